@@ -1,0 +1,59 @@
+"""formationlab: distance-based multi-robot formation control with angular restrictions.
+
+Implements "Formation Control of Multiple Robots Avoiding Local Minima"
+(single-integrator robots, logarithmic attractive-repulsive potential, Khatib
+repulsion, and the angle-restricted sliding-mode law) and goes beyond it.
+
+>>> import formationlab as fl
+>>> f = fl.Formation.from_template([[0, 0], [1, 0], [0.5, 0.8]], diameters=0.2)
+>>> law = fl.AngleRestrictedLaw(k_c=2.0, k_a=3.0, theta=0.5)
+>>> res = fl.simulate(f, law, [[-3, -3], [3, -3], [0, 3]], duration=15.0)
+>>> res.outcome(), res.status
+('desired', 'success')
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+
+from .analysis import OUTCOMES, Tolerances, classify, distance_errors, triangle_orientation
+from .controllers import LAWS, AngleRestrictedLaw, DistanceLaw, Law, Repulsion, get_law
+from .dynamics import SingleIntegrator, System
+from .integrators import INTEGRATORS, RK4, Euler, Integrator, get_integrator
+from .potentials import dphi_dr, khatib, phi, psi, triple_products
+from .simulation import SimulationResult, simulate
+from .spec import Formation, FormationError
+
+try:
+    __version__ = version("formationlab")
+except PackageNotFoundError:  # pragma: no cover - running from a source tree
+    __version__ = "0.0.0"
+
+__all__ = [
+    "INTEGRATORS",
+    "LAWS",
+    "OUTCOMES",
+    "RK4",
+    "AngleRestrictedLaw",
+    "DistanceLaw",
+    "Euler",
+    "Formation",
+    "FormationError",
+    "Integrator",
+    "Law",
+    "Repulsion",
+    "SimulationResult",
+    "SingleIntegrator",
+    "System",
+    "Tolerances",
+    "__version__",
+    "classify",
+    "distance_errors",
+    "dphi_dr",
+    "get_integrator",
+    "get_law",
+    "khatib",
+    "phi",
+    "psi",
+    "simulate",
+    "triangle_orientation",
+    "triple_products",
+]

@@ -1,0 +1,30 @@
+"""The ``formationlab`` command line (typer).
+
+Each sub-module of this package registers its commands on :data:`app`; they
+are discovered at start-up, so a new command is a new module. Errors a user
+can cause (:class:`~formationlab.errors.UserInputError`, missing files) are
+printed as one clear message on standard error with exit status 2, never as a
+traceback.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+import sys
+
+from ._app import app, fail
+
+__all__ = ["app", "fail", "main"]
+
+
+def _load_commands() -> None:
+    for mod in pkgutil.iter_modules(__path__):
+        if not mod.name.startswith("_"):
+            importlib.import_module(f"{__name__}.{mod.name}")
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the ``formationlab`` console script."""
+    _load_commands()
+    app(args=argv if argv is not None else sys.argv[1:], prog_name="formationlab")

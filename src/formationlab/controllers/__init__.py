@@ -1,0 +1,23 @@
+"""Control laws: the paper's two laws and the laws they are compared with.
+
+``LAWS`` maps a law's name (as written in scenario files) to its class.
+"""
+
+from .angle_restricted import AngleRestrictedLaw, active_restrictions, grad_psi, psi_sum
+from .base import LAWS, Law, Repulsion, get_law, register
+from .distance import DistanceLaw, grad_phi, phi_sum
+
+__all__ = [
+    "LAWS",
+    "AngleRestrictedLaw",
+    "DistanceLaw",
+    "Law",
+    "Repulsion",
+    "active_restrictions",
+    "get_law",
+    "grad_phi",
+    "grad_psi",
+    "phi_sum",
+    "psi_sum",
+    "register",
+]

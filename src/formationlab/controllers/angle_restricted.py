@@ -1,0 +1,139 @@
+"""The paper's angle-restricted law, eqs. (11)-(14), and its Lyapunov function (15).
+
+Reference: section 3.2 of "Formation Control of Multiple Robots Avoiding Local
+Minima". ``u_i = -k_c grad_i phi_i - k_a grad_i psi_i`` with
+``psi_i = sum_{j, k in N_i, j != k} psi_ijk`` over *ordered* pairs (eq. 13, as
+printed: ``psi_ikj = psi_ijk``, so every unordered pair counts twice) and
+``psi_ijk = alpha_ijk c_ijk Upsilon(alpha_ijk c_ijk + theta)`` (eq. 14).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..potentials import perp, psi, triple_products, upsilon
+from ..spec import Formation
+from .base import Law, Repulsion, register
+from .distance import _positive, grad_phi, pair_geometry, phi_sum
+
+__all__ = ["AngleRestrictedLaw", "active_restrictions", "grad_psi", "psi_sum"]
+
+
+def _alpha(formation: Formation) -> NDArray[np.float64]:
+    if formation.alpha is None:
+        return np.zeros((formation.n,) * 3)
+    return formation.alpha
+
+
+def active_restrictions(
+    formation: Formation, q: NDArray[np.float64], theta: float
+) -> NDArray[np.bool_]:
+    """Restricted triples whose step is on: ``alpha_ijk c_ijk + theta >= 0``; ``(..., n, n, n)``."""
+    c = triple_products(q)
+    return formation.restricted & (_alpha(formation) * c + theta >= 0)
+
+
+def grad_psi(
+    formation: Formation,
+    q: NDArray[np.float64],
+    theta: float,
+    steps: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]:
+    """``grad_i psi_i`` for every robot, shape ``(..., n, 2)`` (eqs. 13, 23).
+
+    ``grad_i psi_ijk = alpha_ijk Upsilon(.) k x r_jk`` (eq. 23); the step's own
+    derivative is zero away from the switching surface and is left out, as in
+    the paper. ``steps`` (``(..., n, n, n)``, values in [0, 1]) replaces
+    ``Upsilon(alpha_ijk c_ijk + theta)``, for Filippov combinations.
+    """
+    alpha = _alpha(formation)
+    r, _, _ = pair_geometry(q)
+    if steps is None:
+        steps = upsilon(alpha * triple_products(q) + theta)
+    w = alpha * steps  # (..., n, n, n)
+    return np.einsum("...ijk,...jkd->...id", w, perp(r))  # eq. (23), summed as eq. (13)
+
+
+def psi_sum(formation: Formation, q: NDArray[np.float64], theta: float) -> NDArray[np.float64]:
+    """``sum_i psi_i`` over ordered pairs (eq. 13); shape ``(...)``."""
+    values = psi(_alpha(formation), triple_products(q), theta)  # eq. (14)
+    return np.sum(values * formation.restricted, axis=(-3, -2, -1))
+
+
+@register
+@dataclass(frozen=True, kw_only=True)
+class AngleRestrictedLaw(Law):
+    """The paper's law ``u_i = -k_c grad_i phi_i - k_a grad_i psi_i`` (eq. 11).
+
+    The step function in ``psi_ijk`` (eq. 14) makes the closed loop
+    discontinuous: trajectories may slide along the surfaces
+    ``alpha_ijk c_ijk + theta = 0`` (line ``s`` of eq. 26).
+
+    Parameters
+    ----------
+    k_c : float
+        Gain of the distance term (paper: 2).
+    k_a : float
+        Gain of the angular term (paper: 3).
+    theta : float
+        Threshold of the restrictions, > 0 (paper: 0.5).
+    repulsion : Repulsion
+        Khatib's repulsion between non-neighbours.
+    """
+
+    name = "angle-restricted"
+    smooth = False
+    k_c: float = 2.0
+    k_a: float = 3.0
+    theta: float = 0.5
+    repulsion: Repulsion = field(default_factory=Repulsion)
+
+    def __post_init__(self) -> None:
+        _positive(self, "k_c")
+        _positive(self, "k_a", allow_zero=True)
+        _positive(self, "theta", allow_zero=True)
+
+    def lam(self, formation: Formation) -> float:
+        """``lambda`` of eq. (25): ``lambda kappa k_c = 2 k_a`` (kappa = pi or 3)."""
+        return 2.0 * self.k_a / (formation.kappa * self.k_c)  # eq. (25)
+
+    def control(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        return self._control(formation, q, None)
+
+    def _control(self, formation: Formation, q: NDArray, steps: NDArray | None) -> NDArray:
+        u = -self.k_c * grad_phi(formation, q, self.repulsion)
+        if formation.alpha is not None and self.k_a > 0:
+            u = u - self.k_a * grad_psi(formation, q, self.theta, steps)  # eq. (11)
+        return u
+
+    def potential(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``V_n = sum_i phi_i + lambda sum_i psi_i`` (eq. 15), lambda from (25)."""
+        v = phi_sum(formation, q, self.repulsion)
+        return v + self.lam(formation) * psi_sum(formation, q, self.theta)  # eq. (15)
+
+    def active(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Restricted triples whose step is on, ``(..., n, n, n)``."""
+        return active_restrictions(formation, q, self.theta)
+
+    def switching(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``sigma_s = beta_s c_abc + theta`` per distinct surface (``Formation.surfaces``)."""
+        tris, beta, _ = formation.surfaces
+        q = np.asarray(q, dtype=float)
+        a, b, c = (q[..., tris[:, m], :] for m in range(3))
+        cab = (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (
+            c[..., 0] - a[..., 0]
+        )
+        return beta * cab + self.theta
+
+    def control_with(
+        self, formation: Formation, q: NDArray[np.float64], weights: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        _, _, index = formation.surfaces
+        w = np.asarray(weights, dtype=float)
+        if w.shape[-1] == 0:
+            return self._control(formation, q, np.zeros(index.shape))
+        steps = np.where(index >= 0, np.take(w, np.maximum(index, 0), axis=-1), 0.0)
+        return self._control(formation, q, steps)

@@ -1,0 +1,112 @@
+"""The control-law contract shared by every law, and its registry.
+
+A law is a frozen, keyword-only dataclass holding gains only; the formation
+and the positions are arguments. Every law maps positions ``q`` of shape
+``(..., n, 2)`` to controls ``u = q_dot`` of the same shape, using relative
+positions only (so translating all robots leaves ``u`` unchanged).
+
+Extension contract
+------------------
+Subclass :class:`Law`, set ``name``, implement :meth:`Law.control` and
+:meth:`Law.potential`, decorate with :func:`register`. A discontinuous law
+(one with switching surfaces ``sigma(q) = 0``) also implements
+:meth:`Law.switching` and :meth:`Law.control_with`, which the sliding-mode
+integrators use to build Filippov convex combinations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar, TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import ParameterError
+from ..spec import Formation
+
+__all__ = ["LAWS", "Law", "Repulsion", "get_law", "register"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Repulsion:
+    """Khatib's repulsion ``gamma_ij`` between robots that are not neighbours.
+
+    Parameters
+    ----------
+    eta : float
+        Gain ``eta`` of ``gamma = eta/2 (1/s - 1/s0)^2``. Default 1.0.
+    influence : float
+        Range ``s0`` of the clearance ``s = r_ij - a_ij`` below which it acts.
+        Default 0.5 (half the paper's desired distance of 1).
+    """
+
+    eta: float = 1.0
+    influence: float = 0.5
+
+    def __post_init__(self) -> None:
+        for name in ("eta", "influence"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
+                raise ParameterError(f"repulsion {name} must be a finite number > 0, got {v!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Law:
+    """Base class of control laws ``u = f(q)`` for single-integrator robots (eq. 1)."""
+
+    name: ClassVar[str] = ""
+    #: Whether the closed loop is continuous; discontinuous laws expose switching surfaces.
+    smooth: ClassVar[bool] = True
+
+    def control(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Controls ``u``, shape ``(..., n, 2)``, at positions ``q`` of shape ``(..., n, 2)``."""
+        raise NotImplementedError
+
+    def potential(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The law's Lyapunov function at ``q``; shape ``(...)``."""
+        raise NotImplementedError
+
+    def switching(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Switching functions ``sigma``, shape ``(..., s)``; a surface is ``sigma = 0``.
+
+        A smooth law has none (``s = 0``).
+        """
+        return np.zeros((*np.shape(q)[:-2], 0))
+
+    def control_with(
+        self, formation: Formation, q: NDArray[np.float64], weights: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """Controls with the step of each switching function replaced by ``weights`` in [0, 1].
+
+        ``weights`` has the shape of :meth:`switching`. For a smooth law it is ignored.
+        """
+        return self.control(formation, q)
+
+    def with_params(self, **params: float) -> Law:
+        """A copy with some parameters changed (validated again)."""
+        from dataclasses import replace
+
+        return replace(self, **params)
+
+
+LAWS: dict[str, type[Law]] = {}
+L = TypeVar("L", bound=type[Law])
+
+
+def register(cls: L) -> L:
+    """Class decorator: make a law available by its ``name``."""
+    if not cls.name:
+        raise TypeError(f"{cls.__name__} has no name")
+    LAWS[cls.name] = cls
+    return cls
+
+
+def get_law(name: str, **params: object) -> Law:
+    """The law registered as ``name``, built with ``params``."""
+    try:
+        cls = LAWS[name]
+    except KeyError:
+        known = ", ".join(sorted(LAWS))
+        raise ParameterError(f"unknown law {name!r}; known laws: {known}") from None
+    return cls(**params)  # type: ignore[arg-type]

@@ -1,0 +1,133 @@
+"""The distance-based law of eq. (8) and the pure functions it is built from.
+
+Reference: section 3.1 of "Formation Control of Multiple Robots Avoiding Local
+Minima": ``u_i = -k_c grad_i phi_i`` with
+``phi_i = sum_{j in N_i} phi_ij + sum_{j not in N_i} gamma_ij`` (eqs. 8, 12).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import ParameterError
+from ..potentials import dkhatib_ds, dphi_dr, khatib, pair_vectors, phi
+from ..spec import Formation
+from .base import Law, Repulsion, register
+
+__all__ = ["DistanceLaw", "grad_phi", "pair_geometry", "phi_sum"]
+
+
+def pair_geometry(q: NDArray[np.float64]) -> tuple[NDArray, NDArray, NDArray]:
+    """``r_ij`` ``(..., n, n, 2)``, distances ``(..., n, n)`` and unit vectors ``r_ij / r_ij``.
+
+    The diagonal of the unit vectors is zero.
+    """
+    r = pair_vectors(q)
+    dist = np.sqrt(np.sum(r * r, axis=-1))
+    n = r.shape[-2]
+    eye = np.eye(n, dtype=bool)
+    unit = r / np.where(eye, 1.0, dist)[..., None]
+    return r, dist, unit
+
+
+def _pair_slopes(
+    formation: Formation, dist: NDArray[np.float64], repulsion: Repulsion | None
+) -> NDArray[np.float64]:
+    """``d phi_ij / d r`` on edges and ``d gamma_ij / d r`` on other pairs; ``(..., n, n)``."""
+    adj = formation.adjacency
+    a = formation.contact_matrix
+    d = np.where(adj, formation.distance_matrix, a + 1.0)  # filler off the edges
+    eye = np.eye(formation.n, dtype=bool)
+    safe = np.where(eye, a + 1.0, dist)
+    # Off the domain (r <= a, only reached by a rejected trial step) the
+    # slopes are meaningless but must not raise; the integrators reject them.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = np.where(adj, dphi_dr(safe, d, a), 0.0)  # eq. (7)
+        if repulsion is not None:
+            other = ~adj & ~eye
+            if other.any():
+                s = np.where(other, safe - a, np.inf)
+                gamma = dkhatib_ds(s, repulsion.eta, repulsion.influence)
+                slope = slope + np.where(other, gamma, 0.0)
+    return slope
+
+
+def grad_phi(
+    formation: Formation, q: NDArray[np.float64], repulsion: Repulsion | None = None
+) -> NDArray[np.float64]:
+    """``grad_i phi_i`` for every robot (eq. 12), shape ``(..., n, 2)``.
+
+    ``grad_i phi_ij = phi'(r_ij) grad_i r_ij = -phi'(r_ij) r_ij / r_ij``.
+    """
+    _, dist, unit = pair_geometry(q)
+    slope = _pair_slopes(formation, dist, repulsion)
+    return -np.einsum("...ij,...ijd->...id", slope, unit)
+
+
+def phi_sum(
+    formation: Formation, q: NDArray[np.float64], repulsion: Repulsion | None = None
+) -> NDArray[np.float64]:
+    """``sum_i phi_i`` (eq. 9): each edge's ``phi_ij`` and each other pair's ``gamma_ij`` twice.
+
+    Shape ``(...)``; ``+inf`` when two robots touch.
+    """
+    q = np.asarray(q, dtype=float)
+    e = formation.edges
+    r = np.linalg.norm(q[..., e[:, 1], :] - q[..., e[:, 0], :], axis=-1)
+    a = formation.contact_matrix[e[:, 0], e[:, 1]]
+    total = 2.0 * phi(r, formation.distances, a).sum(axis=-1)
+    if repulsion is not None:
+        iu, ju = np.triu_indices(formation.n, k=1)
+        other = ~formation.adjacency[iu, ju]
+        if other.any():
+            i, j = iu[other], ju[other]
+            s = (
+                np.linalg.norm(q[..., j, :] - q[..., i, :], axis=-1)
+                - formation.contact_matrix[i, j]
+            )
+            total = total + 2.0 * khatib(s, repulsion.eta, repulsion.influence).sum(axis=-1)
+    return total
+
+
+@register
+@dataclass(frozen=True, kw_only=True)
+class DistanceLaw(Law):
+    """Distance-based gradient law ``u_i = -k_c grad_i phi_i`` (eq. 8).
+
+    Descends ``V = sum_i phi_i`` (eq. 9) with ``dV/dt = -(2/k_c) sum |u_i|^2``
+    (eq. 10): the log-barrier ``phi_ij`` of eq. (5) on edges and Khatib's
+    ``gamma_ij`` between other pairs.
+
+    Parameters
+    ----------
+    k_c : float
+        Gain of the distance term (the paper uses 2).
+    repulsion : Repulsion
+        Khatib's repulsion between non-neighbours.
+    """
+
+    name = "distance"
+    k_c: float = 2.0
+    repulsion: Repulsion = field(default_factory=Repulsion)
+
+    def __post_init__(self) -> None:
+        _positive(self, "k_c")
+
+    def control(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        return -self.k_c * grad_phi(formation, q, self.repulsion)  # eq. (8)
+
+    def potential(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        return phi_sum(formation, q, self.repulsion)  # eq. (9)
+
+
+def _positive(obj: object, name: str, *, allow_zero: bool = False) -> None:
+    v = getattr(obj, name)
+    ok = isinstance(v, int | float) and np.isfinite(v) and (v >= 0 if allow_zero else v > 0)
+    if not ok:
+        bound = ">= 0" if allow_zero else "> 0"
+        raise ParameterError(
+            f"{type(obj).__name__}.{name} must be a finite number {bound}, got {v!r}"
+        )

@@ -1,0 +1,111 @@
+"""The paper's potentials as pure functions of distances and positions.
+
+Arrays follow the package layout: positions ``q`` have shape ``(..., n, 2)``
+with any batch axes leading; pairwise quantities ``(..., n, n)`` are indexed
+``[i, j]`` and triple quantities ``(..., n, n, n)`` are indexed ``[i, j, k]``.
+
+Reference: "Formation Control of Multiple Robots Avoiding Local Minima",
+section 2.2 (eqs. 5-7) and section 3 (eqs. 8, 12-14, 23).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "cross",
+    "dkhatib_ds",
+    "dphi_dr",
+    "khatib",
+    "pair_vectors",
+    "perp",
+    "phi",
+    "psi",
+    "triple_products",
+    "upsilon",
+]
+
+
+def phi(r: ArrayLike, d: ArrayLike, a: ArrayLike) -> NDArray[np.float64]:
+    """Combined attractive-repulsive potential ``phi_ij`` of eq. (5).
+
+    ``phi = (r - d)/(d - a) - log((r - a)/(d - a))``, defined for ``r > a``;
+    ``+inf`` at and below contact. Zero only at ``r = d`` (eq. 6).
+    """
+    r, d, a = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (r, d, a)))
+    out = np.full(r.shape, np.inf)
+    ok = r > a
+    ra, da = r[ok] - a[ok], d[ok] - a[ok]
+    out[ok] = (r[ok] - d[ok]) / da - np.log(ra / da)  # eq. (5)
+    return out
+
+
+def dphi_dr(r: ArrayLike, d: ArrayLike, a: ArrayLike) -> NDArray[np.float64]:
+    """Derivative of eq. (5): ``d phi / d r = 1/(d - a) - 1/(r - a)`` (eq. 7)."""
+    r, d, a = (np.asarray(x, dtype=float) for x in (r, d, a))
+    return 1.0 / (d - a) - 1.0 / (r - a)  # eq. (7)
+
+
+def khatib(s: ArrayLike, eta: float, s0: float) -> NDArray[np.float64]:
+    """Khatib's repulsive potential ``gamma = eta/2 (1/s - 1/s0)^2`` for ``s < s0``, else 0.
+
+    ``s`` is the clearance ``r_ij - a_ij`` between non-neighbours (the paper's
+    ``gamma_ij`` of eq. 8 cites Khatib 1986 without writing it; this is its
+    usual form). ``+inf`` at ``s <= 0``.
+    """
+    s = np.asarray(s, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g = 0.5 * eta * (1.0 / s - 1.0 / s0) ** 2
+    return np.where(s <= 0, np.inf, np.where(s < s0, g, 0.0))
+
+
+def dkhatib_ds(s: ArrayLike, eta: float, s0: float) -> NDArray[np.float64]:
+    """Derivative of :func:`khatib` in the clearance: ``-eta (1/s - 1/s0) / s^2`` for ``s < s0``."""
+    s = np.asarray(s, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g = -eta * (1.0 / s - 1.0 / s0) / s**2
+    return np.where(s < s0, g, 0.0)
+
+
+def pair_vectors(q: ArrayLike) -> NDArray[np.float64]:
+    """Relative positions ``r_ij = q_j - q_i``; ``(..., n, 2) -> (..., n, n, 2)``."""
+    q = np.asarray(q, dtype=float)
+    return q[..., None, :, :] - q[..., :, None, :]
+
+
+def cross(u: ArrayLike, v: ArrayLike) -> NDArray[np.float64]:
+    """Scalar triple product ``(u x v) . k`` of planar vectors ``(..., 2)``."""
+    u, v = np.asarray(u, dtype=float), np.asarray(v, dtype=float)
+    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+
+def perp(v: ArrayLike) -> NDArray[np.float64]:
+    """``k x v``: planar vectors ``(..., 2)`` turned by +90 degrees."""
+    v = np.asarray(v, dtype=float)
+    return np.stack([-v[..., 1], v[..., 0]], axis=-1)
+
+
+def triple_products(q: ArrayLike) -> NDArray[np.float64]:
+    """``c_ijk = (r_ij x r_ik) . k`` for all triples; ``(..., n, 2) -> (..., n, n, n)``.
+
+    Twice the signed area of triangle ``(i, j, k)``; invariant under cyclic
+    permutation, odd under a swap of ``j`` and ``k`` (term of eq. 14).
+    """
+    r = pair_vectors(q)
+    return cross(r[..., :, :, None, :], r[..., :, None, :, :])
+
+
+def upsilon(x: ArrayLike) -> NDArray[np.float64]:
+    """Unit step ``Upsilon(x)`` of eq. (14), taking ``Upsilon(0) = 1``.
+
+    The value at 0 only matters on the switching surface, a set of measure
+    zero that the Filippov integrator treats as set-valued ``[0, 1]``.
+    """
+    return np.heaviside(np.asarray(x, dtype=float), 1.0)
+
+
+def psi(alpha: ArrayLike, c: ArrayLike, theta: float) -> NDArray[np.float64]:
+    """Angular potential ``psi_ijk = alpha c Upsilon(alpha c + theta)`` of eq. (14)."""
+    ac = np.asarray(alpha, dtype=float) * np.asarray(c, dtype=float)
+    return ac * upsilon(ac + theta)  # eq. (14)

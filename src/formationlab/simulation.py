@@ -1,0 +1,188 @@
+"""One entry point, :func:`simulate`, and the result it returns.
+
+``simulate(formation, law, q0, duration=..., integrator=...)`` integrates the
+closed loop ``q_dot = u(q)`` (eq. 1) and returns a :class:`SimulationResult`
+holding times, positions ``(T, n, 2)``, controls ``(T, n, 2)``, the law's
+Lyapunov function ``(T,)``, which angular restrictions were active, a status
+with a message, and the integrator's diagnostics.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .analysis import Outcome, Tolerances, classify, converged_time, distance_errors, edge_labels
+from .controllers import Law
+from .dynamics import System
+from .errors import ParameterError
+from .integrators import Euler, Integrator, RawSolution
+from .spec import Formation
+
+__all__ = ["SimulationResult", "simulate"]
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class SimulationResult:
+    """A simulated run of a law on a formation.
+
+    Attributes
+    ----------
+    formation, law, integrator
+        What was simulated, and how.
+    t : ndarray, shape (T,)
+        Saved times, seconds.
+    q : ndarray, shape (T, n, 2)
+        Positions at those times.
+    u : ndarray, shape (T, n, 2)
+        Controls (= velocities) at those positions.
+    V : ndarray, shape (T,)
+        The law's Lyapunov function: eq. (9) for the distance law, eq. (15) for
+        the angle-restricted law.
+    sigma : ndarray, shape (T, s)
+        Switching functions of the law's distinct surfaces (``s = 0`` for a
+        smooth law); a restriction is active where ``sigma >= 0``.
+    status, message : str
+        ``"success"``, ``"step-collision"`` or ``"non-finite"``, and why.
+    stats : dict
+        Integrator diagnostics (steps, cost, switches, ...).
+    """
+
+    formation: Formation
+    law: Law
+    integrator: Integrator
+    t: NDArray[np.float64]
+    q: NDArray[np.float64]
+    u: NDArray[np.float64]
+    V: NDArray[np.float64]
+    sigma: NDArray[np.float64]
+    status: str
+    message: str
+    stats: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def active(self) -> NDArray[np.bool_]:
+        """Whether each surface's restriction is on, shape ``(T, s)``."""
+        return self.sigma >= 0
+
+    @property
+    def restriction_labels(self) -> list[str]:
+        """1-based label of each surface, e.g. ``"alpha_123"`` (its first triple)."""
+        tris, _, index = self.formation.surfaces
+        labels = []
+        for s in range(len(tris)):
+            i, j, k = np.argwhere(index == s)[0] + 1
+            labels.append(f"alpha_{i}{j}{k}")
+        return labels
+
+    @property
+    def final(self) -> NDArray[np.float64]:
+        """Final positions, shape ``(n, 2)``."""
+        return self.q[-1]
+
+    @cached_property
+    def distance_errors(self) -> NDArray[np.float64]:
+        """``r_ij - d_ij`` per edge over time, shape ``(T, m)``."""
+        return distance_errors(self.formation, self.q)
+
+    @property
+    def edge_labels(self) -> list[str]:
+        return edge_labels(self.formation)
+
+    def outcome(self, tolerances: Tolerances | None = None) -> Outcome:
+        """Outcome of the final state (see :mod:`formationlab.analysis`)."""
+        return classify(
+            self.formation,
+            self.q[-1],
+            self.u[-1],
+            tolerances,
+            contact=self.status == "step-collision",
+        )
+
+    def converged_time(self, tolerances: Tolerances | None = None) -> float | None:
+        """First time after which every robot's speed stays below the tolerance."""
+        return converged_time(self.t, self.u, (tolerances or Tolerances()).speed)
+
+    def plot(self, kind: str = "trajectories", ax: Any = None, **kwargs: Any) -> Any:
+        """Plot the run: ``"trajectories"``, ``"controls"``, ``"lyapunov"`` or ``"errors"``.
+
+        Needs matplotlib (imported here, not at package import). Returns the artists.
+        """
+        from . import plotting
+
+        return plotting.plot_result(self, kind, ax=ax, **kwargs)
+
+
+def simulate(
+    formation: Formation,
+    law: Law,
+    q0: ArrayLike,
+    *,
+    duration: float,
+    integrator: Integrator | None = None,
+    save_every: int = 1,
+    progress: Callable[[float], None] | None = None,
+) -> SimulationResult:
+    """Simulate ``q_dot_i = u_i`` (eq. 1) under ``law`` from ``q0``.
+
+    Parameters
+    ----------
+    formation : Formation
+        Robots, graph, desired distances and orientation.
+    law : Law
+        The control law, e.g. :class:`~formationlab.AngleRestrictedLaw`.
+    q0 : array_like, shape (n, 2)
+        Initial positions; validated (finite, no overlapping robots).
+    duration : float
+        Simulated time, seconds.
+    integrator : Integrator, optional
+        Default ``Euler(dt=1e-3)``.
+    save_every : int
+        Keep every K-th step (thins what is stored, not what is computed).
+    progress : callable, optional
+        Called with the simulated time now and then.
+
+    Returns
+    -------
+    SimulationResult
+
+    Examples
+    --------
+    >>> import formationlab as fl
+    >>> f = fl.Formation.from_distances(3, distances=1.0, diameters=0.2)
+    >>> res = fl.simulate(f, fl.DistanceLaw(k_c=2.0), [[-3, -3], [3, -3], [0, 3]],
+    ...                   duration=10.0)
+    >>> res.outcome()
+    'desired'
+    """
+    q0 = formation.check_positions(q0)
+    if q0.ndim != 2:
+        raise ParameterError(f"simulate takes one initial state of shape (n, 2), got {q0.shape}")
+    if not isinstance(save_every, int | np.integer) or save_every < 1:
+        raise ParameterError(f"save_every must be an integer >= 1, got {save_every!r}")
+    integrator = integrator or Euler(dt=1e-3)
+    system = System(formation=formation, law=law)
+    raw: RawSolution = integrator.run(
+        system, q0, float(duration), save_every=int(save_every), progress=progress
+    )
+    u = law.control(formation, raw.q)
+    V = law.potential(formation, raw.q)
+    sigma = law.switching(formation, raw.q)
+    return SimulationResult(
+        formation=formation,
+        law=law,
+        integrator=integrator,
+        t=raw.t,
+        q=raw.q,
+        u=u,
+        V=V,
+        sigma=sigma,
+        status=raw.status,
+        message=raw.message,
+        stats=dict(raw.stats),
+    )

@@ -1,0 +1,570 @@
+"""Formation specification: robots, graph, desired distances and orientation.
+
+A formation is the data of section 2 of the paper: ``N`` robots of diameter
+``rho_i``, neighbour sets ``N_i`` with desired distances ``d_ij = d_ji``, and,
+optionally, a desired orientation given by the angles ``alpha_ijk`` of eq. (2).
+
+Conventions (written down once, see ``docs/conventions.md``)
+-------------------------------------------------------------
+* Robot indices are 0-based in code; 1-based wherever a person reads or writes
+  them (tables given by users, messages, files, plots).
+* ``r_ij = q_j - q_i`` (the paper's definition) and
+  ``c_ijk = (r_ij x r_ik) . k`` is twice the signed area of the triangle
+  ``(i, j, k)``: positive when ``i, j, k`` turn counter-clockwise.
+* **Sign of alpha.** The restriction (14) is active while
+  ``alpha_ijk c_ijk > -theta`` and its gradient lowers ``alpha_ijk c_ijk``, so
+  it drives the triangle to ``sign(c_ijk) = -sign(alpha_ijk)``. In the paper's
+  formulas ``alpha_ijk`` therefore carries the sign *opposite* to the
+  counter-clockwise angle from ``r_ij`` to ``r_ik``. Tables given as printed in
+  the paper are used as they are; alpha derived from a template follows the
+  same convention, so that the template is what the law drives towards.
+* ``alpha_ikj = -alpha_ijk`` (eq. 3); a table needs one of the two.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .errors import FormationError
+
+__all__ = [
+    "AlphaValues",
+    "Formation",
+    "FormationError",
+    "Orientation",
+    "complete_edges",
+]
+
+Orientation = Literal["free", "template", "mirror", "table"]
+AlphaValues = Literal["sign", "angle"]
+
+#: A template triple whose |c_ijk| is below this fraction of the product of its
+#: two side lengths (|sin| of the angle at i) counts as collinear.
+COLLINEAR_SIN = 1e-6
+
+
+def complete_edges(n: int) -> NDArray[np.int64]:
+    """Edges ``(i, j)``, ``i < j``, of the complete graph on ``n`` robots, shape ``(m, 2)``."""
+    if n < 2:
+        raise FormationError(f"a formation needs at least 2 robots, got {n}")
+    i, j = np.triu_indices(n, k=1)
+    return np.stack([i, j], axis=1).astype(np.int64)
+
+
+def _as_edges(edges: str | ArrayLike, n: int, *, one_based: bool) -> NDArray[np.int64]:
+    if isinstance(edges, str):
+        if edges != "complete":
+            raise FormationError(
+                f'edges must be "complete" or a list of robot pairs, got the string {edges!r}'
+            )
+        return complete_edges(n)
+    arr = np.asarray(edges)
+    if arr.size == 0:
+        raise FormationError("the edge list is empty: give at least one pair of robots")
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise FormationError(f"edges must be pairs [i, j], got an array of shape {arr.shape}")
+    if not np.all(np.isfinite(arr.astype(float))) or not np.all(arr == np.round(arr)):
+        raise FormationError("edges must hold whole robot numbers")
+    arr = arr.astype(np.int64)
+    base = 1 if one_based else 0
+    seen: set[tuple[int, int]] = set()
+    out = []
+    for i, j in arr:
+        for x in (i, j):
+            if not base <= x < n + base:
+                raise FormationError(
+                    f"edge ({i}, {j}) names robot {x}, but robots are numbered "
+                    f"{base}..{n - 1 + base}"
+                )
+        if i == j:
+            raise FormationError(f"edge ({i}, {j}) joins robot {i} to itself")
+        key = (min(i, j) - base, max(i, j) - base)
+        if key in seen:
+            raise FormationError(f"edge ({i}, {j}) is given twice")
+        seen.add(key)
+        out.append(key)
+    return np.asarray(sorted(out), dtype=np.int64)
+
+
+def _per_item(value: float | ArrayLike, count: int, what: str, per: str) -> NDArray[np.float64]:
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim == 0:
+        arr = np.full(count, float(arr))
+    if arr.shape != (count,):
+        raise FormationError(
+            f"{what} must be one number or one per {per} ({count}), got shape {arr.shape}"
+        )
+    if not np.all(np.isfinite(arr)):
+        raise FormationError(f"{what} must be finite numbers, got {arr.tolist()}")
+    return arr
+
+
+def _signed_angle(u: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Counter-clockwise angle from ``u`` to ``v`` in ``(-pi, pi]``."""
+    cross = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+    dot = u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1]
+    return np.arctan2(cross, dot)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Formation:
+    """A formation of ``n`` robots: graph, desired distances, desired orientation.
+
+    Build it with :meth:`from_distances`, :meth:`from_template` or
+    :meth:`from_alpha_table` rather than directly; they validate their inputs.
+
+    Parameters
+    ----------
+    diameters : ndarray, shape (n,)
+        Robot diameters ``rho_i``; ``a_ij = (rho_i + rho_j) / 2`` (eq. 5).
+    edges : ndarray of int, shape (m, 2)
+        0-based pairs ``(i, j)`` with ``i < j``: ``j in N_i`` and ``i in N_j``.
+    distances : ndarray, shape (m,)
+        Desired distances ``d_ij`` per edge.
+    alpha : ndarray, shape (n, n, n), optional
+        ``alpha_ijk`` in the paper's sign convention (module docstring); zero
+        where no restriction applies. ``None`` when the orientation is free.
+    orientation : {"free", "template", "mirror", "table"}
+        Where ``alpha`` came from.
+    alpha_values : {"sign", "angle"}
+        Whether ``alpha`` holds signs (+-1) or angles in radians; the factor of
+        eq. (25) is 3 for signs and pi for angles.
+    template : ndarray, shape (n, 2), optional
+        The template shape the distances (and orientation) came from.
+    """
+
+    diameters: NDArray[np.float64]
+    edges: NDArray[np.int64]
+    distances: NDArray[np.float64]
+    alpha: NDArray[np.float64] | None = None
+    orientation: Orientation = "free"
+    alpha_values: AlphaValues = "sign"
+    template: NDArray[np.float64] | None = field(default=None)
+
+    def __post_init__(self) -> None:
+        d = np.asarray(self.diameters, dtype=float)
+        n = d.shape[0] if d.ndim == 1 else 0
+        if d.ndim != 1 or n < 2:
+            raise FormationError(f"diameters must be a list of n >= 2 numbers, got {d.shape}")
+        if not np.all(np.isfinite(d)) or np.any(d < 0):
+            raise FormationError(f"diameters must be finite and >= 0, got {d.tolist()}")
+        edges = _as_edges(self.edges, n, one_based=False)
+        dist = _per_item(self.distances, len(edges), "distances", "edge")
+        a = 0.5 * (d[edges[:, 0]] + d[edges[:, 1]])
+        bad = np.flatnonzero(dist <= a)
+        if bad.size:
+            e = bad[0]
+            i, j = edges[e] + 1
+            raise FormationError(
+                f"desired distance d_{i}{j} = {dist[e]:g} must exceed the contact distance "
+                f"a_{i}{j} = (rho_{i} + rho_{j})/2 = {a[e]:g}; use smaller diameters or "
+                "larger distances"
+            )
+        if self.orientation not in ("free", "template", "mirror", "table"):
+            raise FormationError(
+                f'orientation must be "free", "template", "mirror" or "table", '
+                f"got {self.orientation!r}"
+            )
+        if self.alpha_values not in ("sign", "angle"):
+            raise FormationError(
+                f'alpha_values must be "sign" or "angle", got {self.alpha_values!r}'
+            )
+        alpha = None
+        if self.alpha is not None:
+            alpha = np.asarray(self.alpha, dtype=float)
+            if alpha.shape != (n, n, n) or not np.all(np.isfinite(alpha)):
+                raise FormationError(f"alpha must be a finite ({n}, {n}, {n}) array")
+            if not np.allclose(alpha, -alpha.transpose(0, 2, 1)):
+                raise FormationError("alpha must satisfy alpha_ikj = -alpha_ijk (eq. 3)")
+            adj = np.zeros((n, n), bool)
+            adj[edges[:, 0], edges[:, 1]] = adj[edges[:, 1], edges[:, 0]] = True
+            allowed = adj[:, :, None] & adj[:, None, :]
+            stray = np.argwhere((alpha != 0) & ~allowed)
+            if stray.size:
+                i, j, k = stray[0] + 1
+                raise FormationError(
+                    f"alpha_{i}{j}{k} is given but robots {j} and {k} are not both "
+                    f"neighbours of robot {i}; add the edges or drop the entry"
+                )
+            alpha.setflags(write=False)
+        elif self.orientation != "free":
+            raise FormationError(f"orientation {self.orientation!r} needs alpha values")
+        template = None
+        if self.template is not None:
+            template = np.asarray(self.template, dtype=float)
+            if template.shape != (n, 2) or not np.all(np.isfinite(template)):
+                raise FormationError(f"template must be a finite ({n}, 2) array")
+            template.setflags(write=False)
+        for arr in (d, edges, dist):
+            arr.setflags(write=False)
+        object.__setattr__(self, "diameters", d)
+        object.__setattr__(self, "edges", edges)
+        object.__setattr__(self, "distances", dist)
+        object.__setattr__(self, "alpha", alpha)
+        object.__setattr__(self, "template", template)
+
+    # ------------------------------------------------------------------ builders
+    @classmethod
+    def from_distances(
+        cls,
+        n: int,
+        *,
+        edges: str | ArrayLike = "complete",
+        distances: float | ArrayLike = 1.0,
+        diameters: float | ArrayLike = 0.2,
+        one_based: bool = True,
+    ) -> Formation:
+        """A formation with free orientation from a graph and desired distances.
+
+        Parameters
+        ----------
+        n : int
+            Number of robots.
+        edges : "complete" or sequence of pairs
+            The graph; pairs are 1-based robot numbers unless ``one_based=False``.
+        distances : float or sequence of float
+            ``d_ij``: one number for every edge, or one per edge in the given order.
+        diameters : float or sequence of float
+            ``rho_i``: one number for every robot, or one per robot.
+        """
+        if not isinstance(n, int | np.integer) or n < 2:
+            raise FormationError(f"a formation needs an integer n >= 2 robots, got {n!r}")
+        diam = _per_item(diameters, int(n), "diameters", "robot")
+        raw_edges = edges
+        e = _as_edges(edges, int(n), one_based=one_based)
+        dist = np.asarray(distances, dtype=float)
+        if dist.ndim == 1 and not isinstance(raw_edges, str):
+            # distances follow the user's edge order; _as_edges sorted the pairs
+            given = np.asarray(raw_edges, dtype=np.int64) - (1 if one_based else 0)
+            order = {(min(i, j), max(i, j)): t for t, (i, j) in enumerate(given)}
+            dist = _per_item(dist, len(e), "distances", "edge")
+            dist = dist[[order[(i, j)] for i, j in e]]
+        return cls(diameters=diam, edges=e, distances=_per_item(dist, len(e), "distances", "edge"))
+
+    @classmethod
+    def from_template(
+        cls,
+        template: ArrayLike,
+        *,
+        edges: str | ArrayLike = "complete",
+        diameters: float | ArrayLike = 0.2,
+        orientation: Orientation = "template",
+        alpha_values: AlphaValues = "sign",
+        one_based: bool = True,
+    ) -> Formation:
+        """A formation whose distances (and orientation) are those of a template shape.
+
+        Parameters
+        ----------
+        template : array_like, shape (n, 2)
+            Desired positions; only their relative geometry matters.
+        orientation : {"template", "mirror", "free"}
+            Drive towards the template itself, its mirror image, or either.
+        alpha_values : {"sign", "angle"}
+            Store the signs of the template's angles or the angles themselves,
+            both in the paper's sign convention (module docstring).
+        """
+        tpl = np.asarray(template, dtype=float)
+        if tpl.ndim != 2 or tpl.shape[1] != 2 or tpl.shape[0] < 2:
+            raise FormationError(f"template must have shape (n, 2) with n >= 2, got {tpl.shape}")
+        if not np.all(np.isfinite(tpl)):
+            raise FormationError("template holds NaN or infinite numbers")
+        if orientation not in ("template", "mirror", "free"):
+            raise FormationError(
+                f'a template orientation is "template", "mirror" or "free", got {orientation!r}'
+            )
+        n = tpl.shape[0]
+        e = _as_edges(edges, n, one_based=one_based)
+        dist = np.linalg.norm(tpl[e[:, 1]] - tpl[e[:, 0]], axis=-1)
+        diam = _per_item(diameters, n, "diameters", "robot")
+        alpha = None
+        if orientation != "free":
+            shape = tpl if orientation == "template" else tpl * np.array([-1.0, 1.0])
+            alpha = _alpha_from_shape(shape, e, alpha_values)
+        return cls(
+            diameters=diam,
+            edges=e,
+            distances=dist,
+            alpha=alpha,
+            orientation=orientation,
+            alpha_values=alpha_values,
+            template=tpl,
+        )
+
+    @classmethod
+    def from_alpha_table(
+        cls,
+        table: Mapping[tuple[int, int, int], float] | Iterable[Sequence[float]],
+        *,
+        n: int,
+        edges: str | ArrayLike = "complete",
+        distances: float | ArrayLike = 1.0,
+        diameters: float | ArrayLike = 0.2,
+        alpha_values: AlphaValues = "sign",
+    ) -> Formation:
+        """A formation with the paper's ``alpha_ijk`` table, as printed (1-based).
+
+        Parameters
+        ----------
+        table : mapping ``(i, j, k) -> alpha`` or rows ``[i, j, k, alpha]``
+            1-based robot numbers. ``alpha_ikj = -alpha_ijk`` completes the table;
+            a row that contradicts another is an error.
+
+        Examples
+        --------
+        Simulation 2 of section 4 (``alpha_123 = alpha_312 = -alpha_213 = 1``):
+
+        >>> f = Formation.from_alpha_table(
+        ...     {(1, 2, 3): 1, (3, 1, 2): 1, (2, 1, 3): -1}, n=3, distances=1.0)
+        >>> int(f.alpha[1, 2, 0])  # alpha_231 = -alpha_213
+        1
+        """
+        base = cls.from_distances(n, edges=edges, distances=distances, diameters=diameters)
+        rows = table.items() if isinstance(table, Mapping) else ((r[:3], r[3]) for r in table)
+        alpha = np.zeros((n, n, n))
+        given = np.zeros((n, n, n), bool)
+        for key, value in rows:
+            if len(key) != 3:
+                raise FormationError(f"an alpha entry names three robots i, j, k, got {key!r}")
+            i, j, k = (int(x) - 1 for x in key)
+            label = "".join(str(x + 1) for x in (i, j, k))
+            if not all(0 <= x < n for x in (i, j, k)):
+                raise FormationError(f"alpha_{label} names a robot outside 1..{n}")
+            if len({i, j, k}) != 3:
+                raise FormationError(f"alpha_{label} needs three different robots")
+            v = float(value)
+            if not math.isfinite(v) or v == 0:
+                raise FormationError(f"alpha_{label} must be a finite non-zero number, got {v}")
+            for (a, b, c), w in (((i, j, k), v), ((i, k, j), -v)):
+                if given[a, b, c] and alpha[a, b, c] != w:
+                    raise FormationError(
+                        f"alpha_{a + 1}{b + 1}{c + 1} is given twice with different values "
+                        "(remember alpha_ikj = -alpha_ijk)"
+                    )
+                alpha[a, b, c], given[a, b, c] = w, True
+        return cls(
+            diameters=base.diameters,
+            edges=base.edges,
+            distances=base.distances,
+            alpha=alpha,
+            orientation="table",
+            alpha_values=alpha_values,
+        )
+
+    def with_orientation(self, orientation: Orientation) -> Formation:
+        """The same formation driven to the template, its mirror image, or either."""
+        if orientation == "free":
+            return Formation(diameters=self.diameters, edges=self.edges, distances=self.distances)
+        if self.template is None:
+            raise FormationError(f"orientation {orientation!r} needs a template")
+        return Formation.from_template(
+            self.template,
+            edges=self.edges,
+            diameters=self.diameters,
+            orientation=orientation,
+            alpha_values=self.alpha_values,
+            one_based=False,
+        )
+
+    def with_diameters(self, diameters: float | ArrayLike) -> Formation:
+        """The same formation with other robot diameters (validated again)."""
+        return Formation(
+            diameters=_per_item(diameters, self.n, "diameters", "robot"),
+            edges=self.edges,
+            distances=self.distances,
+            alpha=self.alpha,
+            orientation=self.orientation,
+            alpha_values=self.alpha_values,
+            template=self.template,
+        )
+
+    # ------------------------------------------------------------ derived data
+    @property
+    def n(self) -> int:
+        """Number of robots."""
+        return int(self.diameters.shape[0])
+
+    @cached_property
+    def adjacency(self) -> NDArray[np.bool_]:
+        """``A[i, j]`` is true when ``j in N_i``; shape ``(n, n)``."""
+        adj = np.zeros((self.n, self.n), bool)
+        adj[self.edges[:, 0], self.edges[:, 1]] = True
+        adj[self.edges[:, 1], self.edges[:, 0]] = True
+        adj.setflags(write=False)
+        return adj
+
+    @cached_property
+    def distance_matrix(self) -> NDArray[np.float64]:
+        """``d_ij`` on edges, ``nan`` elsewhere; shape ``(n, n)``."""
+        dm = np.full((self.n, self.n), np.nan)
+        dm[self.edges[:, 0], self.edges[:, 1]] = self.distances
+        dm[self.edges[:, 1], self.edges[:, 0]] = self.distances
+        dm.setflags(write=False)
+        return dm
+
+    @cached_property
+    def contact_matrix(self) -> NDArray[np.float64]:
+        """``a_ij = (rho_i + rho_j) / 2`` for every pair; shape ``(n, n)`` (eq. 5)."""
+        a = 0.5 * (self.diameters[:, None] + self.diameters[None, :])
+        a.setflags(write=False)
+        return a
+
+    @cached_property
+    def triples(self) -> NDArray[np.bool_]:
+        """``T[i, j, k]``: ordered pair ``j != k`` of neighbours of ``i`` (the sum of eq. 13)."""
+        adj = self.adjacency
+        t = adj[:, :, None] & adj[:, None, :] & ~np.eye(self.n, dtype=bool)[None, :, :]
+        t.setflags(write=False)
+        return t
+
+    @cached_property
+    def restricted(self) -> NDArray[np.bool_]:
+        """Triples ``(i, j, k)`` with a non-zero ``alpha_ijk``; shape ``(n, n, n)``."""
+        if self.alpha is None:
+            r = np.zeros((self.n,) * 3, bool)
+        else:
+            r = self.alpha != 0
+        r.setflags(write=False)
+        return r
+
+    @cached_property
+    def desired_sign(self) -> NDArray[np.float64]:
+        """Desired ``sign(c_ijk)`` on restricted triples, 0 elsewhere: ``-sign(alpha_ijk)``."""
+        s = np.zeros((self.n,) * 3) if self.alpha is None else -np.sign(self.alpha)
+        s.setflags(write=False)
+        return s
+
+    @cached_property
+    def surfaces(self) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.int64]]:
+        """The distinct switching surfaces ``beta_s c_abc + theta = 0`` of eq. (14).
+
+        ``alpha_ijk c_ijk`` equals ``beta c_abc`` for the sorted triangle
+        ``a < b < c`` with ``beta = alpha_ijk * parity(i, j, k)``; triples with the
+        same triangle and ``beta`` switch together (``psi_ikj = psi_ijk`` always,
+        and with sign-valued alpha the cyclic triples as well).
+
+        Returns
+        -------
+        triangles : ndarray of int, shape (s, 3)
+            Sorted 0-based robots of each surface's triangle.
+        beta : ndarray, shape (s,)
+            Coefficient of ``c_abc`` in the switching function.
+        index : ndarray of int, shape (n, n, n)
+            Surface of each restricted triple ``(i, j, k)``; -1 elsewhere.
+        """
+        n = self.n
+        index = np.full((n, n, n), -1, dtype=np.int64)
+        keys: dict[tuple[int, int, int, float], int] = {}
+        for i, j, k in np.argwhere(self.restricted):
+            tri = (int(i), int(j), int(k))
+            srt = tuple(sorted(tri))
+            perm = [srt.index(x) for x in tri]
+            parity = 1.0 if perm in ([0, 1, 2], [1, 2, 0], [2, 0, 1]) else -1.0
+            beta = float(self.alpha[i, j, k]) * parity  # type: ignore[index]
+            key = (*srt, beta)
+            index[i, j, k] = keys.setdefault(key, len(keys))  # type: ignore[arg-type]
+        tris = np.array([k[:3] for k in keys], dtype=np.int64).reshape(-1, 3)
+        beta = np.array([k[3] for k in keys], dtype=float)
+        for arr in (tris, beta, index):
+            arr.setflags(write=False)
+        return tris, beta, index
+
+    @property
+    def kappa(self) -> float:
+        """The constant of eqs. (24)-(25): pi for angles, 3 for signs."""
+        return math.pi if self.alpha_values == "angle" else 3.0
+
+    @cached_property
+    def is_connected(self) -> bool:
+        """Whether the graph is connected."""
+        seen = {0}
+        frontier = [0]
+        adj = self.adjacency
+        while frontier:
+            i = frontier.pop()
+            for j in np.flatnonzero(adj[i]):
+                if int(j) not in seen:
+                    seen.add(int(j))
+                    frontier.append(int(j))
+        return len(seen) == self.n
+
+    @cached_property
+    def is_rigid(self) -> bool:
+        """Generic infinitesimal rigidity in the plane (rank of the rigidity matrix).
+
+        The rank is evaluated at a generic (seeded random) placement, so the
+        answer is the graph's, not the template's.
+        """
+        n = self.n
+        if n == 2:
+            return len(self.edges) == 1
+        q = np.random.default_rng(12345).normal(size=(n, 2))
+        rows = np.zeros((len(self.edges), 2 * n))
+        for e, (i, j) in enumerate(self.edges):
+            diff = q[i] - q[j]
+            rows[e, 2 * i : 2 * i + 2] = diff
+            rows[e, 2 * j : 2 * j + 2] = -diff
+        return bool(np.linalg.matrix_rank(rows) == 2 * n - 3)
+
+    def check_positions(self, q: ArrayLike, *, what: str = "initial positions") -> NDArray:
+        """Validate positions ``q`` of shape ``(..., n, 2)``: finite, no overlapping robots.
+
+        Returns the positions as a float array. Raises :class:`FormationError`
+        naming the first overlapping pair (1-based).
+        """
+        arr = np.asarray(q, dtype=float)
+        if arr.ndim < 2 or arr.shape[-2:] != (self.n, 2):
+            raise FormationError(f"{what} must have shape (..., {self.n}, 2), got {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise FormationError(f"{what} hold NaN or infinite numbers")
+        diff = arr[..., None, :, :] - arr[..., :, None, :]
+        r = np.linalg.norm(diff, axis=-1)
+        iu = np.triu_indices(self.n, k=1)
+        gap = r[..., iu[0], iu[1]] - self.contact_matrix[iu]
+        if np.any(gap <= 0):
+            flat = np.argwhere(gap <= 0)[0]
+            p = flat[-1]
+            i, j = iu[0][p], iu[1][p]
+            rr = r[(*flat[:-1], i, j)]
+            raise FormationError(
+                f"robots {i + 1} and {j + 1} overlap in the {what}: distance {rr:g} <= "
+                f"a_{i + 1}{j + 1} = {self.contact_matrix[i, j]:g}; move them apart or "
+                "use smaller diameters"
+            )
+        return arr
+
+
+def _alpha_from_shape(
+    shape: NDArray[np.float64], edges: NDArray[np.int64], alpha_values: AlphaValues
+) -> NDArray[np.float64]:
+    """``alpha_ijk`` that drive towards ``shape`` (paper's sign convention, eq. 2).
+
+    ``alpha_ijk = -angle(r_ij -> r_ik)`` (angles) or its sign, for every ordered
+    pair ``j != k`` of neighbours of ``i``. Collinear triples have no orientation
+    and are rejected.
+    """
+    n = shape.shape[0]
+    adj = np.zeros((n, n), bool)
+    adj[edges[:, 0], edges[:, 1]] = adj[edges[:, 1], edges[:, 0]] = True
+    r = shape[None, :, :] - shape[:, None, :]  # r[i, j] = q_j - q_i
+    ang = _signed_angle(r[:, :, None, :], r[:, None, :, :])  # ccw angle r_ij -> r_ik
+    length = np.linalg.norm(r, axis=-1)
+    sin = np.abs(np.sin(ang))
+    mask = adj[:, :, None] & adj[:, None, :] & ~np.eye(n, dtype=bool)[None]
+    coincident = mask & ((length[:, :, None] == 0) | (length[:, None, :] == 0))
+    collinear = mask & ((sin < COLLINEAR_SIN) | coincident)
+    if np.any(collinear):
+        i, j, k = np.argwhere(collinear)[0] + 1
+        raise FormationError(
+            f"robots {i}, {j} and {k} are collinear in the template, so the triple has no "
+            'orientation; move one of them off the line or use orientation = "free"'
+        )
+    alpha = np.where(mask, -ang, 0.0)  # paper's sign: opposite to the ccw angle
+    return np.sign(alpha) if alpha_values == "sign" else alpha
