@@ -108,6 +108,36 @@ class SimulationResult:
         """First time after which every robot's speed stays below the tolerance."""
         return converged_time(self.t, self.u, (tolerances or Tolerances()).speed)
 
+    def summary(self, tolerances: Tolerances | None = None) -> dict[str, Any]:
+        """A JSON-ready summary of the run (the ``summary.json`` of ``run`` and ``paper``).
+
+        Keys: ``outcome``, ``status``, ``message``, ``final_positions`` (``[[x, y], ...]``,
+        robot 1 first), ``distance_errors`` (final ``r_ij - d_ij`` keyed by edge label
+        ``"i-j"``, 1-based), ``max_distance_error``, ``converged_time`` (or None),
+        ``final_time``, ``orientation`` (``"ccw"``/``"cw"`` of robots 1, 2, 3),
+        ``active_restrictions_final`` (labels), ``diagnostics`` (integrator statistics)
+        and ``tolerances``.
+        """
+        from .analysis import triangle_orientation
+
+        tol = tolerances or Tolerances()
+        err = self.distance_errors[-1]
+        active = [lab for lab, on in zip(self.restriction_labels, self.active[-1], strict=True) if on]
+        return {
+            "outcome": self.outcome(tol),
+            "status": self.status,
+            "message": self.message,
+            "final_time": float(self.t[-1]),
+            "final_positions": self.q[-1].tolist(),
+            "distance_errors": dict(zip(self.edge_labels, err.tolist(), strict=True)),
+            "max_distance_error": float(np.max(np.abs(err))),
+            "converged_time": self.converged_time(tol),
+            "orientation": triangle_orientation(self.q[-1]) if self.formation.n >= 3 else None,
+            "active_restrictions_final": active,
+            "diagnostics": dict(self.stats),
+            "tolerances": {"distance": tol.distance, "speed": tol.speed},
+        }
+
     def plot(self, kind: str = "trajectories", ax: Any = None, **kwargs: Any) -> Any:
         """Plot the run: ``"trajectories"``, ``"controls"``, ``"lyapunov"`` or ``"errors"``.
 
