@@ -1,0 +1,173 @@
+"""Plots of one simulated run: trajectories, controls, Lyapunov function, distance errors.
+
+These are the panels of the paper's figures 4-12 (trajectories: figs. 4, 8;
+velocities in x and y: figs. 5-6, 10-11; Lyapunov function: figs. 7, 12;
+distance errors: fig. 9), usable for any formation.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle
+
+__all__ = [
+    "plot_controls",
+    "plot_distance_errors",
+    "plot_lyapunov",
+    "plot_trajectories",
+    "robot_colors",
+    "run_figures",
+]
+
+
+def robot_colors(n: int) -> list[Any]:
+    """One colour per robot (tab10, then a continuous map for larger formations)."""
+    import matplotlib as mpl
+
+    cmap = mpl.colormaps["tab10" if n <= 10 else "viridis"]
+    return [cmap(i if n <= 10 else i / max(n - 1, 1)) for i in range(n)]
+
+
+def _axes(ax: Axes | None, figsize: tuple[float, float] = (6.0, 4.0)) -> Axes:
+    if ax is not None:
+        return ax
+    import matplotlib.pyplot as plt
+
+    _, ax = plt.subplots(figsize=figsize)
+    return ax
+
+
+def _draw_graph(ax: Axes, formation: Any, q: np.ndarray, **style: Any) -> LineCollection:
+    segs = np.stack([q[formation.edges[:, 0]], q[formation.edges[:, 1]]], axis=1)
+    lc = LineCollection(segs, **style)
+    ax.add_collection(lc)
+    return lc
+
+
+def _shade_active(ax: Axes, result: Any) -> list[Any]:
+    """Shade the time intervals where some angular restriction is active."""
+    if result.sigma.shape[-1] == 0:
+        return []
+    on = np.any(result.active, axis=-1)
+    artists = []
+    t = result.t
+    edges = np.flatnonzero(np.diff(on.astype(int)))
+    starts = ([0] if on[0] else []) + [e + 1 for e in edges if not on[e]]
+    stops = [e + 1 for e in edges if on[e]] + ([len(t) - 1] if on[-1] else [])
+    for k, (a, b) in enumerate(zip(starts, stops, strict=False)):
+        label = "restriction active" if k == 0 else None
+        artists.append(ax.axvspan(t[a], t[b], color="0.85", zorder=0, label=label))
+    return artists
+
+
+def plot_trajectories(
+    result: Any, ax: Axes | None = None, *, show_graph: bool = True, title: str | None = None
+) -> list[Any]:
+    """Robot paths in the plane: start (hollow circle), end (disc of the robot's diameter).
+
+    The graph's edges are drawn dashed at the start and solid at the end.
+    """
+    ax = _axes(ax, (5.5, 5.5))
+    f = result.formation
+    q = result.q
+    colors = robot_colors(f.n)
+    artists: list[Any] = []
+    if show_graph:
+        artists.append(_draw_graph(ax, f, q[0], colors="0.6", linestyles="--", linewidths=0.8))
+        artists.append(_draw_graph(ax, f, q[-1], colors="0.2", linewidths=1.2))
+    for i in range(f.n):
+        (line,) = ax.plot(q[:, i, 0], q[:, i, 1], color=colors[i], lw=1.4, label=f"robot {i + 1}")
+        artists.append(line)
+        artists.append(ax.plot(q[0, i, 0], q[0, i, 1], "o", mfc="none", mec=colors[i], ms=8)[0])
+        disc = Circle(tuple(q[-1, i]), f.diameters[i] / 2, color=colors[i], alpha=0.8, zorder=3)
+        ax.add_patch(disc)
+        artists.append(disc)
+        artists.append(ax.annotate(str(i + 1), q[0, i], xytext=(5, 5), textcoords="offset points"))
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x")
+    ax.set_ylabel("y")
+    ax.set_title(title or f"trajectories ({result.law.name} law)")
+    ax.legend(loc="best", fontsize="small")
+    ax.autoscale_view()
+    return artists
+
+
+def plot_controls(
+    result: Any, ax: Axes | None = None, *, axis: int = 0, title: str | None = None
+) -> list[Any]:
+    """Control actions (robot velocities) along x (``axis=0``) or y (``axis=1``) over time."""
+    ax = _axes(ax)
+    colors = robot_colors(result.formation.n)
+    name = "xy"[axis]
+    artists = _shade_active(ax, result)
+    for i in range(result.formation.n):
+        artists += ax.plot(
+            result.t, result.u[:, i, axis], color=colors[i], label=f"$u_{{{i + 1}{name}}}$"
+        )
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(f"velocity in {name}")
+    ax.set_title(title or f"control actions in {name}")
+    ax.legend(loc="best", fontsize="small")
+    return artists
+
+
+def plot_lyapunov(
+    result: Any, ax: Axes | None = None, *, log: bool = False, title: str | None = None
+) -> list[Any]:
+    """The law's Lyapunov function over time (eq. 9 or eq. 15)."""
+    ax = _axes(ax)
+    artists = _shade_active(ax, result)
+    v = result.V
+    label = "$V_n$ (eq. 15)" if result.sigma.shape[-1] else "$V$ (eq. 9)"
+    artists += ax.plot(result.t, v, color="k", label=label)
+    if log:
+        ax.set_yscale("symlog", linthresh=1e-6)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("Lyapunov function")
+    ax.set_title(title or "Lyapunov function")
+    ax.legend(loc="best", fontsize="small")
+    return artists
+
+
+def plot_distance_errors(
+    result: Any, ax: Axes | None = None, *, title: str | None = None
+) -> list[Any]:
+    """Inter-robot distance errors ``r_ij - d_ij`` per edge over time."""
+    ax = _axes(ax)
+    artists = _shade_active(ax, result)
+    err = result.distance_errors
+    for e, lab in enumerate(result.edge_labels):
+        artists += ax.plot(result.t, err[:, e], label=f"$r_{{{lab.replace('-', '')}}} - d$")
+    ax.axhline(0.0, color="0.5", lw=0.6)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("distance error")
+    ax.set_title(title or "inter-robot distance errors")
+    if len(result.edge_labels) <= 12:
+        ax.legend(loc="best", fontsize="small")
+    return artists
+
+
+def run_figures(result: Any, *, prefix: str = "") -> dict[str, Figure]:
+    """The standard figures of a run, by name: ``trajectories``, ``controls_x``,
+    ``controls_y``, ``lyapunov``, ``distance_errors``. Figures are not managed by
+    pyplot (no GUI); save them with :func:`formationlab.io.save_figure`."""
+    out: dict[str, Figure] = {}
+    for name, fn, kw, size in (
+        ("trajectories", plot_trajectories, {}, (5.5, 5.5)),
+        ("controls_x", plot_controls, {"axis": 0}, (6.0, 3.6)),
+        ("controls_y", plot_controls, {"axis": 1}, (6.0, 3.6)),
+        ("lyapunov", plot_lyapunov, {}, (6.0, 3.6)),
+        ("distance_errors", plot_distance_errors, {}, (6.0, 3.6)),
+    ):
+        fig = Figure(figsize=size, layout="constrained")
+        ax = fig.add_subplot()
+        fn(result, ax=ax, **kw)
+        if prefix:
+            ax.set_title(f"{prefix}: {ax.get_title()}")
+        out[name] = fig
+    return out
