@@ -1,0 +1,635 @@
+"""Scenarios: a formation, a law, an integrator and an initial state, described as data.
+
+A scenario is what a user writes in a TOML file (see ``docs/scenarios.md`` for
+every key). :func:`parse_scenario` validates it (structure with pydantic, the
+mathematics with the builders of :class:`~formationlab.Formation`, the law's
+and the integrator's own checks) and returns a frozen :class:`Scenario`; every
+problem becomes a :class:`~formationlab.errors.ScenarioError` whose message
+names the key, what was expected and what was given. Robot numbers in
+scenarios are 1-based, as in the paper.
+
+Laws and integrators are looked up by name in the registries
+:data:`formationlab.controllers.LAWS` and :data:`formationlab.integrators.INTEGRATORS`
+when a scenario is parsed, so laws and integrators registered later are
+accepted without changing this module; the keys of ``[controller]`` and
+``[simulation]`` are checked against the chosen class's dataclass fields.
+
+This module reads no files: :func:`formationlab.io.scenario.load_scenario` does.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import re
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+import tomli_w
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from .controllers import LAWS, Law
+from .errors import ScenarioError, UserInputError
+from .integrators import INTEGRATORS, Integrator
+from .spec import Formation
+
+__all__ = ["SECTIONS", "Scenario", "ScenarioModel", "parse_scenario"]
+
+_STRICT = ConfigDict(strict=True, extra="forbid", allow_inf_nan=False, frozen=True)
+
+
+def _finite(v: Any, what: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise ValueError(f"{what} must be a number, got {v!r}")
+    if not math.isfinite(v):
+        raise ValueError(f"{what} must be a finite number, got {v!r}")
+    return float(v)
+
+
+def _one_or_list(v: Any, what: str) -> float | list[float]:
+    """One finite number, or a non-empty list of finite numbers."""
+    if isinstance(v, list):
+        if not v:
+            raise ValueError(f"{what} must be one number or a non-empty list, got []")
+        return [_finite(x, f"{what}, item {t + 1},") for t, x in enumerate(v)]
+    return _finite(v, what)
+
+
+def _points(v: Any, what: str) -> list[list[float]]:
+    """A list of ``[x, y]`` pairs of finite numbers."""
+    if not isinstance(v, list) or not v:
+        raise ValueError(f"{what} must be a list of [x, y] pairs, got {v!r}")
+    out = []
+    for t, row in enumerate(v):
+        if not isinstance(row, list) or len(row) != 2:
+            raise ValueError(f"{what}, row {t + 1}, must be a pair [x, y], got {row!r}")
+        out.append([_finite(x, f"{what}, row {t + 1},") for x in row])
+    return out
+
+
+class RobotsModel(BaseModel):
+    """``[robots]``: initial positions and diameters."""
+
+    model_config = _STRICT
+    positions: list[list[float]]
+    diameters: float | list[float] = 0.2
+
+    @field_validator("positions", mode="before")
+    @classmethod
+    def _positions(cls, v: Any) -> list[list[float]]:
+        pts = _points(v, "positions")
+        if len(pts) < 2:
+            raise ValueError(f"a formation needs at least 2 robots, got {len(pts)} position")
+        return pts
+
+    @field_validator("diameters", mode="before")
+    @classmethod
+    def _diameters(cls, v: Any) -> float | list[float]:
+        d = _one_or_list(v, "diameters")
+        if any(x < 0 for x in np.atleast_1d(d)):
+            raise ValueError(f"diameters must be >= 0, got {v!r}")
+        return d
+
+
+class FormationModel(BaseModel):
+    """``[formation]``: graph, desired distances, desired orientation."""
+
+    model_config = _STRICT
+    edges: Literal["complete"] | list[list[int]] = "complete"
+    distances: float | list[float] | None = None
+    template: list[list[float]] | None = None
+    orientation: Literal["free", "template", "mirror", "table"] | None = None
+    alpha: list[list[float]] | None = None
+
+    @field_validator("edges", mode="before")
+    @classmethod
+    def _edges(cls, v: Any) -> str | list[list[int]]:
+        if isinstance(v, str):
+            if v != "complete":
+                raise ValueError(f'edges must be "complete" or a list of pairs [i, j], got {v!r}')
+            return v
+        if not isinstance(v, list) or not v:
+            raise ValueError(f'edges must be "complete" or a list of pairs [i, j], got {v!r}')
+        for t, row in enumerate(v):
+            ok = isinstance(row, list) and len(row) == 2
+            ok = ok and all(isinstance(x, int) and not isinstance(x, bool) for x in row)
+            if not ok:
+                raise ValueError(
+                    f"edges, item {t + 1}, must be a pair of robot numbers [i, j], got {row!r}"
+                )
+        return v
+
+    @field_validator("distances", mode="before")
+    @classmethod
+    def _distances(cls, v: Any) -> float | list[float] | None:
+        return None if v is None else _one_or_list(v, "distances")
+
+    @field_validator("template", mode="before")
+    @classmethod
+    def _template(cls, v: Any) -> list[list[float]] | None:
+        return None if v is None else _points(v, "template")
+
+    @field_validator("alpha", mode="before")
+    @classmethod
+    def _alpha(cls, v: Any) -> list[list[float]]:
+        if not isinstance(v, list) or not v:
+            raise ValueError(f"alpha must be a list of rows [i, j, k, value], got {v!r}")
+        for t, row in enumerate(v):
+            ok = isinstance(row, list) and len(row) == 4
+            ok = ok and all(isinstance(x, int) and not isinstance(x, bool) for x in row[:3])
+            if not ok:
+                raise ValueError(
+                    f"alpha, row {t + 1}, must be [i, j, k, value] with robot numbers i, j, k, "
+                    f"got {row!r}"
+                )
+            _finite(row[3], f"alpha, row {t + 1}, value")
+        return [[float(x) for x in row] for row in v]
+
+
+class ControllerModel(BaseModel):
+    """``[controller]``: the law's name, how alpha is valued, and the law's parameters.
+
+    Parameters other than ``law`` and ``alpha_values`` are kept as given and
+    checked against the chosen law's dataclass fields by :func:`parse_scenario`.
+    """
+
+    model_config = ConfigDict(strict=True, extra="allow", allow_inf_nan=False, frozen=True)
+    law: str = "angle-restricted"
+    alpha_values: Literal["sign", "angle"] = "sign"
+
+
+class SimulationModel(BaseModel):
+    """``[simulation]``: integrator, its parameters (``dt``, ...), and the duration."""
+
+    model_config = ConfigDict(strict=True, extra="allow", allow_inf_nan=False, frozen=True)
+    integrator: str = "euler"
+    duration: float = Field(gt=0)
+
+    @field_validator("duration", mode="before")
+    @classmethod
+    def _duration(cls, v: Any) -> float:
+        return _finite(v, "duration")
+
+
+class ScenarioModel(BaseModel):
+    """The whole file. ``[study]`` and ``[equilibria]`` are passed through unvalidated."""
+
+    model_config = _STRICT
+    name: str | None = None
+    description: str = ""
+    robots: RobotsModel
+    formation: FormationModel = FormationModel()
+    controller: ControllerModel = ControllerModel()
+    simulation: SimulationModel
+    study: dict[str, Any] | None = None
+    equilibria: dict[str, Any] | None = None
+
+
+#: The keys each table accepts (the fixed ones; laws and integrators add theirs).
+SECTIONS: dict[str, tuple[str, ...]] = {
+    "": tuple(ScenarioModel.model_fields),
+    "robots": tuple(RobotsModel.model_fields),
+    "formation": tuple(FormationModel.model_fields),
+    "controller": tuple(ControllerModel.model_fields),
+    "simulation": tuple(SimulationModel.model_fields),
+}
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Scenario:
+    """A validated scenario: everything needed to run a simulation.
+
+    Attributes
+    ----------
+    name : str
+        The scenario's name (``name`` key, else the file's stem).
+    text : str
+        The scenario as TOML (the file's text, as read).
+    source : str
+        Where it came from (a path, or ``"<string>"``).
+    description : str
+        Free text from the file.
+    formation : Formation
+        Robots, graph, desired distances and orientation.
+    law : Law
+        The control law with its parameters.
+    integrator : Integrator
+        The integrator with its parameters.
+    duration : float
+        Simulated time, seconds.
+    q0 : ndarray, shape (n, 2)
+        Initial positions; robot 1 is row 0.
+    raw : dict
+        The parsed TOML.
+    study, equilibria : dict or None
+        The raw ``[study]`` and ``[equilibria]`` tables (validated by their users).
+    warnings : tuple of str
+        Things that are allowed but probably unintended (a non-rigid graph, ...).
+    """
+
+    name: str
+    text: str
+    source: str
+    description: str
+    formation: Formation
+    law: Law
+    integrator: Integrator
+    duration: float
+    q0: NDArray[np.float64]
+    raw: dict[str, Any]
+    study: dict[str, Any] | None = None
+    equilibria: dict[str, Any] | None = None
+    warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def n(self) -> int:
+        """Number of robots."""
+        return self.formation.n
+
+    @property
+    def parameters(self) -> dict[str, Any]:
+        """The law's and the integrator's parameters, JSON-ready."""
+        return {
+            "law": {"name": self.law.name, **dataclasses.asdict(self.law)},
+            "integrator": {"name": self.integrator.name, **dataclasses.asdict(self.integrator)},
+            "duration": self.duration,
+        }
+
+
+# --------------------------------------------------------------------------- parsing
+
+
+def parse_scenario(text_or_dict: str | Mapping[str, Any], source: str = "<string>") -> Scenario:
+    """Validate a scenario given as TOML text or as an already parsed table.
+
+    Parameters
+    ----------
+    text_or_dict : str or mapping
+        The TOML text of a scenario file, or the table it parses to.
+    source : str
+        Where it came from, for messages (a path or ``"<string>"``).
+
+    Returns
+    -------
+    Scenario
+
+    Raises
+    ------
+    ScenarioError
+        With a message naming the key, what was expected and what was given.
+    """
+    if isinstance(text_or_dict, str):
+        text = text_or_dict
+        try:
+            raw = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise ScenarioError(
+                f"{source}: TOML syntax error: {exc}; see https://toml.io for the syntax"
+            ) from None
+    else:
+        raw = _plain(dict(text_or_dict))
+        try:
+            text = tomli_w.dumps(raw)
+        except TypeError as exc:
+            raise ScenarioError(
+                f"{source}: the scenario holds a value TOML cannot hold: {exc}"
+            ) from None
+    try:
+        model = ScenarioModel.model_validate(raw)
+    except ValidationError as exc:
+        raise ScenarioError(_format_errors(exc, source, text)) from None
+    return _build(model, raw, text, source)
+
+
+def _plain(obj: Any) -> Any:
+    """Tuples and numpy values to lists and Python scalars (TOML's own types)."""
+    if isinstance(obj, Mapping):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple | np.ndarray):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) -> Scenario:
+    rob, frm, ctl, sim = model.robots, model.formation, model.controller, model.simulation
+    warnings: list[str] = []
+
+    def fail(where: str, message: str) -> ScenarioError:
+        section, _, key = where.partition(".")
+        line = _line_of(text, section, key)
+        at = f" (line {line})" if line else ""
+        return ScenarioError(f"{source}: {where}{at}: {message}")
+
+    n = len(rob.positions)
+    if isinstance(rob.diameters, list) and len(rob.diameters) != n:
+        raise fail(
+            "robots.diameters",
+            f"give one number or one per robot: there are {n} positions but "
+            f"{len(rob.diameters)} diameters",
+        )
+    orientation = frm.orientation
+    if orientation is None:
+        orientation = "template" if frm.template is not None else "table" if frm.alpha else "free"
+    if frm.template is not None:
+        if len(frm.template) != n:
+            raise fail(
+                "formation.template",
+                f"the template has {len(frm.template)} points but there are {n} robots "
+                "(robots.positions); give one template point per robot",
+            )
+        if frm.distances is not None:
+            raise fail(
+                "formation.distances",
+                "give distances or a template, not both: the template sets the distances",
+            )
+        if frm.alpha is not None:
+            raise fail(
+                "formation.alpha",
+                "give an alpha table or a template, not both: the template sets the orientation",
+            )
+        if orientation == "table":
+            raise fail(
+                "formation.orientation",
+                'orientation = "table" needs an alpha table, not a template; use "template", '
+                '"mirror" or "free" with a template',
+            )
+    else:
+        if orientation in ("template", "mirror"):
+            raise fail(
+                "formation.orientation",
+                f'orientation = "{orientation}" needs a template; add formation.template = '
+                '[[x1, y1], ...] or use orientation = "free"',
+            )
+        if orientation == "table" and frm.alpha is None:
+            raise fail(
+                "formation.orientation",
+                'orientation = "table" needs formation.alpha = [[i, j, k, value], ...]',
+            )
+        if frm.alpha is not None and orientation != "table":
+            raise fail(
+                "formation.alpha",
+                f'an alpha table is only used with orientation = "table", got "{orientation}"',
+            )
+    distances = 1.0 if frm.distances is None else frm.distances
+    try:
+        if frm.template is not None:
+            formation = Formation.from_template(
+                frm.template,
+                edges=frm.edges,
+                diameters=rob.diameters,
+                orientation=orientation,  # type: ignore[arg-type]
+                alpha_values=ctl.alpha_values,
+            )
+        elif orientation == "table":
+            formation = Formation.from_alpha_table(
+                frm.alpha or [],
+                n=n,
+                edges=frm.edges,
+                distances=distances,
+                diameters=rob.diameters,
+                alpha_values=ctl.alpha_values,
+            )
+        else:
+            formation = Formation.from_distances(
+                n, edges=frm.edges, distances=distances, diameters=rob.diameters
+            )
+    except UserInputError as exc:
+        raise fail(_formation_key(str(exc), frm), str(exc)) from None
+    if frm.distances is None and frm.template is None:
+        warnings.append("formation.distances not given: every d_ij = 1")
+    if not formation.is_connected:
+        raise fail(
+            "formation.edges",
+            "the graph is not connected, so the formation cannot hold together; add edges "
+            "between its parts",
+        )
+    if not formation.is_rigid:
+        warnings.append(
+            "the graph is not rigid: the distances do not fix the shape (add edges to make "
+            f"it rigid; {n} robots need at least {2 * n - 3} well-placed edges)"
+        )
+    try:
+        q0 = formation.check_positions(np.asarray(rob.positions, dtype=float))
+    except UserInputError as exc:
+        raise fail("robots.positions", str(exc)) from None
+
+    law = _build_law(ctl, fail)
+    if formation.alpha is None and "k_a" in {f.name for f in dataclasses.fields(law)}:
+        warnings.append(
+            f"law {law.name!r} has an angular term but the orientation is free, so it acts as "
+            'the distance law; set formation.orientation (e.g. "template") to use it'
+        )
+    integrator = _build_integrator(sim, fail)
+    return Scenario(
+        name=model.name or _stem(source),
+        text=text,
+        source=source,
+        description=model.description,
+        formation=formation,
+        law=law,
+        integrator=integrator,
+        duration=float(sim.duration),
+        q0=q0,
+        raw=raw,
+        study=model.study,
+        equilibria=model.equilibria,
+        warnings=tuple(warnings),
+    )
+
+
+def _formation_key(message: str, frm: FormationModel) -> str:
+    """The key a formation builder's message is about (for the line number)."""
+    if "collinear" in message or "template" in message:
+        return "formation.template"
+    if "alpha" in message:
+        return "formation.alpha"
+    if "edge" in message and "desired distance" not in message:
+        return "formation.edges"
+    if "diameters" in message and "distance" not in message:
+        return "robots.diameters"
+    if frm.distances is None and frm.template is not None:
+        return "formation.template"
+    return "formation.distances"
+
+
+def _stem(source: str) -> str:
+    stem = re.split(r"[\\/]", source)[-1]
+    stem = stem.removesuffix(".toml")
+    return "scenario" if stem.startswith("<") else stem
+
+
+def _build_law(ctl: ControllerModel, fail: Any) -> Law:
+    if ctl.law not in LAWS:
+        raise fail("controller.law", _unknown("law", ctl.law, LAWS))
+    cls = LAWS[ctl.law]
+    params = _params(cls, dict(ctl.model_extra or {}), "controller", f"law {ctl.law!r}", fail)
+    try:
+        return cls(**params)
+    except UserInputError as exc:
+        raise fail(_param_key("controller", params, str(exc)), str(exc)) from None
+
+
+def _build_integrator(sim: SimulationModel, fail: Any) -> Integrator:
+    if sim.integrator not in INTEGRATORS:
+        raise fail("simulation.integrator", _unknown("integrator", sim.integrator, INTEGRATORS))
+    cls = INTEGRATORS[sim.integrator]
+    extra = dict(sim.model_extra or {})
+    what = f"integrator {sim.integrator!r}"
+    params = _params(cls, extra, "simulation", what, fail)
+    try:
+        return cls(**params)
+    except UserInputError as exc:
+        raise fail(_param_key("simulation", params, str(exc)), str(exc)) from None
+
+
+def _param_key(section: str, params: Mapping[str, Any], message: str) -> str:
+    """``section.key`` for the parameter a constructor's message names, else ``section``."""
+    for key in params:
+        if re.search(rf"\b{re.escape(key)}\b", message):
+            return f"{section}.{key}"
+    return section
+
+
+def _unknown(kind: str, name: str, registry: Mapping[str, Any]) -> str:
+    near = difflib.get_close_matches(name, list(registry), n=1)
+    hint = f"; did you mean {near[0]!r}?" if near else ""
+    return f"unknown {kind} {name!r}{hint} Known: {', '.join(sorted(registry))}"
+
+
+def _params(cls: type, given: dict[str, Any], section: str, what: str, fail: Any) -> dict[str, Any]:
+    """Check ``given`` against the dataclass fields of ``cls``; nested dataclasses from tables."""
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    fixed = SECTIONS[section]
+    out: dict[str, Any] = {}
+    for key, value in given.items():
+        if key not in fields:
+            takes = ", ".join([*fixed, *fields])
+            others = sorted(
+                name
+                for name, other in {**LAWS, **INTEGRATORS}.items()
+                if key in {g.name for g in dataclasses.fields(other)}
+            )
+            if others:
+                owners = ", ".join(repr(o) for o in others)
+                hint = f" {key!r} belongs to {owners}."
+            else:
+                near = difflib.get_close_matches(key, [*fields, *fixed], n=1)
+                hint = f" Did you mean {near[0]!r}?" if near else ""
+            raise fail(f"{section}.{key}", f"{what} takes no key {key!r}.{hint} It takes: {takes}")
+        out[key] = _param_value(fields[key], value, f"{section}.{key}", fail)
+    return out
+
+
+def _default(f: dataclasses.Field[Any]) -> Any:
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    if f.default_factory is not dataclasses.MISSING:
+        return f.default_factory()
+    return None
+
+
+def _param_value(f: dataclasses.Field[Any], value: Any, where: str, fail: Any) -> Any:
+    default = _default(f)
+    if dataclasses.is_dataclass(default) and not isinstance(default, type):
+        if not isinstance(value, dict):
+            names = ", ".join(g.name for g in dataclasses.fields(default))
+            raise fail(where, f"expected a table {{ {names} }}, got {value!r}")
+        sub = {g.name: g for g in dataclasses.fields(default) if g.init}
+        kwargs = {}
+        for key, v in value.items():
+            if key not in sub:
+                near = difflib.get_close_matches(key, list(sub), n=1)
+                hint = f" Did you mean {near[0]!r}?" if near else ""
+                raise fail(f"{where}.{key}", f"unknown key.{hint} It takes: {', '.join(sub)}")
+            kwargs[key] = _param_value(sub[key], v, f"{where}.{key}", fail)
+        try:
+            return type(default)(**kwargs)
+        except UserInputError as exc:
+            raise fail(where, str(exc)) from None
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise fail(where, f"expected true or false, got {value!r}")
+        return value
+    if isinstance(default, int | float):
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise fail(where, f"expected a number, got {value!r}")
+        if not math.isfinite(value):
+            raise fail(where, f"expected a finite number, got {value!r}")
+        if isinstance(default, int) and not isinstance(value, int):
+            raise fail(where, f"expected a whole number, got {value!r}")
+        return type(default)(value)
+    if isinstance(default, str) and not isinstance(value, str):
+        raise fail(where, f"expected a string, got {value!r}")
+    return value
+
+
+# --------------------------------------------------------------------------- messages
+
+
+def _line_of(text: str, section: str, key: str) -> int | None:
+    """1-based line of ``key`` in table ``[section]`` of ``text`` (best effort)."""
+    if not text:
+        return None
+    current = ""
+    first = key.split(".")[0] if key else ""
+    for number, line in enumerate(text.splitlines(), start=1):
+        s = line.strip()
+        m = re.match(r"^\[\s*([A-Za-z0-9_.-]+)\s*\]", s)
+        if m:
+            current = m.group(1)
+            if not first and current == section:
+                return number
+            continue
+        if not first:
+            continue
+        if current == section and re.match(rf"^{re.escape(first)}\s*=", s):
+            return number
+        if not current and re.match(rf"^{re.escape(section)}\.{re.escape(first)}\s*=", s):
+            return number
+    return None
+
+
+def _where(loc: tuple[Any, ...]) -> tuple[str, str]:
+    """``("formation.edges", "item 3")`` from a pydantic location."""
+    keys = [str(p) for p in loc if isinstance(p, str)]
+    items = [f"item {p + 1}" for p in loc if isinstance(p, int)]
+    return ".".join(keys), ", ".join(items)
+
+
+def _format_errors(exc: ValidationError, source: str, text: str) -> str:
+    problems = []
+    for err in exc.errors(include_url=False):
+        loc = tuple(err["loc"])
+        where, items = _where(loc)
+        section, _, key = where.partition(".")
+        if len(loc) == 1:
+            section, key = "", where
+        kind = err["type"]
+        if kind == "extra_forbidden":
+            parent = ".".join(where.split(".")[:-1])
+            name = where.split(".")[-1]
+            known = SECTIONS.get(parent, ())
+            near = difflib.get_close_matches(name, list(known), n=1)
+            hint = f"; did you mean {near[0]!r}?" if near else ""
+            table = f"[{parent}]" if parent else "the top level"
+            msg = f"unknown key {name!r} in {table}{hint} Known keys: {', '.join(known)}"
+        elif kind == "missing":
+            msg = "this key is required"
+        elif kind == "value_error":
+            msg = str(err.get("ctx", {}).get("error", err["msg"]))
+        else:
+            given = err.get("input")
+            msg = f"{err['msg'][0].lower()}{err['msg'][1:]}, got {given!r}"
+        line = _line_of(text, section, key) if kind != "missing" else _line_of(text, section, "")
+        at = f" (line {line})" if line else ""
+        label = where + (f", {items}" if items else "")
+        problems.append(f"{label}{at}: {msg}")
+    head = f"{source}: " if len(problems) == 1 else f"{source}: {len(problems)} problems: "
+    return head + "; ".join(problems)
