@@ -20,7 +20,6 @@ This module reads no files: :func:`formationlab.io.scenario.load_scenario` does.
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import math
 import re
 import tomllib
@@ -33,6 +32,8 @@ import tomli_w
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from ._scenario_parts import format_errors, line_of, param_key, unknown
+from ._scenario_parts import params as _p
 from .controllers import LAWS, Law
 from .errors import ScenarioError, UserInputError
 from .integrators import INTEGRATORS, Integrator
@@ -302,7 +303,7 @@ def parse_scenario(text_or_dict: str | Mapping[str, Any], source: str = "<string
     try:
         model = ScenarioModel.model_validate(raw)
     except ValidationError as exc:
-        raise ScenarioError(_format_errors(exc, source, text)) from None
+        raise ScenarioError(format_errors(exc, source, text, SECTIONS)) from None
     return _build(model, raw, text, source)
 
 
@@ -323,7 +324,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
 
     def fail(where: str, message: str) -> ScenarioError:
         section, _, key = where.partition(".")
-        line = _line_of(text, section, key)
+        line = line_of(text, section, key)
         at = f" (line {line})" if line else ""
         return ScenarioError(f"{source}: {where}{at}: {message}")
 
@@ -467,169 +468,30 @@ def _stem(source: str) -> str:
 
 def _build_law(ctl: ControllerModel, fail: Any) -> Law:
     if ctl.law not in LAWS:
-        raise fail("controller.law", _unknown("law", ctl.law, LAWS))
+        raise fail("controller.law", unknown("law", ctl.law, LAWS))
     cls = LAWS[ctl.law]
-    params = _params(cls, dict(ctl.model_extra or {}), "controller", f"law {ctl.law!r}", fail)
+    params = _p(
+        cls,
+        dict(ctl.model_extra or {}),
+        "controller",
+        SECTIONS["controller"],
+        f"law {ctl.law!r}",
+        fail,
+    )
     try:
         return cls(**params)
     except UserInputError as exc:
-        raise fail(_param_key("controller", params, str(exc)), str(exc)) from None
+        raise fail(param_key("controller", params, str(exc)), str(exc)) from None
 
 
 def _build_integrator(sim: SimulationModel, fail: Any) -> Integrator:
     if sim.integrator not in INTEGRATORS:
-        raise fail("simulation.integrator", _unknown("integrator", sim.integrator, INTEGRATORS))
+        raise fail("simulation.integrator", unknown("integrator", sim.integrator, INTEGRATORS))
     cls = INTEGRATORS[sim.integrator]
     extra = dict(sim.model_extra or {})
     what = f"integrator {sim.integrator!r}"
-    params = _params(cls, extra, "simulation", what, fail)
+    params = _p(cls, extra, "simulation", SECTIONS["simulation"], what, fail)
     try:
         return cls(**params)
     except UserInputError as exc:
-        raise fail(_param_key("simulation", params, str(exc)), str(exc)) from None
-
-
-def _param_key(section: str, params: Mapping[str, Any], message: str) -> str:
-    """``section.key`` for the parameter a constructor's message names, else ``section``."""
-    for key in params:
-        if re.search(rf"\b{re.escape(key)}\b", message):
-            return f"{section}.{key}"
-    return section
-
-
-def _unknown(kind: str, name: str, registry: Mapping[str, Any]) -> str:
-    near = difflib.get_close_matches(name, list(registry), n=1)
-    hint = f"; did you mean {near[0]!r}?" if near else ""
-    return f"unknown {kind} {name!r}{hint} Known: {', '.join(sorted(registry))}"
-
-
-def _params(cls: type, given: dict[str, Any], section: str, what: str, fail: Any) -> dict[str, Any]:
-    """Check ``given`` against the dataclass fields of ``cls``; nested dataclasses from tables."""
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
-    fixed = SECTIONS[section]
-    out: dict[str, Any] = {}
-    for key, value in given.items():
-        if key not in fields:
-            takes = ", ".join([*fixed, *fields])
-            others = sorted(
-                name
-                for name, other in {**LAWS, **INTEGRATORS}.items()
-                if key in {g.name for g in dataclasses.fields(other)}
-            )
-            if others:
-                owners = ", ".join(repr(o) for o in others)
-                hint = f" {key!r} belongs to {owners}."
-            else:
-                near = difflib.get_close_matches(key, [*fields, *fixed], n=1)
-                hint = f" Did you mean {near[0]!r}?" if near else ""
-            raise fail(f"{section}.{key}", f"{what} takes no key {key!r}.{hint} It takes: {takes}")
-        out[key] = _param_value(fields[key], value, f"{section}.{key}", fail)
-    return out
-
-
-def _default(f: dataclasses.Field[Any]) -> Any:
-    if f.default is not dataclasses.MISSING:
-        return f.default
-    if f.default_factory is not dataclasses.MISSING:
-        return f.default_factory()
-    return None
-
-
-def _param_value(f: dataclasses.Field[Any], value: Any, where: str, fail: Any) -> Any:
-    default = _default(f)
-    if dataclasses.is_dataclass(default) and not isinstance(default, type):
-        if not isinstance(value, dict):
-            names = ", ".join(g.name for g in dataclasses.fields(default))
-            raise fail(where, f"expected a table {{ {names} }}, got {value!r}")
-        sub = {g.name: g for g in dataclasses.fields(default) if g.init}
-        kwargs = {}
-        for key, v in value.items():
-            if key not in sub:
-                near = difflib.get_close_matches(key, list(sub), n=1)
-                hint = f" Did you mean {near[0]!r}?" if near else ""
-                raise fail(f"{where}.{key}", f"unknown key.{hint} It takes: {', '.join(sub)}")
-            kwargs[key] = _param_value(sub[key], v, f"{where}.{key}", fail)
-        try:
-            return type(default)(**kwargs)
-        except UserInputError as exc:
-            raise fail(where, str(exc)) from None
-    if isinstance(default, bool):
-        if not isinstance(value, bool):
-            raise fail(where, f"expected true or false, got {value!r}")
-        return value
-    if isinstance(default, int | float):
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise fail(where, f"expected a number, got {value!r}")
-        if not math.isfinite(value):
-            raise fail(where, f"expected a finite number, got {value!r}")
-        if isinstance(default, int) and not isinstance(value, int):
-            raise fail(where, f"expected a whole number, got {value!r}")
-        return type(default)(value)
-    if isinstance(default, str) and not isinstance(value, str):
-        raise fail(where, f"expected a string, got {value!r}")
-    return value
-
-
-# --------------------------------------------------------------------------- messages
-
-
-def _line_of(text: str, section: str, key: str) -> int | None:
-    """1-based line of ``key`` in table ``[section]`` of ``text`` (best effort)."""
-    if not text:
-        return None
-    current = ""
-    first = key.split(".")[0] if key else ""
-    for number, line in enumerate(text.splitlines(), start=1):
-        s = line.strip()
-        m = re.match(r"^\[\s*([A-Za-z0-9_.-]+)\s*\]", s)
-        if m:
-            current = m.group(1)
-            if not first and current == section:
-                return number
-            continue
-        if not first:
-            continue
-        if current == section and re.match(rf"^{re.escape(first)}\s*=", s):
-            return number
-        if not current and re.match(rf"^{re.escape(section)}\.{re.escape(first)}\s*=", s):
-            return number
-    return None
-
-
-def _where(loc: tuple[Any, ...]) -> tuple[str, str]:
-    """``("formation.edges", "item 3")`` from a pydantic location."""
-    keys = [str(p) for p in loc if isinstance(p, str)]
-    items = [f"item {p + 1}" for p in loc if isinstance(p, int)]
-    return ".".join(keys), ", ".join(items)
-
-
-def _format_errors(exc: ValidationError, source: str, text: str) -> str:
-    problems = []
-    for err in exc.errors(include_url=False):
-        loc = tuple(err["loc"])
-        where, items = _where(loc)
-        section, _, key = where.partition(".")
-        if len(loc) == 1:
-            section, key = "", where
-        kind = err["type"]
-        if kind == "extra_forbidden":
-            parent = ".".join(where.split(".")[:-1])
-            name = where.split(".")[-1]
-            known = SECTIONS.get(parent, ())
-            near = difflib.get_close_matches(name, list(known), n=1)
-            hint = f"; did you mean {near[0]!r}?" if near else ""
-            table = f"[{parent}]" if parent else "the top level"
-            msg = f"unknown key {name!r} in {table}{hint} Known keys: {', '.join(known)}"
-        elif kind == "missing":
-            msg = "this key is required"
-        elif kind == "value_error":
-            msg = str(err.get("ctx", {}).get("error", err["msg"]))
-        else:
-            given = err.get("input")
-            msg = f"{err['msg'][0].lower()}{err['msg'][1:]}, got {given!r}"
-        line = _line_of(text, section, key) if kind != "missing" else _line_of(text, section, "")
-        at = f" (line {line})" if line else ""
-        label = where + (f", {items}" if items else "")
-        problems.append(f"{label}{at}: {msg}")
-    head = f"{source}: " if len(problems) == 1 else f"{source}: {len(problems)} problems: "
-    return head + "; ".join(problems)
+        raise fail(param_key("simulation", params, str(exc)), str(exc)) from None
