@@ -1,0 +1,125 @@
+"""Trajectories as netCDF (``trajectory.nc``), through xarray and h5netcdf.
+
+Layout of the file (CF-style names, robots numbered from 1):
+
+========================  ============================  ======================================
+variable                  dimensions                    meaning
+========================  ============================  ======================================
+``q``                     ``(time, robot, axis)``       positions
+``u``                     ``(time, robot, axis)``       controls (= velocities, eq. 1)
+``V``                     ``(time,)``                   the law's Lyapunov function (eq. 9/15)
+``sigma``                 ``(time, surface)``           switching functions (angle-restricted
+                                                        laws only); active where ``>= 0``
+``distance_error``        ``(time, edge)``              ``r_ij - d_ij``
+``diameter``              ``(robot,)``                  ``rho_i``
+``edge_robots``           ``(edge, end)``               1-based robot numbers of each edge
+``desired_distance``      ``(edge,)``                   ``d_ij``
+========================  ============================  ======================================
+
+Coordinates: ``time`` in seconds, ``robot`` = 1..n, ``axis`` = ``"x"``, ``"y"``,
+``edge`` = labels ``"i-j"``, ``surface`` = labels ``"alpha_ijk"``. Global
+attributes: ``scenario`` (the scenario's TOML text), ``formationlab_version``,
+``law`` and ``integrator`` (JSON of their parameters), ``status``, ``message``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .files import atomic_path, to_jsonable
+
+__all__ = ["ENGINE", "load_trajectory", "trajectory_dataset", "write_trajectory"]
+
+#: The netCDF engine used for reading and writing.
+ENGINE = "h5netcdf"
+
+
+def trajectory_dataset(result: Any, *, attrs: dict[str, Any] | None = None) -> Any:
+    """The :class:`xarray.Dataset` of a :class:`~formationlab.SimulationResult`.
+
+    Parameters
+    ----------
+    result : SimulationResult
+        A simulated run (positions ``(T, n, 2)``, controls, ``V``, ``sigma``).
+    attrs : dict, optional
+        Extra global attributes (strings or numbers; dicts are stored as JSON).
+    """
+    import xarray as xr
+
+    from .. import __version__
+
+    f = result.formation
+    n = f.n
+    robot = np.arange(1, n + 1)
+    coords: dict[str, Any] = {
+        "time": ("time", np.asarray(result.t, float), {"units": "s", "long_name": "time"}),
+        "robot": ("robot", robot, {"long_name": "robot number (1-based)"}),
+        "axis": ("axis", np.array(["x", "y"])),
+        "edge": ("edge", np.array(result.edge_labels)),
+    }
+    data: dict[str, Any] = {
+        "q": (("time", "robot", "axis"), result.q, {"long_name": "position q_i"}),
+        "u": (("time", "robot", "axis"), result.u, {"long_name": "control u_i = dq_i/dt"}),
+        "V": (("time",), result.V, {"long_name": "Lyapunov function of the law"}),
+        "distance_error": (
+            ("time", "edge"),
+            result.distance_errors,
+            {"long_name": "distance error r_ij - d_ij"},
+        ),
+        "diameter": (("robot",), f.diameters, {"long_name": "robot diameter rho_i"}),
+        "edge_robots": (("edge", "end"), f.edges + 1, {"long_name": "robots i, j (1-based)"}),
+        "desired_distance": (("edge",), f.distances, {"long_name": "desired distance d_ij"}),
+    }
+    if result.sigma.shape[-1]:
+        coords["surface"] = ("surface", np.array(result.restriction_labels))
+        data["sigma"] = (
+            ("time", "surface"),
+            result.sigma,
+            {"long_name": "switching function sigma = beta c_abc + theta (active >= 0)"},
+        )
+    glob: dict[str, Any] = {
+        "title": "formationlab trajectory",
+        "formationlab_version": __version__,
+        "law": json.dumps(to_jsonable(_params(result.law))),
+        "integrator": json.dumps(to_jsonable(_params(result.integrator))),
+        "status": result.status,
+        "message": result.message,
+        "Conventions": "CF-1.8",
+    }
+    for key, value in (attrs or {}).items():
+        glob[key] = (
+            value if isinstance(value, str | int | float) else json.dumps(to_jsonable(value))
+        )
+    return xr.Dataset(data_vars=data, coords=coords, attrs=glob)
+
+
+def _params(obj: Any) -> dict[str, Any]:
+    import dataclasses
+
+    return {"name": obj.name, **dataclasses.asdict(obj)}
+
+
+def write_trajectory(
+    result: Any, target: str | os.PathLike[str], *, attrs: dict[str, Any] | None = None
+) -> Path:
+    """Write ``result`` to the netCDF file ``target`` atomically (see module docstring).
+
+    ``attrs`` are added as global attributes, e.g. ``{"scenario": scenario.text}``.
+    """
+    ds = trajectory_dataset(result, attrs=attrs)
+    with atomic_path(target, suffix=".nc") as tmp:
+        ds.to_netcdf(tmp, engine=ENGINE, invalid_netcdf=False)
+    return Path(target)
+
+
+def load_trajectory(path: str | os.PathLike[str]) -> Any:
+    """Read a ``trajectory.nc`` into memory and close the file; returns an ``xarray.Dataset``."""
+    import xarray as xr
+
+    with xr.open_dataset(path, engine=ENGINE) as ds:
+        return ds.load()

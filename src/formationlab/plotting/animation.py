@@ -1,0 +1,134 @@
+"""Animation of a run: robots as discs of their diameters, the graph's edges, fading trails.
+
+:func:`animate_run` builds a :class:`matplotlib.animation.FuncAnimation` from
+positions ``(T, n, 2)``; the frames are a thinned, evenly spaced subset of the
+saved times (at most ``max_frames``), so the cost and size of the GIF, MP4 and
+HTML player stay bounded whatever the run's length. Saving is done by
+:mod:`formationlab.io.animation`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from matplotlib.animation import FuncAnimation
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle
+from numpy.typing import ArrayLike, NDArray
+
+from .runs import robot_colors
+
+__all__ = ["animate_run", "frame_indices"]
+
+
+def frame_indices(t: ArrayLike, max_frames: int) -> NDArray[np.int64]:
+    """Indices into ``t`` (shape ``(T,)``) of at most ``max_frames`` frames evenly spaced in time.
+
+    The first and the last saved states are always included.
+    """
+    t = np.asarray(t, dtype=float)
+    if max_frames < 2:
+        raise ValueError(f"an animation needs at least 2 frames, got max_frames={max_frames}")
+    if len(t) <= max_frames:
+        return np.arange(len(t))
+    targets = np.linspace(t[0], t[-1], max_frames)
+    idx = np.searchsorted(t, targets, side="left").clip(0, len(t) - 1)
+    return np.unique(idx)
+
+
+def animate_run(
+    t: ArrayLike,
+    q: ArrayLike,
+    *,
+    edges: ArrayLike,
+    diameters: ArrayLike,
+    max_frames: int = 150,
+    fps: int = 15,
+    trail: float | None = None,
+    title: str = "",
+    size: float = 5.0,
+    dpi: int = 90,
+) -> FuncAnimation:
+    """An animation of a run.
+
+    Parameters
+    ----------
+    t : array_like, shape (T,)
+        Saved times, seconds.
+    q : array_like, shape (T, n, 2)
+        Positions at those times.
+    edges : array_like of int, shape (m, 2)
+        0-based robot pairs of the graph, drawn as lines between the robots.
+    diameters : array_like, shape (n,)
+        Robot diameters ``rho_i``; each robot is drawn as a disc of that
+        diameter, in the units of the axes (true size).
+    max_frames : int
+        Upper bound on the number of frames (see :func:`frame_indices`).
+    fps : int
+        Frames per second of the saved animation.
+    trail : float, optional
+        Length in seconds of the path drawn behind each robot; the whole path
+        so far when omitted.
+    title : str
+        Title; the time is appended.
+    size, dpi : float, int
+        Figure side in inches and resolution.
+
+    Returns
+    -------
+    matplotlib.animation.FuncAnimation
+        Not attached to pyplot; save it with :func:`formationlab.io.animation.save_animation`.
+    """
+    t = np.asarray(t, dtype=float)
+    q = np.asarray(q, dtype=float)
+    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    diameters = np.asarray(diameters, dtype=float)
+    if q.ndim != 3 or q.shape[-1] != 2 or q.shape[0] != t.shape[0]:
+        raise ValueError(f"q must have shape (T, n, 2) with T = len(t), got {q.shape}")
+    n = q.shape[1]
+    frames = frame_indices(t, max_frames)
+    colors = robot_colors(n)
+
+    fig = Figure(figsize=(size, size), dpi=dpi, layout="constrained")
+    ax = fig.add_subplot()
+    lo = q.reshape(-1, 2).min(axis=0) - diameters.max()
+    hi = q.reshape(-1, 2).max(axis=0) + diameters.max()
+    pad = 0.05 * max(float(np.max(hi - lo)), 1e-9)
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x")
+    ax.set_ylabel("y")
+
+    graph = LineCollection(np.zeros((len(edges), 2, 2)), colors="0.3", linewidths=1.0, zorder=2)
+    ax.add_collection(graph)
+    trails = [ax.plot([], [], color=colors[i], lw=1.0, alpha=0.6, zorder=1)[0] for i in range(n)]
+    discs = [
+        Circle((0.0, 0.0), diameters[i] / 2, color=colors[i], alpha=0.9, zorder=3) for i in range(n)
+    ]
+    for disc in discs:
+        ax.add_patch(disc)
+    labels = [
+        ax.annotate(
+            str(i + 1), (0.0, 0.0), xytext=(4, 4), textcoords="offset points", fontsize=8, zorder=4
+        )
+        for i in range(n)
+    ]
+    clock = ax.set_title("")
+
+    def draw(k: int) -> list[Any]:
+        idx = frames[k]
+        now = q[idx]
+        graph.set_segments(np.stack([now[edges[:, 0]], now[edges[:, 1]]], axis=1))
+        start = 0 if trail is None else int(np.searchsorted(t, t[idx] - trail))
+        for i in range(n):
+            trails[i].set_data(q[start : idx + 1, i, 0], q[start : idx + 1, i, 1])
+            discs[i].center = (now[i, 0], now[i, 1])
+            labels[i].xy = (now[i, 0], now[i, 1])
+        clock.set_text(f"{title + ': ' if title else ''}t = {t[idx]:.2f} s")
+        return [graph, *trails, *discs, *labels, clock]
+
+    draw(0)
+    return FuncAnimation(fig, draw, frames=len(frames), interval=1000 / fps, blit=False)
