@@ -50,3 +50,15 @@ def command(*args: Any, **kwargs: Any) -> Callable[[F], F]:
         return fn
 
     return deco
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", help="Print the version and exit."),
+) -> None:
+    """Multi-robot formation control: reproduce the paper, run scenarios, study outcomes."""
+    if version:
+        from .. import __version__
+
+        typer.echo(f"formationlab {__version__}")
+        raise typer.Exit(0)

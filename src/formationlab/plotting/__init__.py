@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from .paper import PAPER_FIGURES, paper_figures
 from .runs import (
     plot_controls,
     plot_distance_errors,
@@ -18,6 +19,8 @@ from .runs import (
 )
 
 __all__ = [
+    "PAPER_FIGURES",
+    "paper_figures",
     "plot_controls",
     "plot_distance_errors",
     "plot_lyapunov",
