@@ -102,7 +102,9 @@ def animate_run(
     ax.set_xlabel("x")
     ax.set_ylabel("y")
 
-    graph = LineCollection(np.zeros((len(edges), 2, 2)), colors="0.3", linewidths=1.0, zorder=2)
+    graph = LineCollection(
+        list(np.zeros((len(edges), 2, 2))), colors="0.3", linewidths=1.0, zorder=2
+    )
     ax.add_collection(graph)
     trails = [ax.plot([], [], color=colors[i], lw=1.0, alpha=0.6, zorder=1)[0] for i in range(n)]
     discs = [
@@ -121,7 +123,7 @@ def animate_run(
     def draw(k: int) -> list[Any]:
         idx = frames[k]
         now = q[idx]
-        graph.set_segments(np.stack([now[edges[:, 0]], now[edges[:, 1]]], axis=1))
+        graph.set_segments(list(np.stack([now[edges[:, 0]], now[edges[:, 1]]], axis=1)))
         start = 0 if trail is None else int(np.searchsorted(t, t[idx] - trail))
         for i in range(n):
             trails[i].set_data(q[start : idx + 1, i, 0], q[start : idx + 1, i, 1])
