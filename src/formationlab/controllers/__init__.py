@@ -6,6 +6,8 @@
 from .angle_restricted import AngleRestrictedLaw, active_restrictions, grad_psi, psi_sum
 from .base import LAWS, Law, Repulsion, get_law, register
 from .distance import DistanceLaw, grad_phi, phi_sum
+from .signed_area import SignedAreaLaw
+from .squared_distance import SquaredDistanceLaw
 
 __all__ = [
     "LAWS",
@@ -13,6 +15,8 @@ __all__ = [
     "DistanceLaw",
     "Law",
     "Repulsion",
+    "SignedAreaLaw",
+    "SquaredDistanceLaw",
     "active_restrictions",
     "get_law",
     "grad_phi",
