@@ -1,0 +1,150 @@
+"""From end states to a catalogue of distinct, classified equilibria.
+
+:func:`catalogue` takes candidate end states (from :func:`~.search.settle` or
+from a study's trials), counts each against the equilibria already found,
+refines the others with :func:`~.refine.refine`, classifies them with
+:func:`~.classify.classify_equilibrium` and merges duplicates with
+:func:`~.dedup.same_equilibrium`.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..analysis import Tolerances
+from ..controllers import Law
+from ..spec import Formation
+from .classify import Equilibrium, classify_equilibrium
+from .dedup import canonical_pose, same_equilibrium
+from .refine import refine
+
+__all__ = ["Catalogue", "catalogue"]
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Catalogue:
+    """Distinct equilibria of a law on a formation, and how many trials ended at each.
+
+    Attributes
+    ----------
+    equilibria : list of Equilibrium
+        The desired one first (if found), then by decreasing count.
+    counts : list of int
+        Trials that ended at each equilibrium.
+    skipped : dict of str to int
+        Candidates not attributed to an equilibrium, by reason
+        (``"collision"``, ``"not-refined"``).
+    """
+
+    formation: Formation
+    law: Law
+    equilibria: list[Equilibrium]
+    counts: list[int]
+    skipped: dict[str, int] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready ``{"equilibria": [...], ...}`` (robot numbers 1-based in labels)."""
+        edges = [f"{i + 1}-{j + 1}" for i, j in self.formation.edges]
+        items = []
+        for k, (eq, count) in enumerate(zip(self.equilibria, self.counts, strict=True)):
+            lam = eq.eigenvalues
+            items.append(
+                {
+                    "id": k + 1,
+                    "positions": eq.q.tolist(),
+                    "distances": dict(zip(edges, eq.distances.tolist(), strict=True)),
+                    "residual": eq.residual,
+                    "stability": eq.stability,
+                    "unstable_directions": eq.unstable_directions,
+                    "eigenvalues": (
+                        lam.real.tolist()
+                        if np.all(lam.imag == 0)
+                        else [[z.real, z.imag] for z in lam]
+                    ),
+                    "desired": eq.desired,
+                    "count": count,
+                    "active_restrictions": list(eq.active),
+                    "switching_surfaces": list(eq.surfaces),
+                    "attractive": eq.attractive,
+                    "growth_rate": eq.growth_rate,
+                    "e_folding_time": (1.0 / eq.growth_rate if eq.growth_rate > 0 else None),
+                }
+            )
+        return {
+            "law": self.law.name,
+            "equilibria": items,
+            "candidates": int(sum(self.counts) + sum(self.skipped.values())),
+            "skipped": dict(self.skipped),
+        }
+
+
+def catalogue(
+    formation: Formation,
+    law: Law,
+    candidates: NDArray[np.float64],
+    *,
+    outcomes: NDArray[np.str_] | None = None,
+    extra: list[NDArray[np.float64]] | None = None,
+    tolerances: Tolerances | None = None,
+    match_tol: float = 1e-3,
+) -> Catalogue:
+    """Refine, classify and merge the end states ``candidates`` (``(B, n, 2)``).
+
+    Parameters
+    ----------
+    outcomes : ndarray of str, shape (B,), optional
+        Outcome of each trial; ``"collision"`` trials are skipped.
+    extra : list of ndarray (n, 2), optional
+        States to refine and include with count 0 (e.g. seeds of saddles).
+    match_tol : float
+        A raw candidate within this (pairwise distances, RMS fit) of an
+        equilibrium already found is counted there without refining it.
+    """
+    cand = np.asarray(candidates, dtype=float).reshape(-1, formation.n, 2)
+    outs = np.asarray(outcomes) if outcomes is not None else np.full(len(cand), "")
+    found: list[Equilibrium] = []
+    counts: list[int] = []
+    skipped: Counter[str] = Counter()
+
+    def attribute(q: NDArray, tol: float) -> int | None:
+        for k, eq in enumerate(found):
+            if same_equilibrium(formation, eq.q, q, tol=tol):
+                return k
+        return None
+
+    pending = [(q, 1) for q, o in zip(cand, outs, strict=True) if o != "collision"]
+    skipped["collision"] += int(np.sum(outs == "collision"))
+    pending += [(np.asarray(q, dtype=float), 0) for q in (extra or [])]
+    for q, weight in pending:
+        k = attribute(q, match_tol) if weight else None
+        if k is None:
+            ref = refine(formation, law, q)
+            if not ref.success:
+                skipped["not-refined"] += weight
+                continue
+            eq = classify_equilibrium(formation, law, ref, tolerances)
+            k = attribute(eq.q, 1e-6)
+            if k is None:
+                found.append(_posed(eq))
+                counts.append(0)
+                k = len(found) - 1
+        counts[k] += weight
+    order = sorted(range(len(found)), key=lambda k: (not found[k].desired, -counts[k]))
+    return Catalogue(
+        formation=formation,
+        law=law,
+        equilibria=[found[k] for k in order],
+        counts=[counts[k] for k in order],
+        skipped={k: v for k, v in skipped.items() if v},
+    )
+
+
+def _posed(eq: Equilibrium) -> Equilibrium:
+    from dataclasses import replace
+
+    return replace(eq, q=canonical_pose(eq.q))

@@ -1,0 +1,208 @@
+"""Classifying an equilibrium by the eigenvalues of the linearised closed loop.
+
+For ``q_dot = u(q)`` linearised at an equilibrium, with the translation and
+rotation modes removed (:mod:`formationlab.equilibria.jacobian`):
+
+``stable``
+    every remaining eigenvalue has a negative real part: nearby states return;
+``saddle``
+    some eigenvalues have positive real parts (``unstable_directions`` of them)
+    and none is zero: almost every nearby state leaves, the equilibrium only
+    delays a run that passes close to it;
+``degenerate``
+    some eigenvalue is zero to the tolerance: the linearisation does not decide
+    (a continuum of equilibria, e.g. the flex of a non-rigid graph);
+``filippov``
+    the equilibrium lies on a switching surface of the angle-restricted law
+    (eq. 14), where the field is discontinuous and the Jacobian does not exist.
+    It is an equilibrium of the Filippov convex combination. Its eigenvalues
+    are those of the sliding dynamics on the surface (the field with the
+    equivalent-control weight, the surface normal removed as well), and
+    ``attractive`` says whether both one-sided fields point into the surface.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..analysis import Tolerances, classify
+from ..controllers import Law
+from ..spec import Formation
+from .jacobian import jacobian, reduced_eigenvalues
+from .refine import Refined
+
+__all__ = ["Equilibrium", "Stability", "classify_equilibrium", "restriction_labels"]
+
+Stability = Literal["stable", "saddle", "degenerate", "filippov"]
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Equilibrium:
+    """A classified equilibrium of a law on a formation.
+
+    Attributes
+    ----------
+    q : ndarray, shape (n, 2)
+        One representative (any translate, rotation or allowed relabelling is
+        the same equilibrium).
+    distances : ndarray, shape (m,)
+        ``r_ij`` per edge, in the order of ``formation.edges``.
+    residual : float
+        Largest ``|u_i|`` at ``q``.
+    stability : {"stable", "saddle", "degenerate", "filippov"}
+    unstable_directions : int
+        Eigenvalues with a positive real part (of the sliding dynamics for a
+        Filippov equilibrium).
+    eigenvalues : ndarray of complex, shape (2n - 3,) or (2n - 3 - r,)
+        Decreasing real part; rigid-motion modes (and surface normals) removed.
+    desired : bool
+        Whether ``q`` is the desired formation (:func:`formationlab.classify`).
+    active : tuple of str
+        Labels (1-based, e.g. ``"alpha_123"``) of the restrictions whose step is on.
+    surfaces : tuple of str
+        Labels of the switching surfaces ``q`` lies on (Filippov equilibria only).
+    weights : ndarray, shape (s,)
+        Step of each surface (Filippov weight on the surfaces ``q`` lies on).
+    attractive : bool or None
+        Filippov equilibria: whether the surfaces attract from both sides
+        (a sliding mode exists there). None otherwise.
+    """
+
+    q: NDArray[np.float64]
+    distances: NDArray[np.float64]
+    residual: float
+    stability: Stability
+    unstable_directions: int
+    eigenvalues: NDArray[np.complex128]
+    desired: bool
+    active: tuple[str, ...] = ()
+    surfaces: tuple[str, ...] = ()
+    weights: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    attractive: bool | None = None
+
+    @property
+    def growth_rate(self) -> float:
+        """Largest real part of the eigenvalues, 1/s (> 0: a perturbation grows)."""
+        return float(self.eigenvalues.real.max()) if self.eigenvalues.size else float("nan")
+
+
+def restriction_labels(formation: Formation) -> list[str]:
+    """1-based label of each switching surface, e.g. ``"alpha_123"`` (its first triple)."""
+    tris, _, index = formation.surfaces
+    labels = []
+    for s in range(len(tris)):
+        i, j, k = np.argwhere(index == s)[0] + 1
+        labels.append(f"alpha_{i}{j}{k}")
+    return labels
+
+
+def _zero_tol(lam: NDArray[np.complex128]) -> float:
+    return 1e-6 * max(1.0, float(np.max(np.abs(lam)))) if lam.size else 1e-6
+
+
+def _sliding_field(formation: Formation, law: Law, weights: NDArray, on: list[int]):  # type: ignore[no-untyped-def]
+    """The sliding field ``u_{w*(q)}(q)`` on the surfaces ``on``: ``grad sigma . u = 0``.
+
+    ``u_w`` is affine in ``w``, so ``w*`` solves a small linear system at every ``q``.
+    """
+
+    def grad_sigma(q: NDArray) -> NDArray:  # (..., k, n, 2), central differences
+        h = 1e-7 * max(1.0, float(np.max(np.abs(q))))
+        out = np.zeros((*q.shape[:-2], len(on), *q.shape[-2:]))
+        for a in range(q.shape[-2]):
+            for b in range(2):
+                e = np.zeros(q.shape[-2:])
+                e[a, b] = h
+                ds = (law.switching(formation, q + e) - law.switching(formation, q - e)) / (2 * h)
+                out[..., :, a, b] = ds[..., on]
+        return out
+
+    def field(q: NDArray) -> NDArray:
+        q = np.asarray(q, dtype=float)
+        batch = q.shape[:-2]
+        w = np.broadcast_to(weights, (*batch, weights.size)).copy()
+        w[..., on] = 0.0
+        base = law.control_with(formation, q, w)
+        cols = []
+        for s in on:
+            ws = w.copy()
+            ws[..., s] = 1.0
+            cols.append(law.control_with(formation, q, ws) - base)
+        d = np.stack(cols, axis=-3)  # (..., k, n, 2)
+        g = grad_sigma(q)
+        a = np.einsum("...tnd,...snd->...ts", g, d)
+        b = -np.einsum("...tnd,...nd->...t", g, base)
+        wstar = np.linalg.solve(a, b[..., None])[..., 0]
+        return base + np.einsum("...s,...snd->...nd", wstar, d)
+
+    return field, grad_sigma
+
+
+def classify_equilibrium(
+    formation: Formation,
+    law: Law,
+    refined: Refined,
+    tolerances: Tolerances | None = None,
+) -> Equilibrium:
+    """Classify a refined equilibrium (see the module docstring for the classes)."""
+    q = refined.q
+    w = refined.weights
+    labels = restriction_labels(formation) if w.size else []
+    sigma = np.asarray(law.switching(formation, q), dtype=float)
+    active = tuple(lab for lab, s in zip(labels, sigma, strict=True) if s >= 0)
+    on = list(refined.surfaces)
+    attractive: bool | None = None
+    if on:
+        field, grad_sigma = _sliding_field(formation, law, w, on)
+        jac = jacobian(field, q)
+        normals = grad_sigma(q).reshape(len(on), -1).T  # (2n, k)
+        lam = reduced_eigenvalues(jac, q, extra=normals)
+        wk = w.copy()
+        wk[on] = 0.0
+        below = law.control_with(formation, q, wk)
+        wk[on] = 1.0
+        above = law.control_with(formation, q, wk)
+        g = normals.T
+        attractive = bool(np.all(g @ below.ravel() > 0) and np.all(g @ above.ravel() < 0))
+        active = tuple(lab for lab in active if lab not in {labels[s] for s in on})
+    else:
+        if w.size:
+            ww = w
+
+            def field(x: NDArray) -> NDArray:
+                return law.control_with(formation, x, np.broadcast_to(ww, (*x.shape[:-2], ww.size)))
+        else:
+
+            def field(x: NDArray) -> NDArray:
+                return law.control(formation, x)
+
+        lam = reduced_eigenvalues(jacobian(field, q), q)
+    ztol = _zero_tol(lam)
+    unstable = int(np.sum(lam.real > ztol))
+    if on:
+        stability: Stability = "filippov"
+    elif np.any(np.abs(lam.real) <= ztol):
+        stability = "degenerate"
+    elif unstable:
+        stability = "saddle"
+    else:
+        stability = "stable"
+    desired = classify(formation, q, np.zeros_like(q), tolerances) == "desired"
+    r = np.linalg.norm(q[formation.edges[:, 1]] - q[formation.edges[:, 0]], axis=-1)
+    return Equilibrium(
+        q=q,
+        distances=r,
+        residual=refined.residual,
+        stability=stability,
+        unstable_directions=unstable,
+        eigenvalues=lam,
+        desired=desired,
+        active=active,
+        surfaces=tuple(labels[s] for s in on),
+        weights=w,
+        attractive=attractive,
+    )

@@ -1,0 +1,136 @@
+"""When two equilibria are the same: translation, rotation and allowed relabellings.
+
+The closed loop of every law in the package is equivariant under
+
+* translations and rotations of all robots (relative positions only);
+* a relabelling ``pi`` of the robots that is an automorphism of the formation:
+  it keeps the graph, the desired distances ``d_ij`` and the diameters, and
+  maps the ``alpha`` table to itself, ``alpha_{pi(i) pi(j) pi(k)} = alpha_ijk``;
+* a reflection combined with a relabelling that maps ``alpha`` to
+  ``-alpha`` (a reflection flips every ``c_ijk``, eq. 14). With a free
+  orientation (no ``alpha``) every automorphism may be combined with a
+  reflection; with the paper's triangle the reflection across ``x = 0`` with
+  robots 1 and 2 swapped is one (NOTES.md, "Things a faithful simulation
+  shows").
+
+Two equilibria are the same when one such transformation maps one onto the
+other. :func:`same_equilibrium` searches the relabellings by backtracking:
+robot ``i`` of ``a`` may go to robot ``p`` of ``b`` only when the formation data
+and the pairwise distances to the robots placed so far agree, which prunes
+almost everything for a generic shape; a complete match of all pairwise
+distances means the shapes are congruent, and a Procrustes fit decides
+whether a rotation (or, where allowed, a reflection) carries one onto the
+other.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..spec import Formation
+
+__all__ = ["canonical_pose", "group_equilibria", "same_equilibrium"]
+
+
+def canonical_pose(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``q`` translated to centroid 0 and turned so that robot 1 -> robot 2 points along +x."""
+    q = np.asarray(q, dtype=float)
+    p = q - q.mean(axis=0)
+    v = p[1] - p[0]
+    ang = np.arctan2(v[1], v[0])
+    c, s = np.cos(-ang), np.sin(-ang)
+    out = p @ np.array([[c, s], [-s, c]])
+    out[np.abs(out) < 1e-14] = 0.0
+    return out
+
+
+def _fit_rmsd(a: NDArray, b: NDArray, reflect: bool) -> float:
+    """Least RMS distance between ``a`` and ``b`` (both centred) over rotations (x reflection)."""
+    if reflect:
+        b = b * np.array([1.0, -1.0])
+    h = b.T @ a
+    u, _, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(u @ vt)) or 1.0
+    rot = u @ np.diag([1.0, d]) @ vt
+    return float(np.sqrt(np.mean(np.sum((b @ rot - a) ** 2, axis=-1))))
+
+
+def same_equilibrium(
+    formation: Formation,
+    qa: NDArray[np.float64],
+    qb: NDArray[np.float64],
+    *,
+    tol: float = 1e-5,
+) -> bool:
+    """Whether ``qa`` and ``qb`` (both ``(n, 2)``) are one equilibrium up to the allowed maps.
+
+    ``tol`` bounds the differences of pairwise distances and the RMS misfit of
+    the final Procrustes fit.
+    """
+    qa = np.asarray(qa, dtype=float)
+    qb = np.asarray(qb, dtype=float)
+    n = formation.n
+    ra = np.linalg.norm(qa[:, None] - qa[None], axis=-1)
+    rb = np.linalg.norm(qb[:, None] - qb[None], axis=-1)
+    if abs(np.sort(ra.ravel()) - np.sort(rb.ravel())).max() > 2 * tol:
+        return False
+    adj = formation.adjacency
+    dm = np.where(adj, formation.distance_matrix, -1.0)
+    rho = formation.diameters
+    alpha = formation.alpha
+    pa = qa - qa.mean(axis=0)
+    pb = qb - qb.mean(axis=0)
+    perm = np.full(n, -1)
+    used = np.zeros(n, bool)
+    # signs eps with alpha o pi = eps alpha still possible (a reflection flips c_ijk)
+    signs = (1.0, -1.0)
+
+    def alpha_ok(i: int, eps: float) -> bool:
+        if alpha is None:
+            return True
+        done = np.flatnonzero(perm >= 0)
+        for j in done:
+            for k in done:
+                if j == k:
+                    continue
+                for a, b, c in ((i, j, k), (j, i, k), (j, k, i)):
+                    if alpha[perm[a], perm[b], perm[c]] != eps * alpha[a, b, c]:
+                        return False
+        return True
+
+    def place(i: int, eps: float) -> bool:
+        if i == n:
+            return _fit_rmsd(pa, pb[perm], reflect=eps < 0) <= tol
+        for p in range(n):
+            if used[p] or rho[p] != rho[i]:
+                continue
+            done = np.flatnonzero(perm >= 0)
+            if np.any(dm[i, done] != dm[p, perm[done]]):
+                continue
+            if np.any(np.abs(ra[i, done] - rb[p, perm[done]]) > 2 * tol):
+                continue
+            perm[i], used[p] = p, True
+            if alpha_ok(i, eps) and place(i + 1, eps):
+                return True
+            perm[i], used[p] = -1, False
+        return False
+
+    return any(place(0, eps) for eps in signs)
+
+
+def group_equilibria(
+    formation: Formation, qs: list[NDArray[np.float64]], *, tol: float = 1e-5
+) -> list[int]:
+    """Group label of each state in ``qs``: the index of the first state it equals."""
+    labels: list[int] = []
+    reps: list[int] = []
+    for idx, q in enumerate(qs):
+        for r in reps:
+            if same_equilibrium(formation, qs[r], q, tol=tol):
+                labels.append(r)
+                break
+        else:
+            reps.append(idx)
+            labels.append(idx)
+    return labels

@@ -1,0 +1,103 @@
+"""Linearisation of the closed loop ``q_dot = u(q)`` at an equilibrium.
+
+Every law in the package uses relative positions only and turns with the
+robots: ``u(q + t) = u(q)`` and ``u(R q) = R u(q)`` for a rotation ``R``. The
+equilibria therefore come in three-dimensional orbits (two translations and
+one rotation), and the Jacobian ``J = du/dq`` at an equilibrium has these
+three directions in its kernel. They carry no information about stability,
+so they are projected out before the eigenvalues are taken: with ``T`` the
+span of the rigid-motion modes, ``J T = 0`` makes ``T`` invariant, and the
+remaining eigenvalues are those of ``P^T J P`` for an orthonormal basis ``P``
+of the orthogonal complement of ``T``.
+
+Arrays: positions ``(n, 2)``; the flat state is ``q.ravel()`` of length
+``2n`` (``x_1, y_1, x_2, y_2, ...``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "jacobian",
+    "reduced_eigenvalues",
+    "rigid_modes",
+]
+
+Field = Callable[[NDArray[np.float64]], NDArray[np.float64]]
+
+
+def jacobian(field: Field, q: NDArray[np.float64], *, step: float | None = None) -> NDArray:
+    """``J = du/dq`` of ``field`` at ``q`` by central differences, shape ``(2n, 2n)``.
+
+    ``field`` maps positions ``(..., n, 2)`` to velocities ``(..., n, 2)``; all
+    ``4n`` perturbed states are evaluated in one batched call. The default step
+    is ``1e-6`` times the size of the configuration (RMS distance to the
+    centroid), which balances the ``O(h^2)`` truncation against rounding.
+    """
+    q = np.asarray(q, dtype=float)
+    n2 = q.size
+    if step is None:
+        size = float(np.sqrt(np.mean(np.sum((q - q.mean(axis=0)) ** 2, axis=-1))))
+        step = 1e-6 * max(size, 1e-3)
+    e = np.eye(n2).reshape(n2, *q.shape) * step
+    batch = np.concatenate([q + e, q - e])  # (2 * 2n, n, 2)
+    u = np.asarray(field(batch)).reshape(2, n2, n2)
+    return ((u[0] - u[1]) / (2.0 * step)).T  # column c is du / dq_c
+
+
+def rigid_modes(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Orthonormal basis of the translation and rotation directions at ``q``; ``(2n, 3)``.
+
+    Translations ``(1, 0)`` and ``(0, 1)`` for every robot; the rotation about
+    the centroid ``k x (q_i - c)``.
+    """
+    q = np.asarray(q, dtype=float)
+    n = q.shape[0]
+    tx = np.tile([1.0, 0.0], n)
+    ty = np.tile([0.0, 1.0], n)
+    p = q - q.mean(axis=0)
+    rot = np.stack([-p[:, 1], p[:, 0]], axis=-1).ravel()
+    basis, _ = np.linalg.qr(np.stack([tx, ty, rot], axis=1))
+    return basis
+
+
+def complement(vectors: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Orthonormal basis ``(N, N - r)`` of the orthogonal complement of the columns ``(N, r)``."""
+    full, _, _ = np.linalg.svd(vectors, full_matrices=True)
+    rank = int(np.linalg.matrix_rank(vectors))
+    return full[:, rank:]
+
+
+def reduced_eigenvalues(
+    jac: NDArray[np.float64],
+    q: NDArray[np.float64],
+    *,
+    extra: NDArray[np.float64] | None = None,
+) -> NDArray[np.complex128]:
+    """Eigenvalues of ``jac`` with the rigid-motion modes (and ``extra`` directions) removed.
+
+    Parameters
+    ----------
+    jac : ndarray, shape (2n, 2n)
+        Jacobian of the closed loop at the equilibrium ``q``.
+    q : ndarray, shape (n, 2)
+        The equilibrium.
+    extra : ndarray, shape (2n, r), optional
+        Further directions to remove, e.g. the normal of a switching surface
+        for the sliding dynamics on it (its left null vector).
+
+    Returns
+    -------
+    ndarray of complex, shape (2n - 3 - r,)
+        Sorted by decreasing real part.
+    """
+    modes = rigid_modes(q)
+    if extra is not None:
+        modes = np.concatenate([modes, np.asarray(extra, dtype=float)], axis=1)
+    basis = complement(modes)
+    lam = np.linalg.eigvals(basis.T @ jac @ basis)
+    return lam[np.argsort(-lam.real, kind="stable")]

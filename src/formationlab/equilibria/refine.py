@@ -1,0 +1,254 @@
+"""Refining an end state to an equilibrium of the closed loop, with a root finder.
+
+A simulation stops *near* an equilibrium (or chatters across a switching
+surface near one); :func:`refine` solves ``u(q) = 0`` from there with
+:func:`scipy.optimize.least_squares`.
+
+* **Smooth pieces.** The angle-restricted law (eq. 11) is smooth between its
+  switching surfaces ``sigma_s(q) = 0``: with the steps ``Upsilon`` of eq. (14)
+  frozen at the end state's values the field is a smooth function, and its
+  roots that keep the same steps are equilibria in the interior of that
+  region. Smooth laws have no surfaces and this is the whole story.
+* **Switching surfaces.** When no root of a frozen piece is consistent with
+  its own steps, the end state sits on a surface: :func:`refine` then solves
+  for a Filippov (sliding-mode) equilibrium, ``sigma_s(q) = 0`` for the
+  surfaces in ``S`` and ``0 = u_w(q)`` for some weights ``w_s in [0, 1]``
+  (the convex combination of the two one-sided fields, eq. 11 with
+  ``Upsilon`` replaced by ``w_s``; ``formationlab.Law.control_with``).
+
+Translation and rotation leave ``u`` unchanged (up to turning it), so the
+roots form three-dimensional orbits. The solver works modulo those: three
+gauge equations pin the centroid to the start's and the mean angular
+displacement about it to zero.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import combinations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+
+from ..controllers import Law
+from ..spec import Formation
+
+__all__ = ["Refined", "refine"]
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Refined:
+    """An end state refined to an equilibrium.
+
+    Attributes
+    ----------
+    q : ndarray, shape (n, 2)
+        The equilibrium (same centroid as the start).
+    weights : ndarray, shape (s,)
+        Step of each switching surface: 1 active, 0 inactive, in between on a
+        surface (Filippov weight). Empty for a smooth law.
+    surfaces : tuple of int
+        0-based indices of the surfaces the equilibrium lies on (Filippov).
+    residual : float
+        Largest ``|u_i|`` of the field used (``u_w``), at ``q``.
+    success : bool
+        Whether the residual is below the tolerance and the steps are
+        consistent with the signs of ``sigma(q)``.
+    message : str
+        What happened, in words.
+    """
+
+    q: NDArray[np.float64]
+    weights: NDArray[np.float64]
+    surfaces: tuple[int, ...]
+    residual: float
+    success: bool
+    message: str
+
+    @property
+    def filippov(self) -> bool:
+        """Whether the equilibrium lies on a switching surface."""
+        return bool(self.surfaces)
+
+
+def _scale(q: NDArray[np.float64]) -> float:
+    return max(float(np.sqrt(np.mean(np.sum((q - q.mean(axis=0)) ** 2, axis=-1)))), 1e-3)
+
+
+def _gauge(q: NDArray, q0: NDArray, c0: NDArray, p0: NDArray, scale: float) -> NDArray:
+    """Centroid of ``q`` minus that of ``q0`` (2) and mean angular displacement (1)."""
+    c = q.mean(axis=0)
+    p = q - c
+    rot = np.sum(p0[:, 0] * p[:, 1] - p0[:, 1] * p[:, 0]) / (len(q) * scale)
+    return np.concatenate([(c - c0), [rot]])
+
+
+def _field(law: Law, formation: Formation, weights: NDArray) -> callable:  # type: ignore[valid-type]
+    if law.smooth or weights.size == 0:
+        return lambda q: law.control(formation, q)
+    return lambda q: law.control_with(
+        formation, q, np.broadcast_to(weights, (*q.shape[:-2], weights.size))
+    )
+
+
+def refine(
+    formation: Formation,
+    law: Law,
+    q0: NDArray[np.float64],
+    *,
+    tol: float = 1e-9,
+    surface_tol: float = 1e-7,
+    max_surfaces: int = 2,
+) -> Refined:
+    """Refine ``q0`` (shape ``(n, 2)``) to an equilibrium of ``law`` on ``formation``.
+
+    Parameters
+    ----------
+    tol : float
+        Largest ``|u_i|`` accepted at the root, relative to the scale of the
+        field at ``q0`` (at least 1).
+    surface_tol : float
+        ``|sigma_s|`` below which a state counts as on surface ``s``, relative
+        to the size of the configuration squared (``sigma`` is an area plus
+        ``theta``).
+    max_surfaces : int
+        Most surfaces a Filippov equilibrium is searched on at once (the
+        nearest ones to ``q0``).
+
+    Returns
+    -------
+    Refined
+        ``success`` says whether an equilibrium was found; ``message`` why not.
+    """
+    q0 = np.asarray(q0, dtype=float)
+    scale = _scale(q0)
+    sigma0 = np.asarray(law.switching(formation, q0), dtype=float)
+    w0 = (sigma0 >= 0).astype(float)
+    u_scale = max(1.0, float(np.max(np.abs(law.control(formation, q0)))))
+    atol = tol * u_scale
+    stol = surface_tol * scale**2 + surface_tol
+
+    smooth = _solve_piece(formation, law, q0, w0, scale)
+    res = _residual(formation, law, smooth, w0)
+    sig = np.asarray(law.switching(formation, smooth), dtype=float)
+    consistent = bool(np.all((sig >= 0) == (w0 > 0.5))) and bool(np.all(np.abs(sig) > stol))
+    if res <= atol and consistent:
+        return Refined(
+            q=smooth,
+            weights=w0,
+            surfaces=(),
+            residual=res,
+            success=True,
+            message="equilibrium in the interior of a smooth region",
+        )
+    why = (
+        f"the root finder stopped at largest |u_i| = {res:.3g}"
+        if res > atol
+        else "the root of the frozen field lies across a switching surface"
+    )
+    if law.smooth or sigma0.size == 0:
+        return Refined(q=smooth, weights=w0, surfaces=(), residual=res, success=False, message=why)
+    order = np.argsort(np.abs(sigma0))
+    best: Refined | None = None
+    for size in range(1, min(max_surfaces, sigma0.size) + 1):
+        for subset in combinations(order[: max_surfaces + 1].tolist(), size):
+            cand = _solve_filippov(formation, law, q0, w0, tuple(sorted(subset)), scale)
+            q, w = cand
+            res_f = _residual(formation, law, q, w)
+            sig = np.asarray(law.switching(formation, q), dtype=float)
+            on = np.zeros(sig.size, bool)
+            on[list(subset)] = True
+            ok = (
+                res_f <= atol
+                and bool(np.all(np.abs(sig[on]) <= stol))
+                and bool(np.all((sig[~on] >= 0) == (w[~on] > 0.5)))
+                and bool(np.all(np.abs(sig[~on]) > stol))
+                and bool(np.all((w[on] > 0) & (w[on] < 1)))
+            )
+            if ok:
+                return Refined(
+                    q=q,
+                    weights=w,
+                    surfaces=tuple(int(s) for s in subset),
+                    residual=res_f,
+                    success=True,
+                    message="Filippov equilibrium on a switching surface",
+                )
+            if best is None or res_f < best.residual:
+                best = Refined(
+                    q=q,
+                    weights=w,
+                    surfaces=tuple(int(s) for s in subset),
+                    residual=res_f,
+                    success=False,
+                    message=why + "; no Filippov equilibrium on the nearest surfaces either",
+                )
+    assert best is not None  # at least one subset was tried (sigma0.size > 0)
+    return best
+
+
+def _residual(formation: Formation, law: Law, q: NDArray, w: NDArray) -> float:
+    u = _field(law, formation, w)(q)
+    return float(np.max(np.linalg.norm(u, axis=-1)))
+
+
+def _solve_piece(
+    formation: Formation, law: Law, q0: NDArray, w: NDArray, scale: float
+) -> NDArray[np.float64]:
+    """Root of the field with frozen steps ``w``, modulo translation and rotation."""
+    shape = q0.shape
+    c0 = q0.mean(axis=0)
+    p0 = q0 - c0
+    field = _field(law, formation, w)
+
+    def fun(x: NDArray) -> NDArray:
+        q = x.reshape(shape)
+        return np.concatenate([field(q).ravel(), _gauge(q, q0, c0, p0, scale)])
+
+    sol = least_squares(
+        fun, q0.ravel(), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=200 * q0.size
+    )
+    return sol.x.reshape(shape)
+
+
+def _solve_filippov(
+    formation: Formation,
+    law: Law,
+    q0: NDArray,
+    w0: NDArray,
+    subset: tuple[int, ...],
+    scale: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Solve ``u_w(q) = 0``, ``sigma_S(q) = 0`` for ``q`` and ``w_S in [0, 1]``."""
+    shape = q0.shape
+    size = q0.size
+    c0 = q0.mean(axis=0)
+    p0 = q0 - c0
+    idx = list(subset)
+
+    def unpack(x: NDArray) -> tuple[NDArray, NDArray]:
+        w = w0.copy()
+        w[idx] = x[size:]
+        return x[:size].reshape(shape), w
+
+    def fun(x: NDArray) -> NDArray:
+        q, w = unpack(x)
+        u = law.control_with(formation, q, w)
+        sig = np.asarray(law.switching(formation, q))[idx] / scale**2
+        return np.concatenate([u.ravel(), sig, _gauge(q, q0, c0, p0, scale)])
+
+    x0 = np.concatenate([q0.ravel(), np.full(len(idx), 0.5)])
+    lo = np.concatenate([np.full(size, -np.inf), np.zeros(len(idx))])
+    hi = np.concatenate([np.full(size, np.inf), np.ones(len(idx))])
+    sol = least_squares(
+        fun,
+        x0,
+        bounds=(lo, hi),
+        method="trf",
+        xtol=1e-15,
+        ftol=1e-15,
+        gtol=1e-15,
+        max_nfev=200 * size,
+    )
+    return unpack(sol.x)

@@ -1,0 +1,77 @@
+"""Files of the ``equilibria`` command: ``equilibria.json`` out, a study's end states in.
+
+``equilibria.json`` holds ``{"equilibria": [...], ...}`` with one entry per
+distinct equilibrium (:meth:`formationlab.equilibria.Catalogue.to_dict`),
+written atomically.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import ScenarioError
+from .files import atomic_write_json
+
+__all__ = ["read_study_end_states", "write_equilibria"]
+
+
+def write_equilibria(data: dict[str, Any], target: str | os.PathLike[str]) -> Path:
+    """Write the catalogue ``data`` (a dict with key ``"equilibria"``) as JSON, atomically."""
+    if "equilibria" not in data:
+        raise ValueError("an equilibria file needs the key 'equilibria'")
+    return atomic_write_json(target, data)
+
+
+def read_study_end_states(
+    study: str | os.PathLike[str], n: int, law: str
+) -> tuple[NDArray[np.float64], NDArray[np.str_]]:
+    """Final positions and outcomes of a study's trials of ``law``.
+
+    Parameters
+    ----------
+    study : path-like
+        A study's output folder (holding ``trials.parquet``) or the file itself.
+    n : int
+        Number of robots: columns ``x1, y1, ..., xn, yn`` (1-based) must exist.
+    law : str
+        Only rows whose ``law`` column equals this name are read.
+
+    Returns
+    -------
+    q : ndarray, shape (B, n, 2)
+    outcome : ndarray of str, shape (B,)
+
+    Raises
+    ------
+    ScenarioError
+        The file is missing, lacks columns, or holds no trial of ``law``.
+    """
+    import pandas as pd
+
+    path = Path(study)
+    if path.is_dir():
+        path = path / "trials.parquet"
+    if not path.exists():
+        raise ScenarioError(f"no study results at {path}; run `formationlab study` first")
+    frame = pd.read_parquet(path)
+    need = ["outcome", *(f"{c}{i}" for i in range(1, n + 1) for c in "xy")]
+    missing = [c for c in need if c not in frame.columns]
+    if missing:
+        raise ScenarioError(
+            f"{path} lacks the columns {', '.join(missing[:4])}: is it a study of "
+            f"{n} robots written by `formationlab study`?"
+        )
+    if "law" in frame.columns:
+        frame = frame[frame["law"] == law]
+    if frame.empty:
+        raise ScenarioError(
+            f"{path} holds no trial of the law {law!r}; use a study that ran it, "
+            "or leave out --from-study to use random starts"
+        )
+    q = np.stack([frame[[f"x{i}", f"y{i}"]].to_numpy(dtype=float) for i in range(1, n + 1)], axis=1)
+    return q, frame["outcome"].to_numpy(dtype=str)

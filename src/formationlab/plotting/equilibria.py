@@ -1,0 +1,106 @@
+"""Pictures of equilibria: the gallery of shapes and continuation curves."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.patches import Circle
+
+__all__ = ["continuation_figure", "gallery_figure", "plot_equilibrium"]
+
+_COLOURS = {
+    "stable": "tab:green",
+    "saddle": "tab:orange",
+    "degenerate": "tab:gray",
+    "filippov": "tab:purple",
+}
+
+
+def plot_equilibrium(formation: Any, eq: Any, ax: Any = None, *, title: str = "") -> list[Any]:
+    """Draw one equilibrium: robots (to scale, numbered 1..n) and the formation's edges.
+
+    Edges are coloured by ``r_ij - d_ij`` (blue short, red long, black met).
+    Returns the artists.
+    """
+    if ax is None:
+        _, ax = plt.subplots(figsize=(3, 3))
+    q = np.asarray(eq.q)
+    artists: list[Any] = []
+    err = eq.distances - formation.distances
+    for (i, j), e in zip(formation.edges, err, strict=True):
+        colour = "k" if abs(e) < 1e-2 else ("tab:red" if e > 0 else "tab:blue")
+        (line,) = ax.plot(*q[[i, j]].T, color=colour, lw=1.2, zorder=1)
+        artists.append(line)
+    for i, (x, y) in enumerate(q):
+        c = Circle((x, y), formation.diameters[i] / 2, fc="white", ec="k", zorder=2)
+        ax.add_patch(c)
+        artists.append(c)
+        artists.append(ax.annotate(str(i + 1), (x, y), ha="center", va="center", fontsize=8))
+    ax.set_aspect("equal")
+    span = float(np.ptp(q, axis=0).max()) + formation.diameters.max() + 0.2
+    centre = (q.max(axis=0) + q.min(axis=0)) / 2
+    ax.set_xlim(centre[0] - span / 2, centre[0] + span / 2)
+    ax.set_ylim(centre[1] - span / 2, centre[1] + span / 2)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    for side in ax.spines.values():
+        side.set_edgecolor(_COLOURS.get(eq.stability, "k"))
+        side.set_linewidth(2)
+    if title:
+        ax.set_title(title, fontsize=8)
+    return artists
+
+
+def gallery_figure(catalogue: Any, *, columns: int = 4, title: str = "") -> Any:
+    """All equilibria of a catalogue, the desired one first, with class and count."""
+    eqs = catalogue.equilibria
+    k = max(len(eqs), 1)
+    cols = min(columns, k)
+    rows = -(-k // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(2.6 * cols, 2.8 * rows), squeeze=False)
+    for ax in axes.ravel()[len(eqs) :]:
+        ax.axis("off")
+    for idx, (eq, count, ax) in enumerate(zip(eqs, catalogue.counts, axes.ravel(), strict=False)):
+        kind = eq.stability
+        if eq.stability in ("saddle", "filippov") and eq.unstable_directions:
+            kind += f" ({eq.unstable_directions} unstable)"
+        label = "desired" if eq.desired else f"#{idx + 1}"
+        plot_equilibrium(catalogue.formation, eq, ax, title=f"{label}: {kind}\n{count} trials")
+    if not eqs:
+        axes[0, 0].text(0.5, 0.5, "no equilibrium found", ha="center", va="center")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def continuation_figure(branches: Sequence[Any], *, labels: Sequence[str] | None = None) -> Any:
+    """How equilibria move as a gain changes: size and largest eigenvalue real part.
+
+    Each branch (:class:`formationlab.equilibria.Branch`) gives the RMS
+    distance of the robots to their centroid and the largest real part of
+    the eigenvalues (> 0: unstable) against the parameter.
+    """
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9, 3.4))
+    for b, branch in enumerate(branches):
+        lab = labels[b] if labels else f"branch {b + 1}"
+        if not len(branch.values):
+            continue
+        size = [
+            float(np.sqrt(np.mean(np.sum((e.q - e.q.mean(0)) ** 2, axis=-1))))
+            for e in branch.equilibria
+        ]
+        grow = [e.growth_rate for e in branch.equilibria]
+        (line,) = ax1.plot(branch.values, size, marker=".", label=lab)
+        ax2.plot(branch.values, grow, marker=".", color=line.get_color(), label=lab)
+    ax1.set_xlabel(branches[0].parameter if branches else "parameter")
+    ax1.set_ylabel("RMS distance to centroid")
+    ax2.set_xlabel(branches[0].parameter if branches else "parameter")
+    ax2.set_ylabel("largest Re(eigenvalue), 1/s")
+    ax2.axhline(0.0, color="k", lw=0.6)
+    ax1.legend(fontsize=7)
+    fig.tight_layout()
+    return fig

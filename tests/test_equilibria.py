@@ -1,0 +1,228 @@
+"""Equilibria: refinement, classification by eigenvalues, de-duplication, the command.
+
+Reference values are derived by hand in docs/equilibria.md ("Two equilibria
+by hand"): the desired triangle of the distance law and the collinear saddle
+of the three-robot distance law.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import formationlab as fl
+from formationlab.equilibria import (
+    catalogue,
+    classify_equilibrium,
+    jacobian,
+    random_starts,
+    reduced_eigenvalues,
+    refine,
+    same_equilibrium,
+    settle,
+)
+
+K_C = 2.0
+A = 0.2  # contact distance a_ij = rho = 0.2
+D = 1.0
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def dphi(r: float) -> float:
+    return 1.0 / (D - A) - 1.0 / (r - A)  # eq. (7)
+
+
+def ddphi(r: float) -> float:
+    return 1.0 / (r - A) ** 2
+
+
+@pytest.fixture(scope="module")
+def triangle() -> fl.Formation:
+    return fl.Formation.from_distances(3, distances=D, diameters=A)
+
+
+@pytest.fixture(scope="module")
+def sim2() -> fl.Formation:
+    return fl.Formation.from_alpha_table(
+        {(1, 2, 3): 1, (3, 1, 2): 1, (2, 1, 3): -1}, n=3, distances=D, diameters=A
+    )
+
+
+def rotate(q: np.ndarray, ang: float) -> np.ndarray:
+    c, s = np.cos(ang), np.sin(ang)
+    return q @ np.array([[c, s], [-s, c]])
+
+
+def test_desired_triangle_is_stable_with_hand_derived_eigenvalues(triangle):
+    law = fl.DistanceLaw(k_c=K_C)
+    rng = np.random.default_rng(3)
+    eq_tri = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, np.sqrt(3) / 2]])
+    ref = refine(triangle, law, eq_tri + 0.05 * rng.standard_normal((3, 2)))
+    assert ref.success
+    eq = classify_equilibrium(triangle, law, ref)
+    assert eq.desired and eq.stability == "stable" and eq.unstable_directions == 0
+    np.testing.assert_allclose(eq.distances, D, atol=1e-10)
+    # J = -k_c phi''(d) R^T R; R^T R of the unit equilateral triangle has 3/2, 3/2, 3
+    expected = -K_C * ddphi(D) * np.array([1.5, 1.5, 3.0])
+    np.testing.assert_allclose(eq.eigenvalues.real, expected, rtol=1e-6)
+    np.testing.assert_allclose(eq.eigenvalues.imag, 0.0, atol=1e-8)
+
+
+def test_collinear_equilibrium_is_a_saddle_with_hand_derived_eigenvalues(triangle):
+    law = fl.DistanceLaw(k_c=K_C)
+    # phi'(s) + phi'(2s) = 0  <=>  5 s^2 - 4.5 s + 0.5 = 0 for d = 1, a = 0.2
+    s = (4.5 + np.sqrt(4.5**2 - 4 * 5 * 0.5)) / 10
+    assert abs(dphi(s) + dphi(2 * s)) < 1e-12
+    tau = dphi(2 * s)
+    ref = refine(triangle, law, np.array([[-0.8, 0.01], [0.02, 0.0], [0.75, -0.01]]))
+    assert ref.success
+    eq = classify_equilibrium(triangle, law, ref)
+    assert eq.stability == "saddle" and eq.unstable_directions == 1 and not eq.desired
+    np.testing.assert_allclose(np.sort(eq.distances), [s, s, 2 * s], rtol=1e-9)
+    expected = [
+        3 * K_C * tau / s,  # bending: the middle robot leaves the line
+        -K_C * (ddphi(s) + 2 * ddphi(2 * s)),  # antisymmetric stretch
+        -3 * K_C * ddphi(s),  # symmetric stretch
+    ]
+    np.testing.assert_allclose(eq.eigenvalues.real, expected, rtol=1e-6)
+    assert eq.growth_rate == pytest.approx(3 * K_C * tau / s, rel=1e-6)
+
+
+def test_jacobian_has_the_rigid_modes_in_its_kernel(triangle):
+    law = fl.DistanceLaw(k_c=K_C)
+    ref = refine(triangle, law, np.array([[-0.8, 0.0], [0.0, 0.0], [0.8, 0.0]]))
+    jac = jacobian(lambda x: law.control(triangle, x), ref.q)
+    q = ref.q - ref.q.mean(0)
+    for mode in (np.tile([1.0, 0.0], 3), np.tile([0.0, 1.0], 3), np.c_[-q[:, 1], q[:, 0]].ravel()):
+        assert np.max(np.abs(jac @ mode)) < 1e-7
+    # removing the modes leaves 2n - 3 eigenvalues, those of J that are not zero
+    lam = reduced_eigenvalues(jac, ref.q)
+    full = np.linalg.eigvals(jac)
+    nonzero = np.sort(full.real[np.abs(full) > 1e-6])
+    np.testing.assert_allclose(np.sort(lam.real), nonzero, rtol=1e-8)
+
+
+def test_classification_is_invariant_to_translation_rotation_relabelling(sim2):
+    law = fl.AngleRestrictedLaw(k_c=2.0, k_a=3.0, theta=0.5)
+    base = refine(sim2, law, np.array([[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]))
+    assert base.success
+    ref_eq = classify_equilibrium(sim2, law, base)
+    q = base.q
+    cyclic = q[[1, 2, 0]]  # an even relabelling keeps alpha
+    mirror_swap = (q * np.array([-1.0, 1.0]))[[1, 0, 2]]  # odd one, with a reflection
+    for moved in (
+        q + np.array([5.0, -2.0]),
+        rotate(q, 1.1),
+        rotate(cyclic, -0.4) + 3.0,
+        mirror_swap,
+    ):
+        # start off the equilibrium, so the root finder has work to do
+        start = moved + 1e-3 * np.random.default_rng(0).standard_normal(q.shape)
+        eq = classify_equilibrium(sim2, law, refine(sim2, law, start))
+        assert eq.stability == ref_eq.stability
+        assert eq.unstable_directions == ref_eq.unstable_directions
+        np.testing.assert_allclose(eq.eigenvalues, ref_eq.eigenvalues, rtol=1e-5)
+        np.testing.assert_allclose(np.sort(eq.distances), np.sort(ref_eq.distances), rtol=1e-9)
+        assert same_equilibrium(sim2, q, eq.q)
+
+
+def test_reflection_counts_only_where_the_formation_allows_it(sim2, triangle):
+    tri = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, np.sqrt(3) / 2]])
+    mirror = tri * np.array([-1.0, 1.0])
+    assert same_equilibrium(triangle, tri, mirror)  # free orientation
+    assert not same_equilibrium(sim2, tri, mirror)  # alpha fixes the orientation
+    assert same_equilibrium(sim2, tri, mirror[[1, 0, 2]])  # unless robots 1, 2 swap too
+    other = np.array([[0.0, 0.0], [1.2, 0.0], [0.5, 0.9]])
+    assert not same_equilibrium(triangle, tri, other)
+
+
+def test_perturbation_decays_at_the_rate_of_the_largest_eigenvalue(sim2):
+    """The equilibrium of simulation 2 (NOTES.md): eigenvalue checked against a simulation."""
+    law = fl.AngleRestrictedLaw(k_c=2.0, k_a=3.0, theta=0.5)
+    run = fl.simulate(sim2, law, [[-3, -3], [3, -3], [0, 3]], duration=8.0, save_every=1000)
+    eq = classify_equilibrium(sim2, law, refine(sim2, law, run.q[-1]))
+    assert eq.stability == "stable" and not eq.desired
+    assert eq.active == ("alpha_123",) and eq.surfaces == ()
+    np.testing.assert_allclose(eq.distances, eq.distances[0], rtol=1e-9)  # equilateral
+    # perturb by 1e-6 along a random direction and watch the shape error shrink
+    rng = np.random.default_rng(1)
+    start = eq.q + 1e-6 * rng.standard_normal(eq.q.shape)
+    res = fl.simulate(sim2, law, start, duration=6.0, integrator=fl.RK4(dt=0.01))
+    err = np.linalg.norm(fl.distance_errors(sim2, res.q) - (eq.distances - 1.0), axis=-1)
+    late = res.t >= 2.0  # after the fast mode (-43/s) has died out
+    slope = np.polyfit(res.t[late], np.log(err[late]), 1)[0]
+    assert slope == pytest.approx(eq.growth_rate, rel=0.02)
+
+
+def test_catalogue_merges_random_ends_of_the_distance_law(triangle):
+    law = fl.DistanceLaw(k_c=K_C)
+    rng = np.random.default_rng(7)
+    starts = random_starts(triangle, 24, rng, collinear=0.25)
+    ends = settle(triangle, law, starts, duration=30.0)
+    cat = catalogue(triangle, law, ends.q, outcomes=ends.outcome)
+    kinds = [(e.desired, e.stability) for e in cat.equilibria]
+    assert kinds == [(True, "stable"), (False, "saddle")]  # desired first
+    assert sum(cat.counts) + sum(cat.skipped.values()) == 24
+    assert cat.counts[1] == np.sum(ends.outcome == "incorrect") > 0
+
+
+def test_equilibria_command_writes_json_and_gallery(tmp_path):
+    from formationlab.cli import main
+
+    scenario = tmp_path / "tri.toml"
+    scenario.write_text(
+        "[robots]\npositions = [[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]\n"
+        '[formation]\ndistances = 1.0\n[controller]\nlaw = "distance"\n'
+        '[simulation]\nintegrator = "rk4"\ndt = 0.01\nduration = 10.0\n'
+        "[equilibria]\nstarts = 12\nduration = 30.0\n"
+    )
+    out = tmp_path / "eq"
+    with pytest.raises(SystemExit) as exc:
+        main(["equilibria", str(scenario), "--out", str(out), "--seed", "2", "-q"])
+    assert exc.value.code == 0
+    data = json.loads((out / "equilibria.json").read_text())
+    assert (out / "gallery.png").stat().st_size > 0
+    first = data["equilibria"][0]
+    assert first["desired"] and first["stability"] == "stable"
+    for key in (
+        "positions",
+        "distances",
+        "residual",
+        "unstable_directions",
+        "eigenvalues",
+        "count",
+    ):
+        assert key in first
+    assert set(first["distances"]) == {"1-2", "1-3", "2-3"}
+    assert sum(e["count"] for e in data["equilibria"]) == 13  # 12 starts + the scenario's run
+    with pytest.raises(SystemExit) as exc:  # the folder now holds results
+        main(["equilibria", str(scenario), "--out", str(out), "-q"])
+    assert exc.value.code == 2
+
+
+def test_study_end_states_are_read_by_law(tmp_path):
+    pd = pytest.importorskip("pandas")
+    from formationlab.errors import ScenarioError
+    from formationlab.io.equilibria import read_study_end_states
+
+    frame = pd.DataFrame(
+        {
+            "law": ["distance", "angle-restricted", "distance"],
+            "outcome": ["incorrect", "desired", "desired"],
+            "x1": [0.0, 1.0, 2.0],
+            "y1": [0.5, 1.5, 2.5],
+            "x2": [3.0, 4.0, 5.0],
+            "y2": [3.5, 4.5, 5.5],
+        }
+    )
+    frame.to_parquet(tmp_path / "trials.parquet")
+    q, outcome = read_study_end_states(tmp_path, 2, "distance")
+    np.testing.assert_array_equal(q, [[[0.0, 0.5], [3.0, 3.5]], [[2.0, 2.5], [5.0, 5.5]]])
+    assert outcome.tolist() == ["incorrect", "desired"]
+    with pytest.raises(ScenarioError, match="no trial of the law"):
+        read_study_end_states(tmp_path, 2, "signed-area")
+    with pytest.raises(ScenarioError, match="lacks the columns"):
+        read_study_end_states(tmp_path, 3, "distance")
