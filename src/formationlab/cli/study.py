@@ -1,0 +1,185 @@
+"""``formationlab study``: a Monte-Carlo study of a scenario (docs/studies.md)."""
+
+from __future__ import annotations
+
+import shlex
+import sys
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from ._app import command, err_console, fail
+
+
+@command("study")
+def study(
+    scenario: Annotated[Path, typer.Argument(help="Scenario file (TOML) with a [study] table.")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Folder for the results.")],
+    trials: Annotated[
+        int | None,
+        typer.Option("--trials", "-n", help="Trials per group (overrides study.trials)."),
+    ] = None,
+    seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the study (>= 0).")] = 0,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            help='Run chunks on dask.distributed: "local" (a LocalCluster of processes) or a '
+            "scheduler's address (tcp://host:8786). Default: this machine, without dask."
+        ),
+    ] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option(help="Worker processes (default: one per core; 1 runs in this process)."),
+    ] = None,
+    chunk_size: Annotated[
+        int | None,
+        typer.Option("--chunk-size", help="Trials per chunk (overrides study.chunk_size)."),
+    ] = None,
+    resume: Annotated[
+        bool, typer.Option("--resume", help="Finish an interrupted study in OUT.")
+    ] = False,
+    force: Annotated[
+        bool, typer.Option("--force", help="Replace the files of an earlier study in OUT.")
+    ] = False,
+) -> None:
+    """Run many random starts of a scenario's laws and count the outcomes.
+
+    Example:
+
+        formationlab study examples/study-triangle.toml --trials 2000 --seed 1 --out out/tri
+
+    Writes OUT/trials.parquet (one row per trial), OUT/summary.json (outcome counts,
+    fractions and 95% Wilson intervals per law and sweep point), figures
+    (fractions*.png, desired*.png, shapes_<law>.png) and OUT/chunks/ (finished chunks,
+    for --resume). The same --seed gives the same trials whatever --workers,
+    --scheduler or the chunk size.
+    """
+    from ..io.scenario import load_scenario
+    from ..io.trials import ChunkFolder
+    from ..studies import parse_study
+    from ..studies.runner import run_study, study_groups, study_identity
+
+    sc = load_scenario(scenario)
+    config = parse_study(sc.study, trials=trials, chunk_size=chunk_size, source=sc.source)
+    dt = float(config.dt or getattr(sc.integrator, "dt", None) or 1e-3)
+    duration = float(config.duration or sc.duration)
+    center = sc.formation.template if sc.formation.template is not None else sc.q0
+    groups = study_groups(sc.formation, sc.law, config)
+    identity = study_identity(groups, config, seed=seed, dt=dt, duration=duration, center=center)
+    store = ChunkFolder(out, identity)
+    if resume:
+        if not out.is_dir():
+            fail(f"nothing to resume: {out} does not exist; run without --resume")
+        kept = store.check_resumable()
+        err_console.print(f"resuming: {kept} finished chunks kept in {store.folder}")
+    else:
+        from ..io import prepare_output_dir
+
+        prepare_output_dir(out, force=force)
+        store.start()
+    if sc.integrator.name != "euler":
+        err_console.print(
+            f"note: studies use the batched explicit Euler kernel (dt = {dt:g}), not the "
+            f"scenario's {sc.integrator.name!r}",
+            highlight=False,
+        )
+    err_console.print(
+        f"{len(groups)} groups x {config.trials} trials, dt = {dt:g}, duration = {duration:g}, "
+        f"seed = {seed}",
+        highlight=False,
+    )
+    result = _run_with_progress(
+        run_study,
+        sc.formation,
+        sc.law,
+        config,
+        seed=seed,
+        dt=dt,
+        duration=duration,
+        center=center,
+        scheduler=scheduler,
+        workers=workers,
+        store=store,
+        resume=resume,
+        out=out,
+    )
+    _write_outputs(out, sc, result, identity)
+
+
+def _run_with_progress(run: Any, *args: Any, out: Path, store: Any, **kwargs: Any) -> Any:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    with Progress(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        console=err_console,
+    ) as bar:
+        task = bar.add_task("trials", total=None)
+
+        def progress(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        try:
+            return run(*args, store=store, progress=progress, **kwargs)
+        except KeyboardInterrupt:
+            bar.stop()
+            kept = len(list(store.folder.glob("g*-c*.parquet")))
+            fail(
+                f"interrupted; {kept} finished chunks are kept in {store.folder}: run the same "
+                "command with --resume to finish",
+                code=130,
+            )
+
+
+def _write_outputs(out: Path, sc: Any, result: Any, identity: dict[str, Any]) -> None:
+    from .. import __version__
+    from ..io import atomic_write_json, atomic_write_text, save_figure
+    from ..io.trials import write_trials
+    from ..plotting.studies import study_figures
+
+    write_trials(result.trials, out / "trials.parquet")
+    summary = {
+        "scenario": sc.name,
+        "scenario_file": sc.source,
+        "command": "formationlab " + shlex.join(sys.argv[1:]) if sys.argv else None,
+        "formationlab_version": __version__,
+        "fingerprint": identity["fingerprint"],
+        **result.summary,
+    }
+    atomic_write_json(out / "summary.json", summary)
+    atomic_write_text(out / "scenario.toml", sc.text)
+    for stem, fig in study_figures(summary, result.trials, sc.formation.edges).items():
+        save_figure(fig, out / f"{stem}.png", dpi=100)
+    _print_table(summary)
+    err_console.print(f"wrote trials.parquet, summary.json and figures to {out}", highlight=False)
+
+
+def _print_table(summary: dict[str, Any]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    outs = summary["outcomes"]
+    table = Table(title=f"{summary['scenario']}: outcome fractions (95% Wilson interval)")
+    table.add_column("law")
+    table.add_column("parameters")
+    table.add_column("trials", justify="right")
+    for o in outs:
+        table.add_column(o, justify="right")
+    for g in summary["groups"]:
+        params = ", ".join(f"{k}={v:g}" for k, v in g["parameters"].items())
+        cells = []
+        for o in outs:
+            lo, hi = g["ci95"][o]
+            cells.append(f"{g['fractions'][o]:.3f} [{lo:.3f}, {hi:.3f}]")
+        table.add_row(g["law"], params, str(g["trials"]), *cells)
+    Console(width=200).print(table)
+    steps, wall = summary["trial_steps"], summary["wall_time_s"]
+    rate = summary.get("trial_steps_per_s")
+    Console().print(
+        f"{steps:,} trial-steps in {wall:.1f} s"
+        + (f" ({rate:.3g} trial-steps/s)" if rate else " (resumed)"),
+        highlight=False,
+    )

@@ -1,0 +1,139 @@
+"""The files of a study: ``trials.parquet``, ``summary.json`` and the chunks kept for resuming.
+
+``trials.parquet`` has one row per trial and these columns (robots 1-based):
+
+========================  ======================================================
+``group``                 0-based group (law x sweep point), as in ``summary.json``
+``trial``                 0-based trial number within the group
+``seed``                  the study's seed; with ``trial`` it reproduces the start
+                          (:func:`formationlab.studies.sampling.trial_initial_states`)
+``law``                   the law's name
+one per swept parameter   its value; NaN for a law the parameter does not apply to
+``outcome``               one of :data:`formationlab.OUTCOMES`
+``max_distance_error``    largest ``|r_ij - d_ij|`` over the edges at the end
+``converged_time``        time when every speed fell below the tolerance; NaN if never
+``min_clearance``         least ``r_ij - a_ij`` over pairs and time
+``steps``                 Euler steps taken (a trial stops once converged)
+``x1_init, y1_init, ...`` initial positions
+``x1, y1, x2, y2, ...``   final positions
+========================  ======================================================
+
+Chunks live in ``DIR/chunks/<fingerprint>/`` (the fingerprint of the study's
+identity, :func:`formationlab.studies.runner.study_identity`) beside a
+``manifest.json`` holding that identity, so chunks of another study are never
+mixed in.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from ..errors import ParameterError
+from .files import atomic_path, atomic_write_json
+
+__all__ = ["ChunkFolder", "read_trials", "trials_schema", "write_trials"]
+
+_INTS = ("group", "trial", "seed", "steps")
+_STRINGS = ("law", "outcome")
+
+
+def trials_schema(columns: list[str]) -> pa.Schema:
+    """The Arrow schema of a trials table with these columns (ints, strings, floats)."""
+    fields = []
+    for c in columns:
+        if c in _INTS:
+            fields.append(pa.field(c, pa.int64()))
+        elif c in _STRINGS:
+            fields.append(pa.field(c, pa.string()))
+        else:
+            fields.append(pa.field(c, pa.float64()))
+    return pa.schema(fields)
+
+
+def _write(frame: pd.DataFrame, target: Path) -> Path:
+    table = pa.Table.from_pandas(
+        frame, schema=trials_schema(list(frame.columns)), preserve_index=False
+    )
+    with atomic_path(target) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
+    return target
+
+
+def write_trials(frame: pd.DataFrame, target: str | os.PathLike[str]) -> Path:
+    """Write a trials table to parquet atomically (schema of :func:`trials_schema`)."""
+    return _write(frame, Path(target))
+
+
+def read_trials(path: str | os.PathLike[str]) -> pd.DataFrame:
+    """Read a trials table written by :func:`write_trials`."""
+    return pq.read_table(path).to_pandas()
+
+
+class ChunkFolder:
+    """Finished chunks of one study under ``DIR/chunks/<fingerprint>/`` (a ``ChunkStore``).
+
+    Parameters
+    ----------
+    out : path-like
+        The study's output folder.
+    identity : dict
+        :func:`formationlab.studies.runner.study_identity` of the study.
+    """
+
+    def __init__(self, out: str | os.PathLike[str], identity: dict[str, Any]) -> None:
+        self.root = Path(out) / "chunks"
+        self.identity = identity
+        self.folder = self.root / str(identity["fingerprint"])
+
+    def path(self, chunk_id: str) -> Path:
+        return self.folder / f"{chunk_id}.parquet"
+
+    def start(self) -> None:
+        """Create the folder and write the manifest (a fresh run)."""
+        atomic_write_json(self.folder / "manifest.json", self.identity)
+
+    def check_resumable(self) -> int:
+        """Check that this study can be resumed here; return how many chunks are kept.
+
+        Raises
+        ------
+        ParameterError
+            When the folder holds no chunks of this study, naming what differs from
+            the study whose chunks it does hold.
+        """
+        manifest = self.folder / "manifest.json"
+        if manifest.exists():
+            return len(list(self.folder.glob("g*-c*.parquet")))
+        others = sorted(self.root.glob("*/manifest.json"), key=lambda p: p.stat().st_mtime)
+        if not others:
+            raise ParameterError(
+                f"nothing to resume in {self.root.parent}: it holds no chunks of a study; "
+                "run without --resume"
+            )
+        old = json.loads(others[-1].read_text(encoding="utf-8"))
+        diff = [
+            k for k in self.identity if k != "fingerprint" and old.get(k) != self.identity.get(k)
+        ]
+        raise ParameterError(
+            f"{self.root.parent} holds chunks of another study (differs in: "
+            f"{', '.join(diff) or 'the formation'}); resume with the same scenario, --seed, "
+            "--trials and chunk size, or start afresh in an empty folder"
+        )
+
+    def load(self, chunk_id: str) -> pd.DataFrame | None:
+        """The chunk's trials, or None if it has not finished."""
+        p = self.path(chunk_id)
+        if not p.exists():
+            return None
+        return read_trials(p)
+
+    def save(self, chunk_id: str, frame: pd.DataFrame) -> None:
+        """Keep a finished chunk (atomic: an interruption leaves no half-written chunk)."""
+        _write(frame, self.path(chunk_id))

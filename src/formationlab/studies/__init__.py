@@ -1,0 +1,23 @@
+"""Monte-Carlo studies: how often does each law reach the desired formation?
+
+* :mod:`~formationlab.studies.config`: the ``[study]`` table of a scenario;
+* :mod:`~formationlab.studies.sampling`: random initial states, seeded by trial number;
+* :mod:`~formationlab.studies.runner`: :func:`run_study`, chunks, workers, resume;
+* :mod:`~formationlab.studies.summary`: outcome fractions and Wilson intervals;
+* :mod:`~formationlab.studies.batch`: the batched kernel every chunk calls.
+"""
+
+from .config import StudyConfig, parse_study
+from .runner import StudyResult, run_study, study_groups
+from .sampling import trial_initial_states
+from .summary import wilson_interval
+
+__all__ = [
+    "StudyConfig",
+    "StudyResult",
+    "parse_study",
+    "run_study",
+    "study_groups",
+    "trial_initial_states",
+    "wilson_interval",
+]

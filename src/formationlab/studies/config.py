@@ -1,0 +1,176 @@
+"""The ``[study]`` table of a scenario: what a Monte-Carlo study runs.
+
+Every key, its default and its meaning (``docs/studies.md`` shows examples):
+
+``trials`` (int >= 1, default 1000)
+    Trials per group (a group is one law at one point of the sweep).
+    ``formationlab study --trials N`` overrides it.
+``initial`` (table, default ``{ kind = "box", half_width = 3.0 }``)
+    How initial positions are drawn. ``{ kind = "box", half_width = w }``: every
+    robot uniform in ``[-w, w]^2``, independently. ``{ kind = "gaussian",
+    sigma = s }``: every coordinate of every robot ``N(c, s^2)`` around a centre
+    ``c``, the formation's template if it has one, else the scenario's
+    ``robots.positions``. Either way, a draw in which two robots overlap
+    (``r_ij <= a_ij``) is rejected and drawn again.
+``laws`` (list of law names, default: the scenario's law)
+    The laws compared. Each is built with the parameters of the scenario's
+    ``[controller]`` that it has (same name), its own defaults for the rest.
+``sweep`` (table of lists, default empty)
+    ``key = [v1, v2, ...]``; the study runs the product of all lists. A key is a
+    parameter of a law (``k_c``, ``k_a``, ``theta``, ...), of its repulsion
+    (``eta``, ``influence``) or of the robots (``diameter``: every robot's
+    diameter). A law runs only the points of the keys it has: with
+    ``k_a = [...]`` the distance law runs once, not once per ``k_a``.
+``tolerances`` (table, default ``{ distance = 1e-2, speed = 1e-3 }``)
+    Of the outcome classification (:class:`formationlab.Tolerances`).
+``chunk_size`` (int >= 1, default 1000)
+    Trials per unit of work (a chunk is what a worker runs and what ``--resume``
+    keeps). Results do not depend on it.
+``dt``, ``duration`` (float > 0, default: the scenario's ``[simulation]``)
+    Step of the batched explicit Euler kernel and simulated time per trial.
+``backend`` (``"numba"`` or ``"numpy"``, default ``"numba"``)
+    The batched kernel's implementation; both give the same results.
+
+This module reads no files; the command line passes it the parsed table.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from ..analysis import Tolerances
+from ..errors import ScenarioError
+
+__all__ = ["BoxInitial", "GaussianInitial", "StudyConfig", "parse_study"]
+
+_STRICT = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True)
+
+
+class BoxInitial(BaseModel):
+    """Every robot uniform in the square ``[-half_width, half_width]^2``."""
+
+    model_config = _STRICT
+    kind: Literal["box"] = "box"
+    half_width: float = Field(default=3.0, gt=0)
+
+
+class GaussianInitial(BaseModel):
+    """Every coordinate ``N(c, sigma^2)`` around a centre shape ``c`` (template or scenario)."""
+
+    model_config = _STRICT
+    kind: Literal["gaussian"]
+    sigma: float = Field(gt=0)
+
+
+Initial = Annotated[BoxInitial | GaussianInitial, Field(discriminator="kind")]
+
+
+class TolerancesModel(BaseModel):
+    """``[study.tolerances]``: see :class:`formationlab.Tolerances`."""
+
+    model_config = _STRICT
+    distance: float = Field(default=1e-2, gt=0)
+    speed: float = Field(default=1e-3, gt=0)
+
+
+class StudyConfig(BaseModel):
+    """A validated ``[study]`` table (module docstring lists the keys)."""
+
+    model_config = _STRICT
+    trials: int = Field(default=1000, ge=1)
+    initial: Initial = BoxInitial()
+    laws: tuple[str, ...] | None = None
+    sweep: dict[str, tuple[float, ...]] = Field(default_factory=dict)
+    tolerances: TolerancesModel = TolerancesModel()
+    chunk_size: int = Field(default=1000, ge=1)
+    dt: float | None = Field(default=None, gt=0)
+    duration: float | None = Field(default=None, gt=0)
+    backend: Literal["numba", "numpy"] = "numba"
+
+    @field_validator("laws")
+    @classmethod
+    def _laws(cls, v: tuple[str, ...] | None) -> tuple[str, ...] | None:
+        if v is None:
+            return v
+        if not v:
+            raise ValueError("give at least one law name, or leave laws out")
+        dup = sorted({x for x in v if v.count(x) > 1})
+        if dup:
+            raise ValueError(f"law {dup[0]!r} is listed twice")
+        return v
+
+    @field_validator("sweep")
+    @classmethod
+    def _sweep(cls, v: dict[str, tuple[float, ...]]) -> dict[str, tuple[float, ...]]:
+        for key, values in v.items():
+            if not values:
+                raise ValueError(f"sweep.{key} is empty; give at least one value")
+            if any(not math.isfinite(x) for x in values):
+                raise ValueError(f"sweep.{key} must hold finite numbers, got {list(values)}")
+            if len(set(values)) != len(values):
+                raise ValueError(f"sweep.{key} repeats a value: {list(values)}")
+        return v
+
+    @property
+    def tol(self) -> Tolerances:
+        """The tolerances as :class:`formationlab.Tolerances`."""
+        return Tolerances(distance=self.tolerances.distance, speed=self.tolerances.speed)
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form, every default filled in."""
+        return self.model_dump(mode="json")
+
+
+def parse_study(
+    table: dict[str, Any] | None,
+    *,
+    trials: int | None = None,
+    chunk_size: int | None = None,
+    source: str = "scenario",
+) -> StudyConfig:
+    """Validate a ``[study]`` table (``None``: all defaults), with command-line overrides.
+
+    Raises
+    ------
+    ScenarioError
+        Naming the key (``study.initial.half_width``), what was expected and what was given.
+    """
+    data = dict(table or {})
+    if trials is not None:
+        data["trials"] = trials
+    if chunk_size is not None:
+        data["chunk_size"] = chunk_size
+    try:
+        return StudyConfig.model_validate(data)
+    except ValidationError as exc:
+        problems = []
+        for err in exc.errors(include_url=False):
+            loc = [str(p) for p in err["loc"] if not str(p).isdigit()]
+            # pydantic puts the union member in the path: initial.box.half_width
+            loc = [p for i, p in enumerate(loc) if not (i == 1 and loc[0] == "initial")]
+            where = ".".join(["study", *loc])
+            if err["type"] == "extra_forbidden":
+                known = _known_keys(loc[:-1])
+                msg = f"unknown key; known keys: {', '.join(known)}"
+            elif err["type"] == "value_error":
+                msg = str(err.get("ctx", {}).get("error", err["msg"]))
+            else:
+                msg = f"{err['msg']}, got {err.get('input')!r}"
+            problems.append(f"{where}: {msg}")
+        raise ScenarioError(f"{source}: [study]: " + "; ".join(problems)) from None
+
+
+def _known_keys(path: list[str]) -> list[str]:
+    models: dict[str, Any] = {
+        "": StudyConfig,
+        "initial": BoxInitial,
+        "tolerances": TolerancesModel,
+    }
+    model = models.get(".".join(path), StudyConfig)
+    keys = list(model.model_fields)
+    if model is BoxInitial:
+        keys += ["sigma (kind = gaussian)"]
+    return keys

@@ -1,0 +1,109 @@
+"""Counting outcomes: fractions per group with Wilson score intervals.
+
+The ``groups`` of a study's ``summary.json`` come from :func:`summarize_groups`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import ArrayLike, NDArray
+
+from ..analysis import OUTCOMES
+
+__all__ = ["Z95", "summarize_groups", "wilson_interval"]
+
+#: The standard normal quantile of 0.975: two-sided 95 % intervals.
+Z95 = 1.959963984540054
+
+
+def wilson_interval(
+    successes: ArrayLike, trials: ArrayLike, z: float = Z95
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Wilson score interval of a binomial proportion ``k / n``.
+
+    ``(p + z^2/2n -+ z sqrt(p(1 - p)/n + z^2/4n^2)) / (1 + z^2/n)`` with
+    ``p = k / n`` (Wilson 1927). Unlike the normal approximation it stays in
+    ``[0, 1]`` and is not empty at ``k = 0`` or ``k = n``: for ``k = 0`` it is
+    ``[0, z^2 / (n + z^2)]``.
+
+    Parameters
+    ----------
+    successes, trials : array_like
+        ``k`` and ``n`` (broadcast together), ``0 <= k <= n``, ``n >= 1``.
+    z : float
+        Normal quantile; the default gives 95 % intervals.
+
+    Returns
+    -------
+    low, high : ndarray
+        The interval's ends, shape of the broadcast inputs.
+    """
+    k = np.asarray(successes, dtype=float)
+    n = np.asarray(trials, dtype=float)
+    if np.any(n < 1) or np.any(k < 0) or np.any(k > n):
+        raise ValueError("the Wilson interval needs 0 <= successes <= trials and trials >= 1")
+    p = k / n
+    z2 = z * z
+    denom = 1.0 + z2 / n
+    centre = (p + z2 / (2.0 * n)) / denom
+    half = z * np.sqrt(p * (1.0 - p) / n + z2 / (4.0 * n * n)) / denom
+    # exact ends at k = 0 and k = n (rounding would leave them a hair off 0 and 1)
+    low = np.where(k == 0, 0.0, np.clip(centre - half, 0.0, 1.0))
+    high = np.where(k == n, 1.0, np.clip(centre + half, 0.0, 1.0))
+    return low, high
+
+
+def summarize_groups(trials: pd.DataFrame, groups: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One summary entry per group, in the order of ``groups``.
+
+    Parameters
+    ----------
+    trials : DataFrame
+        One row per trial with at least the columns ``group``, ``outcome``,
+        ``converged_time`` and ``steps``.
+    groups : list of dict
+        Per group (index = ``group`` column): ``law``, ``parameters`` and
+        anything else to carry over (``law_parameters``, ...).
+
+    Returns
+    -------
+    list of dict
+        ``law``, ``parameters``, ..., ``trials``, ``counts``, ``fractions`` and
+        ``ci95`` (``[low, high]``) keyed by every outcome in :data:`OUTCOMES`,
+        ``median_converged_time`` (of the trials that converged, or None) and
+        ``trial_steps``.
+    """
+    out = []
+    by_group = dict(tuple(trials.groupby("group", sort=True)))
+    for g, meta in enumerate(groups):
+        rows = by_group.get(g)
+        n = 0 if rows is None else len(rows)
+        counts = {o: 0 for o in OUTCOMES}
+        if rows is not None:
+            for o, c in rows["outcome"].value_counts().items():
+                counts[str(o)] = int(c)
+        entry = dict(meta)
+        entry["trials"] = n
+        entry["counts"] = counts
+        if n:
+            k = np.array([counts[o] for o in OUTCOMES])
+            lo, hi = wilson_interval(k, n)
+            entry["fractions"] = {o: counts[o] / n for o in OUTCOMES}
+            entry["ci95"] = {
+                o: [float(a), float(b)] for o, a, b in zip(OUTCOMES, lo, hi, strict=True)
+            }
+            ct = rows["converged_time"].to_numpy(dtype=float)
+            ct = ct[np.isfinite(ct)]
+            entry["median_converged_time"] = float(np.median(ct)) if ct.size else None
+            entry["trial_steps"] = int(rows["steps"].sum())
+        else:
+            entry["fractions"] = {o: math.nan for o in OUTCOMES}
+            entry["ci95"] = {o: [math.nan, math.nan] for o in OUTCOMES}
+            entry["median_converged_time"] = None
+            entry["trial_steps"] = 0
+        out.append(entry)
+    return out
