@@ -57,3 +57,20 @@ class System:
         iu, ju = np.triu_indices(self.formation.n, k=1)
         r = np.linalg.norm(q[..., ju, :] - q[..., iu, :], axis=-1)
         return np.min(r - self.formation.contact_matrix[iu, ju], axis=-1)
+
+    def swept_clearance(
+        self, q0: NDArray[np.float64], q1: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """Least ``r_ij - a_ij`` over the straight step from ``q0`` to ``q1``; shape ``(...)``.
+
+        Catches a step that carries two robots through each other, which the
+        clearance at the end of the step alone would miss.
+        """
+        q0, q1 = np.asarray(q0, dtype=float), np.asarray(q1, dtype=float)
+        iu, ju = np.triu_indices(self.formation.n, k=1)
+        r0 = q0[..., ju, :] - q0[..., iu, :]
+        dr = (q1[..., ju, :] - q1[..., iu, :]) - r0
+        dd = np.sum(dr * dr, axis=-1)
+        s = np.clip(-np.sum(r0 * dr, axis=-1) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
+        r = np.linalg.norm(r0 + s[..., None] * dr, axis=-1)
+        return np.min(r - self.formation.contact_matrix[iu, ju], axis=-1)

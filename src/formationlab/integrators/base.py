@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 
 from ..dynamics import System
 from ..errors import ParameterError
+from .diagnostics import SwitchMonitor
 
 __all__ = [
     "INTEGRATORS",
@@ -35,7 +36,7 @@ __all__ = [
     "register_integrator",
 ]
 
-Status = Literal["success", "step-collision", "non-finite"]
+Status = Literal["success", "step-collision", "non-finite", "event-limit"]
 Progress = Callable[[float], None]
 
 
@@ -50,12 +51,16 @@ class RawSolution:
     q : ndarray, shape (T, n, 2)
         Saved positions.
     status : str
-        ``"success"``, ``"step-collision"`` or ``"non-finite"``.
+        ``"success"``, ``"step-collision"``, ``"non-finite"`` or ``"event-limit"``
+        (an event-driven integrator met more switching events than it allows).
     message : str
         What happened, in words; says what to change when the run failed.
     stats : dict
         Diagnostics: ``steps``, ``rhs_evaluations``, ``wall_time_s``,
-        ``step_cost_s``, and whatever the integrator adds (switch counts, ...).
+        ``step_cost_s``, the switching diagnostics of
+        :mod:`formationlab.integrators.diagnostics` (``switch_count``,
+        ``sliding_time``, ``sliding_start``, ``sliding_end``, ``max_excursion``)
+        and whatever the integrator adds.
     """
 
     t: NDArray[np.float64]
@@ -103,6 +108,13 @@ class FixedStepIntegrator(Integrator):
         """One step from ``q`` (shape ``(n, 2)``) of length ``dt``."""
         raise NotImplementedError
 
+    def _advance(
+        self, system: System, q: NDArray[np.float64], dt: float, counters: dict[str, float]
+    ) -> NDArray[np.float64]:
+        """The step the run loop takes; a scheme may add to ``counters`` (its own stats;
+        ``extra_rhs_evaluations`` is added to ``rhs_evaluations``)."""
+        return self.step(system, q, dt)
+
     def run(
         self,
         system: System,
@@ -119,9 +131,11 @@ class FixedStepIntegrator(Integrator):
         message = f"integrated {n_steps} steps of dt = {self.dt:g} s"
         start = time.perf_counter()
         report = max(1, n_steps // 100)
+        monitor = SwitchMonitor(sigma0=system.sigma(q), t0=0.0)
+        counters: dict[str, float] = {}
         k = 0
         for k in range(1, n_steps + 1):
-            q_new = self.step(system, q, self.dt)
+            q_new = self._advance(system, q, self.dt, counters)
             if not np.all(np.isfinite(q_new)):
                 status = "non-finite"
                 message = (
@@ -129,12 +143,13 @@ class FixedStepIntegrator(Integrator):
                     f"reduce dt (now {self.dt:g} s)"
                 )
                 break
-            gap = system.clearance(q_new)
+            gap = system.swept_clearance(q, q_new)
             if gap <= 0:
                 status = "step-collision"
                 message = contact_message(system, q_new, k * self.dt, self.dt)
                 break
             q = q_new
+            monitor.record(k * self.dt, system.sigma(q))
             if k % save_every == 0 or k == n_steps:
                 ts.append(k * self.dt)
                 qs.append(q.copy())
@@ -149,9 +164,12 @@ class FixedStepIntegrator(Integrator):
         done = k - 1
         stats = {
             "steps": float(done),
-            "rhs_evaluations": float(done * self.evaluations_per_step),
+            "rhs_evaluations": float(done * self.evaluations_per_step)
+            + counters.pop("extra_rhs_evaluations", 0.0),
             "wall_time_s": wall,
             "step_cost_s": wall / max(done, 1),
+            **monitor.stats(),
+            **counters,
         }
         return RawSolution(
             t=np.asarray(ts), q=np.asarray(qs), status=status, message=message, stats=stats

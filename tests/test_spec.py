@@ -1,0 +1,77 @@
+"""Formation specification: builders, the alpha conventions, validation messages."""
+
+import numpy as np
+import pytest
+
+import formationlab as fl
+from formationlab import FormationError
+
+
+def test_paper_table_completion_and_desired_orientation():
+    f = fl.Formation.from_alpha_table({(1, 2, 3): 1, (3, 1, 2): 1, (2, 1, 3): -1}, n=3)
+    a = f.alpha
+    assert a[0, 1, 2] == 1 and a[0, 2, 1] == -1  # eq. (3)
+    assert a[1, 2, 0] == 1 and a[2, 0, 1] == 1  # alpha_231 = -alpha_213
+    # the law drives to sign(c_ijk) = -sign(alpha_ijk): simulation 2 wants clockwise
+    assert f.desired_sign[0, 1, 2] == -1
+
+
+def test_template_alpha_follows_paper_sign_convention():
+    tpl = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, np.sqrt(3) / 2]])  # ccw equilateral
+    f = fl.Formation.from_template(tpl, alpha_values="angle")
+    # ccw angle from r_12 to r_13 is +60 degrees; the paper's alpha carries the opposite sign
+    assert f.alpha[0, 1, 2] == pytest.approx(-np.pi / 3)
+    # eq. (4) in magnitude: the three angles of the triangle sum to pi
+    assert abs(f.alpha[0, 1, 2] + f.alpha[1, 2, 0] + f.alpha[2, 0, 1]) == pytest.approx(np.pi)
+    np.testing.assert_allclose(f.distances, 1.0)
+    assert fl.Formation.from_template(tpl).alpha[0, 1, 2] == -1.0
+    assert fl.Formation.from_template(tpl, orientation="mirror").alpha[0, 1, 2] == 1.0
+    assert fl.Formation.from_template(tpl, orientation="free").alpha is None
+
+
+def test_distances_follow_user_edge_order():
+    f = fl.Formation.from_distances(3, edges=[[2, 3], [1, 2]], distances=[2.0, 1.5])
+    assert f.edges.tolist() == [[0, 1], [1, 2]]
+    assert f.distances.tolist() == [1.5, 2.0]
+
+
+def test_rigidity_and_connectivity():
+    assert fl.Formation.from_distances(4).is_rigid
+    assert not fl.Formation.from_distances(4, edges=[[1, 2], [2, 3], [3, 4], [4, 1]]).is_rigid
+    assert not fl.Formation.from_distances(4, edges=[[1, 2], [3, 4]]).is_connected
+
+
+@pytest.mark.parametrize(
+    ("build", "fragment"),
+    [
+        (
+            lambda: fl.Formation.from_distances(3, distances=0.1, diameters=0.2),
+            "must exceed the contact",
+        ),
+        (lambda: fl.Formation.from_distances(3, edges=[[1, 4]]), "names robot 4"),
+        (lambda: fl.Formation.from_distances(3, edges=[[2, 2]]), "to itself"),
+        (lambda: fl.Formation.from_distances(3, edges=[[1, 2], [2, 1]]), "given twice"),
+        (lambda: fl.Formation.from_distances(3, distances=[1.0, np.nan, 1.0]), "finite"),
+        (lambda: fl.Formation.from_distances(3, diameters=[0.1, 0.2]), "one per robot"),
+        (lambda: fl.Formation.from_template([[0, 0], [1, 0], [2, 0]]), "collinear"),
+        (lambda: fl.Formation.from_alpha_table({(1, 2, 3): 1, (1, 3, 2): 1}, n=3), "twice"),
+        (lambda: fl.Formation.from_alpha_table({(1, 2, 2): 1}, n=3), "three different"),
+        (
+            lambda: fl.Formation.from_alpha_table({(1, 2, 3): 1}, n=3, edges=[[1, 2], [2, 3]]),
+            "not both neighbours",
+        ),
+    ],
+)
+def test_validation_messages(build, fragment):
+    with pytest.raises(FormationError, match=fragment):
+        build()
+
+
+def test_check_positions_names_overlapping_pair():
+    f = fl.Formation.from_distances(3, diameters=0.4)
+    with pytest.raises(FormationError, match="robots 2 and 3 overlap"):
+        f.check_positions([[0, 0], [2, 0], [2.3, 0]])
+    with pytest.raises(FormationError, match="NaN"):
+        f.check_positions([[0, 0], [2, 0], [np.nan, 0]])
+    with pytest.raises(FormationError, match="shape"):
+        f.check_positions([[0, 0], [2, 0]])
