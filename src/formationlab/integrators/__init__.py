@@ -8,15 +8,22 @@ from .base import (
     get_integrator,
     register_integrator,
 )
+from .diagnostics import SwitchMonitor, switching_diagnostics
 from .explicit import RK4, Euler
+from .filippov import Filippov
+from .implicit import ImplicitEuler
 
 __all__ = [
     "INTEGRATORS",
     "RK4",
     "Euler",
+    "Filippov",
     "FixedStepIntegrator",
+    "ImplicitEuler",
     "Integrator",
     "RawSolution",
+    "SwitchMonitor",
     "get_integrator",
     "register_integrator",
+    "switching_diagnostics",
 ]
