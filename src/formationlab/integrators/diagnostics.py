@@ -127,7 +127,7 @@ class SwitchMonitor:
         self._sigma, self._label, self._t = sigma, label, t
 
     def stats(self) -> dict[str, float]:
-        """``switch_count``, ``sliding_time``, ``sliding_start``, ``sliding_end``, ``max_excursion``."""
+        """The diagnostics so far, a dict of floats (keys as in the module docstring)."""
         iv = self.intervals
         return {
             "switch_count": float(self.switch_count),

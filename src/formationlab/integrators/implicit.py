@@ -154,7 +154,9 @@ class ImplicitEuler(FixedStepIntegrator):
             new = []
             start = q + dt * base
 
-            def end_state(wj: NDArray[np.float64], J: list[int] = involved) -> NDArray:
+            def end_state(
+                wj: NDArray[np.float64], J: list[int] = involved, start: NDArray = start
+            ) -> NDArray:
                 out = start.copy()
                 for m, j in enumerate(J):
                     out += (dt * (wj[m] - w0[j])) * directions[j]
