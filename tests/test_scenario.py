@@ -68,14 +68,26 @@ def test_paper_simulation_files_build_the_papers_formation_and_law() -> None:
 
 def test_euler_trajectory_of_paper_simulation_1_equals_simulate_with_papers_parameters() -> None:
     sc = load_scenario(EXAMPLES / "paper-simulation-1.toml")
-    got = fl.simulate(sc.formation, sc.law, sc.q0, duration=sc.duration, integrator=sc.integrator)
+    duration = 4.0  # long enough to converge (the distance law, restrictions inactive)
+    got = fl.simulate(sc.formation, sc.law, sc.q0, duration=duration, integrator=sc.integrator)
     f = fl.Formation.from_alpha_table(SIM1, n=3, distances=1.0, diameters=0.2)
     law = fl.AngleRestrictedLaw(k_c=2.0, k_a=3.0, theta=0.5)
-    ref = fl.simulate(f, law, PAPER_Q0, duration=15.0, integrator=fl.Euler(dt=1e-3))
+    ref = fl.simulate(f, law, PAPER_Q0, duration=duration, integrator=fl.Euler(dt=1e-3))
     np.testing.assert_array_equal(got.t, ref.t)
     np.testing.assert_array_equal(got.q, ref.q)
     # simulation 1 ends at the equilateral triangle of side 1 (section 4)
     assert got.outcome() == "desired"
+
+
+@pytest.mark.parametrize("simulation", [1, 2])
+def test_example_trajectories_agree_with_the_paper_command(simulation: int) -> None:
+    from formationlab.paper import PaperSetup
+
+    sc = load_scenario(EXAMPLES / f"paper-simulation-{simulation}.toml")
+    setup = PaperSetup(duration=2.0, dt=1e-3, integrator="euler", diameter=0.2)
+    ref = setup.run(simulation, perturbation=0.0)  # type: ignore[arg-type]
+    got = fl.simulate(sc.formation, sc.law, sc.q0, duration=2.0, integrator=sc.integrator)
+    np.testing.assert_array_equal(got.q, ref.q)
 
 
 def test_every_example_validates() -> None:
