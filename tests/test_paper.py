@@ -99,7 +99,8 @@ def test_exchanged_pairs_detects_crossing_paths():
     a = np.hstack([t, t])  # robot 1 goes up-right
     b = np.hstack([t, 1 - t])  # robot 2 goes down-right: the paths cross
     c = np.hstack([t, t + 5])  # robot 3 parallel to robot 1, never crossing
-    assert exchanged_pairs(np.stack([a, b, c], axis=1)) == ["1-2", "2-3"]
+    assert exchanged_pairs(np.stack([a, b, c], axis=1)) == ["1-2"]
+    assert exchanged_pairs(np.stack([a, c], axis=1)) == []
 
 
 def test_paper_formations_are_each_others_mirror():
