@@ -200,6 +200,7 @@ def lyapunov_report(res: SimulationResult) -> dict[str, Any]:
     report = {
         "initial": float(res.V[0]),
         "final": float(res.V[-1]),
+        "minimum": float(res.V.min()),
         "max_increase": float(max(dv.max(initial=0.0), 0.0)),
         "increases": int(rises.sum()),
     }

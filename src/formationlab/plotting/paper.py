@@ -30,7 +30,12 @@ PAPER_FIGURES: dict[str, tuple[str, Any, dict[str, Any], str]] = {
         {"axis": 1},
         "Fig. 6: control actions (velocities) in y",
     ),
-    "fig07_lyapunov": ("simulation_1", plot_lyapunov, {}, "Fig. 7: Lyapunov function V_n"),
+    "fig07_lyapunov": (
+        "simulation_1",
+        plot_lyapunov,
+        {"log": True},
+        "Fig. 7: Lyapunov function V_n",
+    ),
     "fig08_trajectories": (
         "simulation_2",
         plot_trajectories,
@@ -58,7 +63,7 @@ PAPER_FIGURES: dict[str, tuple[str, Any, dict[str, Any], str]] = {
     "fig12_lyapunov": (
         "simulation_2",
         plot_lyapunov,
-        {},
+        {"log": True},
         "Fig. 12: Lyapunov function V_n, restrictions active",
     ),
     "extra_sim2_unperturbed_trajectories": (

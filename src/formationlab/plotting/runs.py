@@ -126,7 +126,7 @@ def plot_lyapunov(
     label = "$V_n$ (eq. 15)" if result.sigma.shape[-1] else "$V$ (eq. 9)"
     artists += ax.plot(result.t, v, color="k", label=label)
     if log:
-        ax.set_yscale("symlog", linthresh=1e-6)
+        ax.set_yscale("symlog", linthresh=1e-2)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("Lyapunov function")
     ax.set_title(title or "Lyapunov function")
