@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from rich.markup import escape
 
 from ..errors import OutputExistsError, UserInputError
 from ._app import command, err_console, fail
@@ -19,7 +20,9 @@ ANIMATION_STEM = "animation"
 
 
 def _warn(message: str) -> None:
-    err_console.print(f"[bold yellow]warning:[/] {message}", highlight=False, soft_wrap=True)
+    err_console.print(
+        f"[bold yellow]warning:[/] {escape(message)}", highlight=False, soft_wrap=True
+    )
 
 
 def _say(message: str, quiet: bool) -> None:
@@ -239,7 +242,9 @@ def validate(
             sc = load_scenario(path)
         except UserInputError as exc:
             bad += 1
-            err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+            err_console.print(
+                f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True
+            )
             continue
         for w in sc.warnings:
             _warn(f"{path}: {w}")

@@ -6,7 +6,9 @@ interrupted save never leaves half an animation behind.
 
 from __future__ import annotations
 
+import html
 import os
+import re
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -71,8 +73,8 @@ def save_animation(
                 anim.save(tmp, writer=writer)
         else:
             with mpl.rc_context({"animation.embed_limit": 200.0}):  # MB; frames are bounded
-                html = anim.to_jshtml(fps=fps, default_mode="once")
-            atomic_write_text(target, _page(html, stem.name))
+                player = anim.to_jshtml(fps=fps, default_mode="once")
+            atomic_write_text(target, _page(player, stem.name))
         written.append(target)
     return written
 
@@ -80,8 +82,30 @@ def save_animation(
 _EVEN = "pad=ceil(iw/2)*2:ceil(ih/2)*2"
 
 
+#: matplotlib's player links Font Awesome from a CDN for its button icons; the
+#: page replaces that link with these glyphs so that it works offline.
+_ICONS = {
+    "fast-backward": "\\23EE",
+    "step-backward": "\\23F4\\23F4",
+    "play": "\\25B6",
+    "pause": "\\23F8",
+    "step-forward": "\\23F5\\23F5",
+    "fast-forward": "\\23ED",
+    "minus": "\\2212",
+    "plus": "+",
+}
+_CSS = (
+    ".fa { font-style: normal; font-family: sans-serif; }\n"
+    ".fa-flip-horizontal { display: inline-block; transform: scaleX(-1); }\n"
+    + "".join(f'.fa-{name}:before {{ content: "{glyph}"; }}\n' for name, glyph in _ICONS.items())
+)
+_CDN = re.compile(r"<link[^>]*font-awesome[^>]*>", re.DOTALL)
+
+
 def _page(player: str, title: str) -> str:
+    """A self-contained HTML page around matplotlib's player (no network needed)."""
+    player = _CDN.sub(lambda _: f"<style>\n{_CSS}</style>", player)
     return (
         "<!DOCTYPE html>\n<html>\n<head>\n<meta charset='utf-8'>\n"
-        f"<title>{title}</title>\n</head>\n<body>\n{player}\n</body>\n</html>\n"
+        f"<title>{html.escape(title)}</title>\n</head>\n<body>\n{player}\n</body>\n</html>\n"
     )
