@@ -7,15 +7,18 @@
 * :mod:`~formationlab.studies.batch`: the batched kernel every chunk calls.
 """
 
+from .batch import BatchResult, run_batch
 from .config import StudyConfig, parse_study
 from .runner import StudyResult, run_study, study_groups
 from .sampling import trial_initial_states
 from .summary import wilson_interval
 
 __all__ = [
+    "BatchResult",
     "StudyConfig",
     "StudyResult",
     "parse_study",
+    "run_batch",
     "run_study",
     "study_groups",
     "trial_initial_states",

@@ -1,0 +1,248 @@
+"""Numba kernels of the batched Euler stepping (the numpy specification is ``reference``).
+
+Layout: every chunk of trials keeps its positions as ``(n, 2, C)`` with the
+trials on the innermost, contiguous axis, so that each loop over trials is a
+plain SIMD loop. Chunks run in parallel (``prange``); inside a chunk, trials
+that stop are swapped out of the live range (compaction), so that early
+stopping saves work instead of masking it.
+
+The law enters as data (:class:`KernelLaw`, built by
+:mod:`formationlab.studies.batch`):
+
+* every pair ``i < j``: edge (``d_ij``, ``a_ij``) or not (Khatib's repulsion);
+  on an edge either the paper's ``phi_ij`` (``kind = LOG_BARRIER``, eqs. 5, 7)
+  or ``1/4 (r^2 - d^2)^2`` (``kind = SQUARED``, Krick et al. 2009);
+* the restricted triples ``(i, j, k, alpha_ijk)`` of eq. (14) with ``k_a``, ``theta``;
+* the triangles ``(a, b, c, A*)`` of the signed-area penalty with its gain.
+
+Each pair contributes ``u_i += g (q_j - q_i)``, ``u_j -= g (q_j - q_i)``:
+``g = k_c phi'(r) / r`` (eq. 8), ``g = k (r^2 - d^2)`` (squared distance) or
+``g = k_r gamma'(r - a) / r`` (repulsion). The arithmetic follows the numpy
+laws operation by operation where it decides a branch (``alpha c + theta``,
+``r - a``), so that trajectories agree with :func:`formationlab.simulate` to
+rounding.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from .reference import STATUS_COLLISION, STATUS_CONVERGED, STATUS_END, STATUS_NON_FINITE
+
+__all__ = ["LOG_BARRIER", "SQUARED", "run_chunks"]
+
+#: Edge potential of the law: the paper's phi (eq. 5) or Krick et al.'s squared distance.
+LOG_BARRIER, SQUARED = 0, 1
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def _controls(
+    q, u, gap, nact, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
+    ti, tj, tk, talpha, k_a, theta, sa, sb, sc, starget, k_area,
+):  # fmt: skip
+    """``u = f(q)`` for the first ``nact`` trials of a chunk; ``gap``: least ``r_ij - a_ij``."""
+    n = q.shape[0]
+    for i in range(n):
+        for b in range(nact):
+            u[i, 0, b] = 0.0
+            u[i, 1, b] = 0.0
+    for b in range(nact):
+        gap[b] = np.inf
+    rep = -gain_rep * eta / s0
+    for p in range(pi.shape[0]):
+        i = pi[p]
+        j = pj[p]
+        a = pa[p]
+        xi, yi, xj, yj = q[i, 0], q[i, 1], q[j, 0], q[j, 1]
+        uxi, uyi, uxj, uyj = u[i, 0], u[i, 1], u[j, 0], u[j, 1]
+        if pedge[p] and kind == LOG_BARRIER:
+            inv_da = 1.0 / (pd[p] - a)
+            for b in range(nact):
+                dx = xj[b] - xi[b]
+                dy = yj[b] - yi[b]
+                r = math.sqrt(dx * dx + dy * dy)
+                ra = r - a
+                gap[b] = min(gap[b], ra)
+                g = gain_edge * (ra * inv_da - 1.0) / (ra * r)  # k_c phi'(r) / r, eqs. (7), (8)
+                uxi[b] += g * dx
+                uyi[b] += g * dy
+                uxj[b] -= g * dx
+                uyj[b] -= g * dy
+        elif pedge[p]:
+            d2 = pd[p] * pd[p]
+            for b in range(nact):
+                dx = xj[b] - xi[b]
+                dy = yj[b] - yi[b]
+                r2 = dx * dx + dy * dy
+                gap[b] = min(gap[b], math.sqrt(r2) - a)
+                g = gain_edge * (r2 - d2)  # Krick et al. 2009
+                uxi[b] += g * dx
+                uyi[b] += g * dy
+                uxj[b] -= g * dx
+                uyj[b] -= g * dy
+        else:
+            for b in range(nact):
+                dx = xj[b] - xi[b]
+                dy = yj[b] - yi[b]
+                r = math.sqrt(dx * dx + dy * dy)
+                s = r - a
+                gap[b] = min(gap[b], s)
+                # k_r gamma'(s) / r with gamma'(s) = -eta (1/s - 1/s0) / s^2 (Khatib)
+                g = rep * (s0 - s) / (s * s * s * r) if s < s0 else 0.0
+                uxi[b] += g * dx
+                uyi[b] += g * dy
+                uxj[b] -= g * dx
+                uyj[b] -= g * dy
+    for t in range(ti.shape[0]):  # eqs. (11), (13), (14), (23)
+        i = ti[t]
+        j = tj[t]
+        k = tk[t]
+        al = talpha[t]
+        xi, yi, xj, yj, xk, yk = q[i, 0], q[i, 1], q[j, 0], q[j, 1], q[k, 0], q[k, 1]
+        uxi, uyi = u[i, 0], u[i, 1]
+        for b in range(nact):
+            c = (xj[b] - xi[b]) * (yk[b] - yi[b]) - (yj[b] - yi[b]) * (xk[b] - xi[b])
+            w = k_a * al if al * c + theta >= 0.0 else 0.0  # Upsilon(0) = 1
+            uxi[b] += w * (yk[b] - yj[b])  # -k_a alpha (k x r_jk)
+            uyi[b] -= w * (xk[b] - xj[b])
+    for t in range(sa.shape[0]):  # signed-area penalty, grad_a A_abc = 1/2 k x r_bc
+        ia = sa[t]
+        ib = sb[t]
+        ic = sc[t]
+        target = starget[t]
+        xa, ya, xb, yb, xc, yc = q[ia, 0], q[ia, 1], q[ib, 0], q[ib, 1], q[ic, 0], q[ic, 1]
+        uxa, uya, uxb, uyb, uxc, uyc = u[ia, 0], u[ia, 1], u[ib, 0], u[ib, 1], u[ic, 0], u[ic, 1]
+        for b in range(nact):
+            area = 0.5 * ((xb[b] - xa[b]) * (yc[b] - ya[b]) - (yb[b] - ya[b]) * (xc[b] - xa[b]))
+            g = k_area * 0.5 * (area - target)
+            uxa[b] += g * (yc[b] - yb[b])
+            uya[b] -= g * (xc[b] - xb[b])
+            uxb[b] += g * (ya[b] - yc[b])
+            uyb[b] -= g * (xa[b] - xc[b])
+            uxc[b] += g * (yb[b] - ya[b])
+            uyc[b] -= g * (xb[b] - xa[b])
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def _run_chunk(
+    q0, start, stop, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
+    ti, tj, tk, talpha, k_a, theta, sa, sb, sc, starget, k_area,
+    dt, n_steps, check_every, speed,
+    q_out, u_out, steps_out, status_out, mc_out,
+):  # fmt: skip
+    n = q0.shape[1]
+    m = stop - start
+    # double buffers: (q, u) at step k, (qp, up) at step k - 1
+    q = np.empty((n, 2, m))
+    u = np.empty((n, 2, m))
+    qp = np.empty((n, 2, m))
+    up = np.empty((n, 2, m))
+    ids = np.arange(start, stop)
+    mc = np.full(m, np.inf)  # least clearance over accepted states
+    gap = np.empty(m)  # clearance of the current state
+    fin = np.zeros(m)  # 0 while the last Euler step was finite
+    code = np.full(m, -1, dtype=np.int8)  # -1: still running
+    for b in range(m):
+        for i in range(n):
+            q[i, 0, b] = q0[start + b, i, 0]
+            q[i, 1, b] = q0[start + b, i, 1]
+    nact = m
+    k = 0
+    while nact > 0:
+        _controls(
+            q, u, gap, nact, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
+            ti, tj, tk, talpha, k_a, theta, sa, sb, sc, starget, k_area,
+        )  # fmt: skip
+        stopping = 0
+        if k > 0:  # reject the step that led here if it is not finite or reached contact
+            for b in range(nact):
+                if fin[b] != 0.0:
+                    code[b] = STATUS_NON_FINITE
+                    stopping += 1
+                elif not gap[b] > 0.0:
+                    code[b] = STATUS_COLLISION
+                    stopping += 1
+        for b in range(nact):
+            mc[b] = min(mc[b], gap[b]) if code[b] < 0 else mc[b]
+        if k % check_every == 0 or k == n_steps:
+            for b in range(nact):
+                top = 0.0
+                for i in range(n):
+                    top = max(top, u[i, 0, b] * u[i, 0, b] + u[i, 1, b] * u[i, 1, b])
+                if code[b] < 0 and math.sqrt(top) <= speed:
+                    code[b] = STATUS_CONVERGED
+                    stopping += 1
+        if k == n_steps:
+            for b in range(nact):
+                if code[b] < 0:
+                    code[b] = STATUS_END
+            stopping = nact
+        if stopping:
+            # write out the stopped trials, then compact the live range
+            for b in range(nact - 1, -1, -1):
+                if code[b] < 0:
+                    continue
+                g = ids[b]
+                rejected = code[b] == STATUS_COLLISION or code[b] == STATUS_NON_FINITE
+                for i in range(n):
+                    for d in range(2):
+                        # a rejected step ends the trial at the previous, accepted state
+                        q_out[g, i, d] = qp[i, d, b] if rejected else q[i, d, b]
+                        u_out[g, i, d] = up[i, d, b] if rejected else u[i, d, b]
+                steps_out[g] = k - 1 if rejected else k
+                status_out[g] = code[b]
+                mc_out[g] = mc[b]
+                last = nact - 1
+                if b != last:  # the trial at `last` is running (visited already)
+                    for i in range(n):
+                        for d in range(2):
+                            q[i, d, b] = q[i, d, last]
+                            u[i, d, b] = u[i, d, last]
+                    ids[b] = ids[last]
+                    mc[b] = mc[last]
+                code[b] = -1
+                code[last] = -1
+                nact -= 1
+        if nact == 0:
+            break
+        for b in range(nact):
+            fin[b] = 0.0
+        for i in range(n):
+            for d in range(2):
+                qs, qps, us = q[i, d], qp[i, d], u[i, d]
+                for b in range(nact):
+                    x = qs[b] + dt * us[b]  # explicit Euler
+                    qps[b] = x  # the next state, written over the older one
+                    fin[b] += x * 0.0  # NaN unless x is finite
+        q, qp = qp, q
+        u, up = up, u
+        k += 1
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", parallel=True)
+def run_chunks(
+    q0, chunk, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
+    ti, tj, tk, talpha, k_a, theta, sa, sb, sc, starget, k_area,
+    dt, n_steps, check_every, speed,
+    q_out, u_out, steps_out, status_out, mc_out,
+):  # fmt: skip
+    """Step every trial of ``q0`` ``(B, n, 2)``; chunks of ``chunk`` trials run in parallel.
+
+    Fills ``q_out``, ``u_out`` ``(B, n, 2)``, ``steps_out`` (int64), ``status_out``
+    (int8, the ``STATUS_*`` codes of :mod:`formationlab.studies.reference`) and
+    ``mc_out`` (least clearance), all of length ``B``.
+    """
+    n_trials = q0.shape[0]
+    n_chunks = (n_trials + chunk - 1) // chunk
+    for c in prange(n_chunks):
+        start = c * chunk
+        stop = min(n_trials, start + chunk)
+        _run_chunk(
+            q0, start, stop, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
+            ti, tj, tk, talpha, k_a, theta, sa, sb, sc, starget, k_area,
+            dt, n_steps, check_every, speed,
+            q_out, u_out, steps_out, status_out, mc_out,
+        )  # fmt: skip

@@ -1,0 +1,279 @@
+"""The batched Euler kernel: equal to the one-by-one simulator, trial by trial.
+
+The numba kernel is compared with the numpy reference and both with
+``formationlab.simulate(..., integrator=Euler(dt))``; the stopping rules and
+the classification are checked on hand-built cases.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+import formationlab as fl
+from formationlab.analysis import classify
+from formationlab.controllers import SignedAreaLaw, SquaredDistanceLaw
+from formationlab.errors import FormationError, ParameterError
+from formationlab.studies import batch
+from formationlab.studies.batch import BatchResult, classify_batch, run_batch
+
+SIM2 = {(1, 2, 3): 1, (3, 1, 2): 1, (2, 1, 3): -1}  # section 4, simulation 2
+SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+LAWS = {
+    "distance": fl.DistanceLaw(k_c=2.0),
+    "angle-restricted": fl.AngleRestrictedLaw(k_c=2.0, k_a=3.0, theta=0.5),
+    "squared-distance": SquaredDistanceLaw(),
+    "signed-area": SignedAreaLaw(k_s=1.0),
+}
+DT = 1e-3
+
+
+def paper_triangle():
+    return fl.Formation.from_alpha_table(SIM2, n=3, distances=1.0, diameters=0.2)
+
+
+def square_one_diagonal():
+    """The unit square, ring 1-2-3-4 plus diagonal 1-3: robots 2 and 4 only repel."""
+    edges = [[1, 2], [2, 3], [3, 4], [4, 1], [1, 3]]
+    return fl.Formation.from_template(SQUARE, edges=edges, orientation="template")
+
+
+def draws(formation, count, half_width, seed):
+    """Uniform positions in the box, overlapping draws rejected."""
+    rng = np.random.default_rng(seed)
+    out = []
+    while len(out) < count:
+        q = rng.uniform(-half_width, half_width, size=(formation.n, 2))
+        iu, ju = np.triu_indices(formation.n, k=1)
+        if np.all(np.linalg.norm(q[ju] - q[iu], axis=-1) > formation.contact_matrix[iu, ju] + 0.05):
+            out.append(q)
+    return np.array(out)
+
+
+@pytest.fixture(scope="module")
+def cases():
+    """(formation, law, q0) per law; the paper's triangle and the square with a non-edge."""
+    out = {}
+    for name, law in LAWS.items():
+        for label, f, w in (
+            ("triangle", paper_triangle(), 3.0),
+            ("square", square_one_diagonal(), 1.5),
+        ):
+            out[name, label] = (f, law, draws(f, 6, w, seed=len(out)))
+    return out
+
+
+@pytest.fixture(scope="module")
+def results(cases):
+    """Both backends on every case (duration 2 s, so that some trials run to the end)."""
+    kw = {"dt": DT, "duration": 2.0, "check_every": 7}
+    return {
+        key: {b: run_batch(f, law, q0, backend=b, **kw) for b in ("numba", "numpy")}
+        for key, (f, law, q0) in cases.items()
+    }
+
+
+def test_result_fields_and_shapes(results, cases):
+    res = results["angle-restricted", "triangle"]["numba"]
+    assert isinstance(res, BatchResult)
+    b, n = cases["angle-restricted", "triangle"][2].shape[:2]
+    assert res.q_final.shape == res.u_final.shape == (b, n, 2)
+    for name in ("outcome", "max_distance_error", "converged_time", "min_clearance", "steps"):
+        assert getattr(res, name).shape == (b,)
+    assert res.steps.dtype == np.int64
+    assert set(res.outcome) <= set(fl.OUTCOMES)
+
+
+@pytest.mark.parametrize("law", list(LAWS))
+@pytest.mark.parametrize("shape", ["triangle", "square"])
+def test_numba_equals_numpy_reference(results, law, shape):
+    a, b = results[law, shape]["numba"], results[law, shape]["numpy"]
+    np.testing.assert_array_equal(a.steps, b.steps)
+    np.testing.assert_array_equal(a.outcome, b.outcome)
+    np.testing.assert_allclose(a.q_final, b.q_final, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a.u_final, b.u_final, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a.min_clearance, b.min_clearance, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(np.isnan(a.converged_time), np.isnan(b.converged_time))
+    np.testing.assert_allclose(a.converged_time, b.converged_time, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("law", list(LAWS))
+@pytest.mark.parametrize("shape", ["triangle", "square"])
+def test_batch_equals_one_by_one_simulator(results, cases, law, shape):
+    f, lw, q0 = cases[law, shape]
+    res = results[law, shape]["numba"]
+    for t in range(0, len(q0), 2):  # every other trial keeps the test fast
+        steps = int(res.steps[t])
+        collided = res.outcome[t] == "collision"
+        if steps == 0 and not collided:
+            np.testing.assert_array_equal(res.q_final[t], q0[t])
+            continue
+        # a collision ends at the last accepted state: the simulator needs one step more
+        duration = (steps + collided) * DT
+        sim = fl.simulate(f, lw, q0[t], duration=duration, integrator=fl.Euler(dt=DT))
+        assert (sim.status == "step-collision") == collided
+        np.testing.assert_allclose(res.q_final[t], sim.q[-1], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(res.u_final[t], sim.u[-1], rtol=0, atol=1e-9)
+        expected = classify(f, sim.q[-1], sim.u[-1], contact=sim.status == "step-collision")
+        assert res.outcome[t] == expected
+        clearance = fl.System(formation=f, law=lw).clearance(sim.q)
+        assert res.min_clearance[t] == pytest.approx(clearance.min(), abs=1e-9)
+        errors = np.abs(fl.distance_errors(f, sim.q[-1])).max()
+        assert res.max_distance_error[t] == pytest.approx(errors, abs=1e-9)
+
+
+def test_stopping_rules(results):
+    # converged trials stopped at a multiple of check_every with every |u_i| <= speed;
+    # the others ran to the end (2000 steps) or were stopped by contact.
+    speed = fl.Tolerances().speed
+    for per_backend in results.values():
+        res = per_backend["numba"]
+        conv = ~np.isnan(res.converged_time)
+        assert np.all(res.steps[conv] % 7 == 0)
+        np.testing.assert_allclose(res.converged_time[conv], res.steps[conv] * DT)
+        assert np.all(np.linalg.norm(res.u_final[conv], axis=-1).max(axis=-1) <= speed)
+        other = ~conv & (res.outcome != "collision")
+        assert np.all(res.steps[other] == 2000)
+
+
+def test_converged_time_is_the_first_check_passed():
+    f = paper_triangle()
+    law = LAWS["angle-restricted"]
+    q0 = draws(f, 2, 3.0, seed=11)
+    res = run_batch(f, law, q0, dt=DT, duration=10.0, check_every=25)
+    for t in range(2):
+        assert not np.isnan(res.converged_time[t])
+        k = int(res.steps[t])
+        sim = fl.simulate(f, law, q0[t], duration=k * DT, integrator=fl.Euler(dt=DT))
+        speeds = np.linalg.norm(sim.u, axis=-1).max(axis=-1)  # at steps 0..k
+        assert speeds[k] <= 1e-3
+        assert np.all(speeds[:k:25] > 1e-3)  # every earlier check failed
+
+
+def test_trial_at_the_desired_formation_stops_at_once():
+    f = paper_triangle()
+    tri = np.array([[0.0, 0.0], [0.5, math.sqrt(3) / 2], [1.0, 0.0]])  # clockwise, unit sides
+    res = run_batch(f, LAWS["angle-restricted"], tri[None], dt=DT, duration=1.0)
+    assert res.steps[0] == 0 and res.converged_time[0] == 0.0
+    assert res.outcome[0] == "desired"
+    assert res.min_clearance[0] == pytest.approx(0.8)  # 1 - a, a = 0.2
+
+
+def test_step_into_contact_is_a_collision_at_the_previous_state():
+    # Two robots 1.3 apart, d = 1, squared distance with k = 1: u_1 = (1.69 - 1) 1.3 = 0.897
+    # along the line, so one step of dt = 0.65 brings them to r = 1.3 - 2 * 0.65 * 0.897
+    # = 0.134 < a = 0.2: the step is rejected and the trial ends where it started.
+    f = fl.Formation.from_distances(2, distances=1.0, diameters=0.2)
+    q0 = np.array([[[0.0, 0.0], [1.3, 0.0]]])
+    for backend in ("numba", "numpy"):
+        res = run_batch(f, SquaredDistanceLaw(), q0, dt=0.65, duration=6.5, backend=backend)
+        assert res.outcome[0] == "collision"
+        assert res.steps[0] == 0 and np.isnan(res.converged_time[0])
+        np.testing.assert_array_equal(res.q_final[0], q0[0])
+        np.testing.assert_allclose(res.u_final[0], [[0.897, 0.0], [-0.897, 0.0]], rtol=1e-12)
+        assert res.min_clearance[0] == pytest.approx(1.1)
+    sim = fl.simulate(f, SquaredDistanceLaw(), q0[0], duration=6.5, integrator=fl.Euler(dt=0.65))
+    assert sim.status == "step-collision"
+
+
+def test_short_runs_do_not_converge():
+    f = paper_triangle()
+    q0 = np.array([[[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]])
+    res = run_batch(f, LAWS["distance"], q0, dt=DT, duration=0.05)
+    assert res.outcome[0] == "not-converged" and res.steps[0] == 50
+
+
+def test_chunking_and_compaction_do_not_change_results(monkeypatch):
+    # Trials are independent: the result of a trial must not depend on its chunk or
+    # on which other trials stopped before it (the kernel compacts its live trials).
+    f = square_one_diagonal()
+    law = LAWS["angle-restricted"]
+    q0 = draws(f, 23, 1.5, seed=5)
+    full = run_batch(f, law, q0, dt=DT, duration=2.0, check_every=3)
+    monkeypatch.setattr(batch, "CHUNK", 4)
+    small = run_batch(f, law, q0, dt=DT, duration=2.0, check_every=3)
+    part = run_batch(f, law, q0[9:14], dt=DT, duration=2.0, check_every=3)
+    for other, sl in ((small, slice(None)), (part, slice(9, 14))):
+        np.testing.assert_array_equal(other.q_final, full.q_final[sl])
+        np.testing.assert_array_equal(other.steps, full.steps[sl])
+        np.testing.assert_array_equal(other.min_clearance, full.min_clearance[sl])
+
+
+def four_robots_two_triangles():
+    """Triangles 1-2-3 and 2-3-4 sharing edge 2-3 (not rigid against folding robot 4)."""
+    tpl = np.array([[0.0, 0.0], [1.0, -0.5], [1.0, 0.5], [1.6, 0.2]])
+    edges = [[1, 2], [1, 3], [2, 3], [2, 4], [3, 4]]
+    return fl.Formation.from_template(tpl, edges=edges), tpl
+
+
+def test_classify_batch_equals_classify_on_every_class():
+    f, tpl = four_robots_two_triangles()
+    folded = tpl.copy()
+    folded[3] = [0.4, 0.2]  # robot 4 reflected across edge 2-3: distances kept, one flip
+    moving = np.full((4, 2), 0.1)
+    states = [
+        (tpl, np.zeros((4, 2)), False, "desired"),
+        (tpl * [-1.0, 1.0], np.zeros((4, 2)), False, "mirror"),
+        (
+            folded + np.array([[0.0, 0.3], [0, 0], [0, 0], [0, 0]]),
+            np.zeros((4, 2)),
+            False,
+            "incorrect",
+        ),
+        (folded, moving, False, "incorrect"),  # distances met, only triangle 2-3-4 flipped
+        (tpl * 0.5, np.zeros((4, 2)), False, "incorrect"),  # stopped, distances not met
+        (tpl * 0.5, moving, False, "not-converged"),
+        (tpl, np.zeros((4, 2)), True, "collision"),  # a step was rejected at contact
+        (np.array([[0.0, 0.0], [0.1, 0.0], [1.0, 0.5], [2.0, 0.0]]), moving, False, "collision"),
+    ]
+    q = np.array([s[0] for s in states])
+    u = np.array([s[1] for s in states])
+    contact = np.array([s[2] for s in states])
+    got = classify_batch(f, q, u, contact=contact)
+    for t, (qt, ut, ct, want) in enumerate(states):
+        assert classify(f, qt, ut, contact=ct) == want
+        assert got[t] == want
+
+
+def test_classify_batch_agrees_with_classify_on_random_states(rng):
+    f = square_one_diagonal()
+    q = SQUARE + rng.normal(scale=0.004, size=(400, 4, 2))
+    q[::3] = q[::3] * [-1.0, 1.0]  # mirrors
+    q[::7] *= 0.9  # distances not met
+    u = rng.normal(scale=1e-3, size=(400, 4, 2))
+    tol = fl.Tolerances(distance=1e-2, speed=2e-3)
+    got = classify_batch(f, q, u, tol)
+    want = [classify(f, q[t], u[t], tol) for t in range(400)]
+    np.testing.assert_array_equal(got, want)
+    assert len(set(want)) >= 3
+
+
+def test_input_errors():
+    f = paper_triangle()
+    law = LAWS["distance"]
+    good = np.array([[[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]])
+    with pytest.raises(FormationError, match=r"shape \(B, 3, 2\)"):
+        run_batch(f, law, good[0], dt=DT, duration=1.0)
+    overlap = good.copy()
+    overlap[0, 1] = [-2.9, -3.0]
+    with pytest.raises(FormationError, match="robots 1 and 2 overlap in trial 1"):
+        run_batch(f, law, overlap, dt=DT, duration=1.0)
+    with pytest.raises(ParameterError, match="backend"):
+        run_batch(f, law, good, dt=DT, duration=1.0, backend="cuda")
+    with pytest.raises(ParameterError, match="dt"):
+        run_batch(f, law, good, dt=-1.0, duration=1.0)
+    with pytest.raises(ParameterError, match="check_every"):
+        run_batch(f, law, good, dt=DT, duration=1.0, check_every=0)
+
+
+def test_other_laws_run_on_the_numpy_backend_only():
+    class Scaled(fl.DistanceLaw):
+        name = "scaled-distance-for-test"
+
+    f = paper_triangle()
+    q0 = np.array([[[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]])
+    with pytest.raises(ParameterError, match='backend="numpy"'):
+        run_batch(f, Scaled(), q0, dt=DT, duration=0.1)
+    res = run_batch(f, Scaled(), q0, dt=DT, duration=0.1, backend="numpy")
+    ref = run_batch(f, fl.DistanceLaw(), q0, dt=DT, duration=0.1)
+    np.testing.assert_allclose(res.q_final, ref.q_final, atol=1e-12)
