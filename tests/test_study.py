@@ -279,3 +279,75 @@ def test_summary_counts_fractions_and_intervals(reference_run):
             assert entry["counts"][o] == k and entry["fractions"][o] == k / len(rows)
             lo, hi = entry["ci95"][o]
             assert lo <= k / len(rows) <= hi
+
+
+# ----------------------------------------------------------------------------- command
+
+
+SCENARIO = """
+name = "tiny-study"
+[robots]
+positions = [[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]
+[formation]
+orientation = "table"
+alpha = [[1, 2, 3, 1.0], [3, 1, 2, 1.0], [2, 1, 3, -1.0]]
+[controller]
+law = "angle-restricted"
+[simulation]
+dt = 1e-2
+duration = 4.0
+[study]
+trials = 24
+chunk_size = 10
+laws = ["distance", "angle-restricted"]
+backend = "numpy"
+[study.sweep]
+k_a = [0.5, 3.0]
+"""
+
+
+def cli(*args: str) -> int:
+    """Run ``formationlab ARGS``; its exit status."""
+    from formationlab.cli import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(list(args))
+    return int(exit_.value.code or 0)
+
+
+def test_study_command_writes_trials_summary_and_figures(tmp_path, capsys, reference_run):
+    import json
+
+    path = tmp_path / "tiny.toml"
+    path.write_text(SCENARIO, encoding="utf-8")
+    out = tmp_path / "out"
+    args = [str(path), "--seed", "5", "--out", str(out), "--workers", "1"]
+    assert cli("study", *args) == 0
+    trials = read_trials(out / "trials.parquet")
+    pd.testing.assert_frame_equal(trials, reference_run, check_exact=True)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["scenario"] == "tiny-study" and summary["seed"] == 5
+    assert [g["law"] for g in summary["groups"]] == ["distance", *["angle-restricted"] * 2]
+    assert summary["trial_steps"] == int(trials["steps"].sum()) and summary["wall_time_s"] > 0
+    for stem in ("fractions", "desired"):
+        assert (out / f"{stem}.png").stat().st_size > 0
+    # a second run refuses the folder, and --resume finds every chunk done
+    capsys.readouterr()
+    assert cli("study", *args) == 2 and "--force" in capsys.readouterr().err
+    assert cli("study", *args, "--resume") == 0
+    again = json.loads((out / "summary.json").read_text())
+    assert again["chunks"] == {"total": 9, "resumed": 9}
+    pd.testing.assert_frame_equal(read_trials(out / "trials.parquet"), trials, check_exact=True)
+    # resuming with another seed is refused with a message, not a traceback
+    capsys.readouterr()
+    assert cli("study", str(path), "--seed", "6", "--out", str(out), "--resume") == 2
+    assert "differs in: seed" in capsys.readouterr().err
+
+
+def test_docstring_examples_of_the_study_modules():
+    import doctest
+
+    import formationlab.studies.sampling
+
+    result = doctest.testmod(formationlab.studies.sampling)
+    assert result.attempted > 0 and result.failed == 0

@@ -14,7 +14,7 @@ from ._app import command, err_console, fail
 
 @command("study")
 def study(
-    scenario: Annotated[Path, typer.Argument(help="Scenario file (TOML) with a [study] table.")],
+    scenario: Annotated[Path, typer.Argument(help="Scenario file (TOML) with a \\[study] table.")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Folder for the results.")],
     trials: Annotated[
         int | None,
@@ -30,11 +30,22 @@ def study(
     ] = None,
     workers: Annotated[
         int | None,
-        typer.Option(help="Worker processes (default: one per core; 1 runs in this process)."),
+        typer.Option(
+            help="With --scheduler local: the cluster's processes (default one per core). "
+            "Without --scheduler: above 1, a pool of single-threaded processes instead of this "
+            "process's multi-threaded kernel (default 1)."
+        ),
     ] = None,
     chunk_size: Annotated[
         int | None,
         typer.Option("--chunk-size", help="Trials per chunk (overrides study.chunk_size)."),
+    ] = None,
+    dt: Annotated[
+        float | None, typer.Option("--dt", help="Euler step in seconds (overrides study.dt).")
+    ] = None,
+    duration: Annotated[
+        float | None,
+        typer.Option("--duration", help="Simulated seconds per trial (overrides study.duration)."),
     ] = None,
     resume: Annotated[
         bool, typer.Option("--resume", help="Finish an interrupted study in OUT.")
@@ -61,7 +72,9 @@ def study(
     from ..studies.runner import run_study, study_groups, study_identity
 
     sc = load_scenario(scenario)
-    config = parse_study(sc.study, trials=trials, chunk_size=chunk_size, source=sc.source)
+    config = parse_study(
+        sc.study, trials=trials, chunk_size=chunk_size, dt=dt, duration=duration, source=sc.source
+    )
     dt = float(config.dt or getattr(sc.integrator, "dt", None) or 1e-3)
     duration = float(config.duration or sc.duration)
     center = sc.formation.template if sc.formation.template is not None else sc.q0

@@ -129,9 +129,13 @@ def parse_study(
     *,
     trials: int | None = None,
     chunk_size: int | None = None,
+    dt: float | None = None,
+    duration: float | None = None,
     source: str = "scenario",
 ) -> StudyConfig:
     """Validate a ``[study]`` table (``None``: all defaults), with command-line overrides.
+
+    ``trials``, ``chunk_size``, ``dt`` and ``duration``, when given, replace the table's.
 
     Raises
     ------
@@ -139,10 +143,14 @@ def parse_study(
         Naming the key (``study.initial.half_width``), what was expected and what was given.
     """
     data = dict(table or {})
-    if trials is not None:
-        data["trials"] = trials
-    if chunk_size is not None:
-        data["chunk_size"] = chunk_size
+    for key, value in (
+        ("trials", trials),
+        ("chunk_size", chunk_size),
+        ("dt", dt),
+        ("duration", duration),
+    ):
+        if value is not None:
+            data[key] = value
     try:
         return StudyConfig.model_validate(data)
     except ValidationError as exc:
