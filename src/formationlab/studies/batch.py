@@ -46,6 +46,8 @@ KERNEL_LAWS = ("distance", "angle-restricted", "squared-distance", "signed-area"
 
 Backend = Literal["numba", "numpy"]
 
+_EVEN = ((0, 1, 2), (1, 2, 0), (2, 0, 1))
+
 #: Trials per chunk of the numba backend (the unit of parallel work).
 CHUNK = 256
 #: The numba kernel already uses every core, and numba's fallback threading layer
@@ -287,16 +289,13 @@ def _kernel_law(formation: Formation, law: Law) -> tuple:
     pd = np.where(pedge, np.nan_to_num(formation.distance_matrix[pi, pj]), 0.0)
     pa = formation.contact_matrix[pi, pj].copy()
     rep = law.repulsion  # type: ignore[attr-defined]
-    no_triples = (np.zeros(0, np.int64),) * 3 + (np.zeros(0),)
-    no_triangles = (np.zeros(0, np.int64),) * 3 + (np.zeros(0),)
-    k_a = theta = k_area = 0.0
-    triples, triangles = no_triples, no_triangles
+    k_area = theta = 0.0
+    angular = _angular_terms(formation, 0.0)
+    triangles = (np.zeros(0, np.int64),) * 3 + (np.zeros(0),)
     if isinstance(law, DistanceLaw | AngleRestrictedLaw):
         kind, gain_edge, gain_rep = LOG_BARRIER, float(law.k_c), float(law.k_c)
         if isinstance(law, AngleRestrictedLaw) and formation.alpha is not None and law.k_a > 0:
-            t = np.argwhere(formation.alpha != 0)
-            triples = (*(t[:, m].astype(np.int64) for m in range(3)), formation.alpha[tuple(t.T)])
-            k_a, theta = float(law.k_a), float(law.theta)
+            angular, theta = _angular_terms(formation, float(law.k_a)), float(law.theta)
     else:
         kind, gain_edge, gain_rep = SQUARED, float(law.k), float(law.k_r)  # type: ignore[attr-defined]
         if isinstance(law, SignedAreaLaw) and law.k_s > 0:
@@ -305,5 +304,39 @@ def _kernel_law(formation: Formation, law: Law) -> tuple:
             k_area = float(law.k * law.k_s)
     return (
         kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, float(rep.eta), float(rep.influence),
-        *triples, k_a, theta, *triangles, k_area,
+        *angular, theta, *triangles, k_area,
     )  # fmt: skip
+
+
+def _angular_terms(formation: Formation, k_a: float) -> tuple:
+    """The restricted triples of eq. (14) grouped by triangle, for the kernel.
+
+    Returns the sorted triangles ``(a, b, c)`` (three arrays), offsets into the
+    terms, and per term ``(i, j, k)`` with ``j < k``: ``i, j, k``, ``alpha_ijk``,
+    the parity ``par`` with ``c_ijk = par c_abc``, and the weight ``2 k_a alpha_ijk``
+    (the ordered pair ``(k, j)`` of eq. (13) contributes the same as ``(j, k)``).
+    With ``k_a = 0`` or no alpha, all arrays are empty.
+    """
+    rows: dict[tuple[int, int, int], list[tuple[int, int, int, float, float]]] = {}
+    if formation.alpha is not None and k_a > 0:
+        for i, j, k in np.argwhere(formation.restricted):
+            if j > k:
+                continue
+            tri = tuple(sorted((int(i), int(j), int(k))))
+            par = 1.0 if tuple(tri.index(x) for x in (i, j, k)) in _EVEN else -1.0
+            rows.setdefault(tri, []).append((int(i), int(j), int(k), formation.alpha[i, j, k], par))  # type: ignore[arg-type]
+    tris = sorted(rows)
+    terms = [t for tri in tris for t in rows[tri]]
+    offsets = np.cumsum([0] + [len(rows[tri]) for tri in tris]).astype(np.int64)
+    ints = lambda col: np.array([t[col] for t in terms], dtype=np.int64)  # noqa: E731
+    alpha = np.array([t[3] for t in terms], dtype=float)
+    return (
+        *(np.array([t[m] for t in tris], dtype=np.int64) for m in range(3)),
+        offsets,
+        ints(0),
+        ints(1),
+        ints(2),
+        alpha,
+        np.array([t[4] for t in terms], dtype=float),
+        2.0 * k_a * alpha,
+    )

@@ -12,7 +12,9 @@ The law enters as data (:class:`KernelLaw`, built by
 * every pair ``i < j``: edge (``d_ij``, ``a_ij``) or not (Khatib's repulsion);
   on an edge either the paper's ``phi_ij`` (``kind = LOG_BARRIER``, eqs. 5, 7)
   or ``1/4 (r^2 - d^2)^2`` (``kind = SQUARED``, Krick et al. 2009);
-* the restricted triples ``(i, j, k, alpha_ijk)`` of eq. (14) with ``k_a``, ``theta``;
+* the restricted triangles ``(a, b, c)`` of eq. (14) and, per triangle, the terms
+  ``(i, j, k)``, ``j < k``, with ``alpha_ijk``, the parity of ``c_ijk = par c_abc``
+  and the weight ``2 k_a alpha_ijk`` (``psi_ikj = psi_ijk``), and ``theta``;
 * the triangles ``(a, b, c, A*)`` of the signed-area penalty with its gain.
 
 Each pair contributes ``u_i += g (q_j - q_i)``, ``u_j -= g (q_j - q_i)``:
@@ -40,8 +42,8 @@ LOG_BARRIER, SQUARED = 0, 1
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
 def _controls(
-    q, u, gap, nact, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
-    ti, tj, tk, talpha, k_a, theta, sa, sb, sc, starget, k_area,
+    q, u, gap, cbuf, nact, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
+    ra, rb, rc, roff, vi, vj, vk, valpha, vpar, vw, theta, sa, sb, sc, starget, k_area,
 ):  # fmt: skip
     """``u = f(q)`` for the first ``nact`` trials of a chunk; ``gap``: least ``r_ij - a_ij``."""
     n = q.shape[0]
@@ -64,9 +66,9 @@ def _controls(
                 dx = xj[b] - xi[b]
                 dy = yj[b] - yi[b]
                 r = math.sqrt(dx * dx + dy * dy)
-                ra = r - a
-                gap[b] = min(gap[b], ra)
-                g = gain_edge * (ra * inv_da - 1.0) / (ra * r)  # k_c phi'(r) / r, eqs. (7), (8)
+                clr = r - a
+                gap[b] = min(gap[b], clr)
+                g = gain_edge * (clr * inv_da - 1.0) / (clr * r)  # k_c phi'(r) / r, eqs. (7), (8)
                 uxi[b] += g * dx
                 uyi[b] += g * dy
                 uxj[b] -= g * dx
@@ -96,18 +98,27 @@ def _controls(
                 uyi[b] += g * dy
                 uxj[b] -= g * dx
                 uyj[b] -= g * dy
-    for t in range(ti.shape[0]):  # eqs. (11), (13), (14), (23)
-        i = ti[t]
-        j = tj[t]
-        k = tk[t]
-        al = talpha[t]
-        xi, yi, xj, yj, xk, yk = q[i, 0], q[i, 1], q[j, 0], q[j, 1], q[k, 0], q[k, 1]
-        uxi, uyi = u[i, 0], u[i, 1]
+    # eqs. (11), (13), (14), (23): per restricted triangle (a, b, c), c_abc once; a term
+    # (i, j, k) with c_ijk = par c_abc adds -w Upsilon(alpha_ijk c_ijk + theta) k x r_jk
+    # to u_i, w = 2 k_a alpha_ijk (the ordered pairs (j, k), (k, j) of eq. 13 are equal).
+    for t in range(ra.shape[0]):
+        ia = ra[t]
+        ib = rb[t]
+        ic = rc[t]
+        xa, ya, xb, yb, xc, yc = q[ia, 0], q[ia, 1], q[ib, 0], q[ib, 1], q[ic, 0], q[ic, 1]
         for b in range(nact):
-            c = (xj[b] - xi[b]) * (yk[b] - yi[b]) - (yj[b] - yi[b]) * (xk[b] - xi[b])
-            w = k_a * al if al * c + theta >= 0.0 else 0.0  # Upsilon(0) = 1
-            uxi[b] += w * (yk[b] - yj[b])  # -k_a alpha (k x r_jk)
-            uyi[b] -= w * (xk[b] - xj[b])
+            cbuf[b] = (xb[b] - xa[b]) * (yc[b] - ya[b]) - (yb[b] - ya[b]) * (xc[b] - xa[b])
+        for v in range(roff[t], roff[t + 1]):
+            i = vi[v]
+            al = valpha[v]
+            par = vpar[v]
+            w0 = vw[v]
+            xj, yj, xk, yk = q[vj[v], 0], q[vj[v], 1], q[vk[v], 0], q[vk[v], 1]
+            uxi, uyi = u[i, 0], u[i, 1]
+            for b in range(nact):
+                w = w0 if al * (par * cbuf[b]) + theta >= 0.0 else 0.0  # Upsilon(0) = 1
+                uxi[b] += w * (yk[b] - yj[b])
+                uyi[b] -= w * (xk[b] - xj[b])
     for t in range(sa.shape[0]):  # signed-area penalty, grad_a A_abc = 1/2 k x r_bc
         ia = sa[t]
         ib = sb[t]
@@ -129,7 +140,7 @@ def _controls(
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
 def _run_chunk(
     q0, start, stop, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
-    ti, tj, tk, talpha, k_a, theta, sa, sb, sc, starget, k_area,
+    ra, rb, rc, roff, vi, vj, vk, valpha, vpar, vw, theta, sa, sb, sc, starget, k_area,
     dt, n_steps, check_every, speed,
     q_out, u_out, steps_out, status_out, mc_out,
 ):  # fmt: skip
@@ -143,6 +154,7 @@ def _run_chunk(
     ids = np.arange(start, stop)
     mc = np.full(m, np.inf)  # least clearance over accepted states
     gap = np.empty(m)  # clearance of the current state
+    cbuf = np.empty(m)  # c_abc of one triangle
     fin = np.zeros(m)  # 0 while the last Euler step was finite
     code = np.full(m, -1, dtype=np.int8)  # -1: still running
     for b in range(m):
@@ -153,8 +165,8 @@ def _run_chunk(
     k = 0
     while nact > 0:
         _controls(
-            q, u, gap, nact, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
-            ti, tj, tk, talpha, k_a, theta, sa, sb, sc, starget, k_area,
+            q, u, gap, cbuf, nact, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
+            ra, rb, rc, roff, vi, vj, vk, valpha, vpar, vw, theta, sa, sb, sc, starget, k_area,
         )  # fmt: skip
         stopping = 0
         if k > 0:  # reject the step that led here if it is not finite or reached contact
@@ -225,7 +237,7 @@ def _run_chunk(
 @njit(cache=True, fastmath=False, error_model="numpy", parallel=True)
 def run_chunks(
     q0, chunk, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
-    ti, tj, tk, talpha, k_a, theta, sa, sb, sc, starget, k_area,
+    ra, rb, rc, roff, vi, vj, vk, valpha, vpar, vw, theta, sa, sb, sc, starget, k_area,
     dt, n_steps, check_every, speed,
     q_out, u_out, steps_out, status_out, mc_out,
 ):  # fmt: skip
@@ -242,7 +254,7 @@ def run_chunks(
         stop = min(n_trials, start + chunk)
         _run_chunk(
             q0, start, stop, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
-            ti, tj, tk, talpha, k_a, theta, sa, sb, sc, starget, k_area,
+            ra, rb, rc, roff, vi, vj, vk, valpha, vpar, vw, theta, sa, sb, sc, starget, k_area,
             dt, n_steps, check_every, speed,
             q_out, u_out, steps_out, status_out, mc_out,
         )  # fmt: skip
