@@ -1,9 +1,10 @@
 """A distance-plus-signed-area gradient law, for comparison with the angular term.
 
 After B. D. O. Anderson, Z. Sun, T. Sugie, S. Azuma and K. Sakurama,
-"Formation shape control with distance and area constraints" (2017): the
-squared-distance potential of Krick et al. plus a penalty on the signed areas
-of triangles, which tells a triangle from its mirror image:
+"Distance-based rigid formation control with signed area constraints", IEEE
+Conference on Decision and Control (CDC), 2017, doi:10.1109/CDC.2017.8264071:
+the squared-distance potential of Krick et al. plus a penalty on the signed
+areas of triangles, which tells a triangle from its mirror image:
 
 ``V = 1/4 sum_{(i,j) in E} (r_ij^2 - d_ij^2)^2 + k_s/2 sum_{abc} (A_abc - A*_abc)^2``,
 
@@ -19,6 +20,13 @@ angle-valued alpha, from ``1/2 d_ij d_ik |sin alpha_ijk|``.
 ``grad_a c_abc = k x r_bc`` (the paper's eq. 23), so
 ``grad_a A_abc = 1/2 k x r_bc`` and cyclically. Khatib's repulsion between
 non-neighbours is added as in :class:`SquaredDistanceLaw`.
+
+Anderson et al. analyse how the equilibria depend on the area weight. With a
+weak weight the mirror image survives as a shrunken local minimum: for three
+robots with unit sides, the wrong-orientation equilateral triangle of side
+``s`` with ``s^2 = (8 - k_s) / (8 + k_s)`` is stationary (``W = 1/3`` at
+``k_s = 1``; see ``tests/test_comparison_laws.py``), so this law's failures are
+classified ``incorrect`` rather than ``mirror``.
 """
 
 from __future__ import annotations
@@ -147,7 +155,8 @@ class SignedAreaLaw(Law):
     ``W = V_d + k_s V_A + (k_r / k) Gamma``.
 
     Reference: B. D. O. Anderson, Z. Sun, T. Sugie, S. Azuma and K. Sakurama,
-    "Formation shape control with distance and area constraints", 2017.
+    "Distance-based rigid formation control with signed area constraints",
+    IEEE CDC 2017, doi:10.1109/CDC.2017.8264071.
 
     Parameters
     ----------
