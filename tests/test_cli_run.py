@@ -268,6 +268,23 @@ def test_missing_scenario_file(tmp_path: Path) -> None:
     assert not (tmp_path / "out").exists()
 
 
+def test_a_run_that_stops_early_writes_its_results_and_exits_1(tmp_path: Path) -> None:
+    # dt = 1 s: an Euler step brings two robots closer than a_ij, a step the integrator
+    # refuses (the exact flow cannot touch: phi_ij is infinite at contact)
+    path = tmp_path / "coarse.toml"
+    path.write_text(
+        SCENARIO.replace("dt = 1e-3", "dt = 1.0").replace("duration = 0.5", "duration = 3.0")
+    )
+    out = tmp_path / "out"
+    res = invoke("run", path, "--out", out, "-q")
+    assert res.exit_code == 1
+    assert "stopped early" in res.stderr and "reduce dt" in res.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["status"] == "step-collision" and s["outcome"] == "collision"
+    with xr.open_dataset(out / "trajectory.nc", engine="h5netcdf") as ds:
+        assert ds.attrs["status"] == "step-collision"
+
+
 def test_output_folder_that_is_a_file_is_refused(tmp_path: Path) -> None:
     scenario = tmp_path / "s.toml"
     scenario.write_text(SCENARIO)

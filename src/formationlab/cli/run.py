@@ -87,6 +87,8 @@ def run(
     for name, fig in run_figures(result, prefix=sc.name).items():
         pictures.append(save_figure(fig, folder / f"{name}.png").name)
     if animate:
+        if not quiet:
+            err_console.print(f"animating ({frames} frames at most) ...", highlight=False)
         pictures += [p.name for p in _animate(folder, result, sc.name, frames)]
     summary: dict[str, Any] = {
         "scenario": sc.name,
