@@ -261,3 +261,20 @@ def test_two_robots_slide_on_two_surfaces_at_once():
     # first order through the two-surface sliding: halving dt halves the error
     assert errors[1] < 2e-3
     assert np.log2(errors[0] / errors[1]) == pytest.approx(1.0, abs=0.25)
+
+
+def test_two_sliding_weights_reaching_zero_together_both_exit():
+    # a start symmetric under the half-turn (1 <-> 2, 3 <-> 4): both weights reach 0 at
+    # the same instant; the solver reports one event, the other must be released too
+    table = dict(SIM1_TABLE) | {(1, 2, 4): 1, (4, 1, 2): 1, (2, 1, 4): -1}
+    f = fl.Formation.from_alpha_table(
+        table, n=4, edges=[[1, 2], [1, 3], [2, 3], [1, 4], [2, 4]], distances=1.0, diameters=0.2
+    )
+    q0 = np.array([[-1.5, 0.0], [1.5, 0.0], [5.0, -2.0], [-5.0, 2.0]])
+    dt, duration = 2e-3, 1.5
+    ref = fl.simulate(f, LAW, q0, duration=duration, integrator=Filippov())
+    imp = fl.simulate(f, LAW, q0, duration=duration, integrator=ImplicitEuler(dt=dt))
+    assert ref.stats["sliding_end"] < duration - 0.2  # sliding ends, on both surfaces
+    assert np.all(ref.sigma[-1] < -1e-3)
+    assert imp.stats["sliding_end"] == pytest.approx(ref.stats["sliding_end"], abs=5 * dt)
+    np.testing.assert_allclose(imp.final, ref.final, atol=5e-3)

@@ -147,6 +147,26 @@ def _decide(
     return best, False
 
 
+def _release(field: _Field, q: NDArray, modes: NDArray) -> NDArray:
+    """Let go of sliding surfaces whose weight sits at 0 or 1 at an event.
+
+    The solver stops at the first terminal event; when two sliding weights
+    reach a bound at the same time, the second has no crossing left to detect
+    after the restart, so it is released here (to the side its weight selects).
+    """
+    modes = modes.copy()
+    for _ in range(modes.size):
+        sliding = modes == SLIDE
+        if not sliding.any():
+            break
+        _, w = field.evaluate(q, modes)
+        low, high = sliding & (w <= _SLACK), sliding & (w >= 1.0 - _SLACK)
+        if not (low.any() or high.any()):
+            break
+        modes[low], modes[high] = OFF, ON
+    return modes
+
+
 @register_integrator
 @dataclass(frozen=True, kw_only=True)
 class Filippov(Integrator):
@@ -293,6 +313,7 @@ class Filippov(Integrator):
             if touched.size:
                 new, ok = _decide(system, field, q, new, touched)
                 unresolved += not ok
+            new = _release(field, q, new)
             switches += int(np.count_nonzero(new != modes))
             if np.any(new == SLIDE) and sliding_from is None:
                 sliding_from = t_end
