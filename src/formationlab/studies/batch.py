@@ -46,8 +46,6 @@ KERNEL_LAWS = ("distance", "angle-restricted", "squared-distance", "signed-area"
 
 Backend = Literal["numba", "numpy"]
 
-_EVEN = ((0, 1, 2), (1, 2, 0), (2, 0, 1))
-
 #: Trials per chunk of the numba backend (the unit of parallel work).
 CHUNK = 256
 #: The numba kernel already uses every core, and numba's fallback threading layer
@@ -317,26 +315,18 @@ def _angular_terms(formation: Formation, k_a: float) -> tuple:
     (the ordered pair ``(k, j)`` of eq. (13) contributes the same as ``(j, k)``).
     With ``k_a = 0`` or no alpha, all arrays are empty.
     """
-    rows: dict[tuple[int, int, int], list[tuple[int, int, int, float, float]]] = {}
+    t = np.zeros((0, 3), dtype=np.int64)
     if formation.alpha is not None and k_a > 0:
-        for i, j, k in np.argwhere(formation.restricted):
-            if j > k:
-                continue
-            tri = tuple(sorted((int(i), int(j), int(k))))
-            par = 1.0 if tuple(tri.index(x) for x in (i, j, k)) in _EVEN else -1.0
-            rows.setdefault(tri, []).append((int(i), int(j), int(k), formation.alpha[i, j, k], par))  # type: ignore[arg-type]
-    tris = sorted(rows)
-    terms = [t for tri in tris for t in rows[tri]]
-    offsets = np.cumsum([0] + [len(rows[tri]) for tri in tris]).astype(np.int64)
-    ints = lambda col: np.array([t[col] for t in terms], dtype=np.int64)  # noqa: E731
-    alpha = np.array([t[3] for t in terms], dtype=float)
-    return (
-        *(np.array([t[m] for t in tris], dtype=np.int64) for m in range(3)),
-        offsets,
-        ints(0),
-        ints(1),
-        ints(2),
-        alpha,
-        np.array([t[4] for t in terms], dtype=float),
-        2.0 * k_a * alpha,
-    )
+        t = np.argwhere(formation.restricted).astype(np.int64)
+        t = t[t[:, 1] < t[:, 2]]  # (i, k, j) is the same term as (i, j, k)
+    tris = np.unique(np.sort(t, axis=1), axis=0).reshape(-1, 3)
+    which = np.array([np.flatnonzero((tris == x).all(axis=1))[0] for x in np.sort(t, axis=1)])
+    order = np.argsort(which, kind="stable")
+    t, which = t[order], which[order].astype(np.int64)
+    offsets = np.searchsorted(which, np.arange(len(tris) + 1)).astype(np.int64)
+    i, j, k = (np.ascontiguousarray(t[:, m]) for m in range(3))
+    # parity of the permutation taking (a, b, c), a < b < c, to (i, j, k)
+    par = np.sign((j - i) * (k - i) * (k - j)).astype(float)
+    alpha = formation.alpha[i, j, k] if len(t) else np.zeros(0)  # type: ignore[index]
+    corners = (np.ascontiguousarray(tris[:, m]) for m in range(3))
+    return (*corners, offsets, i, j, k, alpha, par, 2.0 * k_a * alpha)
