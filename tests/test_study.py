@@ -261,8 +261,20 @@ def test_study_on_a_dask_local_cluster_of_processes(reference_run):
     pytest.importorskip("distributed")
     res = run_study(
         TRIANGLE, LAW, small(chunk_size=12), seed=5, dt=DT, duration=DURATION,
-        scheduler="local", workers=2,
+        scheduler="local", workers=1,
     )  # fmt: skip
+    pd.testing.assert_frame_equal(res.trials, reference_run, check_exact=True)
+
+
+def test_study_on_a_dask_scheduler_given_by_its_address(reference_run):
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        res = run_study(
+            TRIANGLE, LAW, small(chunk_size=5), seed=5, dt=DT, duration=DURATION,
+            scheduler=cluster.scheduler_address,
+        )  # fmt: skip
     pd.testing.assert_frame_equal(res.trials, reference_run, check_exact=True)
 
 
