@@ -301,6 +301,16 @@ def test_line_numbers_point_at_the_offending_key() -> None:
         parse(text)
 
 
+def test_misspelt_table_is_named_with_its_line_and_the_missing_one() -> None:
+    text = BASE.replace("[robots]", "[robot]")
+    with pytest.raises(ScenarioError) as info:
+        parse(text)
+    msg = str(info.value)
+    assert "robot (line 2): unknown key 'robot'" in msg and "did you mean 'robots'" in msg
+    assert "the table [robots] is required" in msg
+    assert msg.index("unknown key") < msg.index("is required")  # the cause first
+
+
 def test_missing_file_and_folder(tmp_path: Path) -> None:
     with pytest.raises(ScenarioError, match="does not exist"):
         load_scenario(tmp_path / "nope.toml")

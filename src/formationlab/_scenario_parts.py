@@ -122,6 +122,8 @@ def line_of(text: str, section: str, key: str) -> int | None:
             current = m.group(1)
             if not first and current == section:
                 return number
+            if first and current == (f"{section}.{first}" if section else first):
+                return number  # the key is a table, e.g. a misspelt [robot]
             continue
         if not first:
             continue
@@ -142,7 +144,7 @@ def _where(loc: tuple[Any, ...]) -> tuple[str, str]:
 def format_errors(
     exc: ValidationError, source: str, text: str, sections: Mapping[str, tuple[str, ...]]
 ) -> str:
-    problems = []
+    problems: list[tuple[bool, str]] = []
     for err in exc.errors(include_url=False):
         loc = tuple(err["loc"])
         where, items = _where(loc)
@@ -158,6 +160,8 @@ def format_errors(
             hint = f"; did you mean {near[0]!r}?" if near else ""
             table = f"[{parent}]" if parent else "the top level"
             msg = f"unknown key {name!r} in {table}{hint} Known keys: {', '.join(known)}"
+        elif kind == "missing" and where in sections:
+            msg = f"the table [{where}] is required"
         elif kind == "missing":
             msg = "this key is required"
         elif kind == "value_error":
@@ -168,6 +172,7 @@ def format_errors(
         line = line_of(text, section, key) if kind != "missing" else line_of(text, section, "")
         at = f" (line {line})" if line else ""
         label = where + (f", {items}" if items else "")
-        problems.append(f"{label}{at}: {msg}")
+        # unknown keys first: they often explain the missing ones (a misspelt table)
+        problems.append((kind != "extra_forbidden", f"{label}{at}: {msg}"))
     head = f"{source}: " if len(problems) == 1 else f"{source}: {len(problems)} problems: "
-    return head + "; ".join(problems)
+    return head + "; ".join(text for _, text in sorted(problems, key=lambda p: p[0]))
