@@ -153,3 +153,21 @@ def test_diagnostics_of_resting_on_two_surfaces():
     assert d["switch_count"] == 3  # 1: on -> surface -> off; 2: off -> surface
     assert d["sliding_time"] == pytest.approx(1.5)  # union of [0.5, 1.5] and [1.0, 2.0]
     assert d["max_excursion"] == pytest.approx(1e-13)
+
+
+def test_sliding_figure_has_one_panel_per_run_with_its_diagnostics():
+    from formationlab.plotting.integrators import sliding_figure
+
+    q0 = np.array([[5.0, -2.0], [-1.5, 0.0], [1.5, 0.0]])  # slides (test_sliding.py)
+    runs = {
+        "explicit": fl.simulate(SIM1, LAW, q0, duration=0.3, integrator=fl.Euler(dt=1e-2)),
+        "implicit": fl.simulate(SIM1, LAW, q0, duration=0.3, integrator=ImplicitEuler(dt=1e-2)),
+    }
+    fig = sliding_figure(runs, window=(0.0, 0.3), ylim=(-2.0, 0.6))
+    visible = [ax for ax in fig.axes if ax.get_visible()]
+    assert len(visible) == 2
+    for ax, res in zip(visible, runs.values(), strict=True):
+        assert f"switches {res.stats['switch_count']:.0f}" in ax.get_title()
+        assert ax.get_ylim() == (-2.0, 0.6)
+        # the curve is sigma(t) itself
+        np.testing.assert_allclose(ax.lines[0].get_ydata(), res.sigma[:, 0])

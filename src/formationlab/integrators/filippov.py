@@ -360,19 +360,20 @@ class Filippov(Integrator):
             if mode == SLIDE:
                 for target, kind, direction in ((0.0, "exit0", -1), (1.0, "exit1", 1)):
 
-                    def g(_t, y, s=s, target=target):
+                    def exit_event(_t, y, s=s, target=target):
                         return field.at(y)[1][s] - target
 
-                    g.terminal, g.direction = True, direction  # type: ignore[attr-defined]
-                    events.append(g)
+                    exit_event.terminal = True  # type: ignore[attr-defined]
+                    exit_event.direction = direction  # type: ignore[attr-defined]
+                    events.append(exit_event)
                     kinds.append((kind, s))
             else:
 
-                def g(_t, y, s=s):
+                def cross_event(_t, y, s=s):
                     return system.sigma(y.reshape(shape))[s]
 
-                g.terminal = True  # type: ignore[attr-defined]
-                g.direction = 1 if mode == OFF else -1  # type: ignore[attr-defined]
-                events.append(g)
+                cross_event.terminal = True  # type: ignore[attr-defined]
+                cross_event.direction = 1 if mode == OFF else -1  # type: ignore[attr-defined]
+                events.append(cross_event)
                 kinds.append(("cross", s))
         return events, kinds

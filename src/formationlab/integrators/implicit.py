@@ -142,7 +142,7 @@ class ImplicitEuler(FixedStepIntegrator):
         evals = 1
         involved: list[int] = []
         directions: dict[int, NDArray[np.float64]] = {}
-        new = list(np.flatnonzero(bad))
+        new = [int(j) for j in np.flatnonzero(bad)]
         best: tuple[float, NDArray[np.float64], bool] | None = None
         while new and len(involved) + len(new) <= max(self.max_surfaces, len(new)):
             for j in new:
