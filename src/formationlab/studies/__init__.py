@@ -2,7 +2,10 @@
 
 * :mod:`~formationlab.studies.config`: the ``[study]`` table of a scenario;
 * :mod:`~formationlab.studies.sampling`: random initial states, seeded by trial number;
-* :mod:`~formationlab.studies.runner`: :func:`run_study`, chunks, workers, resume;
+* :mod:`~formationlab.studies.groups`: laws x sweep points;
+* :mod:`~formationlab.studies.chunks`: the unit of work, one call of the kernel;
+* :mod:`~formationlab.studies.executors`: this process, a process pool, or dask.distributed;
+* :mod:`~formationlab.studies.runner`: :func:`run_study`, resume, the summary;
 * :mod:`~formationlab.studies.summary`: outcome fractions and Wilson intervals;
 * :mod:`~formationlab.studies.batch`: the batched kernel every chunk calls.
 """

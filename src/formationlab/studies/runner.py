@@ -20,35 +20,33 @@ Resume: every finished chunk is handed to ``store.save`` as soon as it arrives
 (the command line's store writes it atomically under ``DIR/chunks/``); with
 ``resume=True`` chunks that ``store.load`` returns are not run again.
 
-This module touches no files: the store does.
+The pieces live in :mod:`~formationlab.studies.groups`,
+:mod:`~formationlab.studies.chunks` and :mod:`~formationlab.studies.executors`;
+this module ties them together and touches no files: the store does.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
-import itertools
 import json
 import math
-import os
 import time
-import uuid
-from collections.abc import Callable, Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from multiprocessing import get_context
 from typing import Any, Protocol
 
 import numpy as np
 import pandas as pd
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
-from ..analysis import OUTCOMES, Tolerances
-from ..controllers import LAWS, Law
-from ..errors import ParameterError, UserInputError
+from ..analysis import OUTCOMES
+from ..controllers import Law
+from ..errors import ParameterError
 from ..spec import Formation
-from .config import BoxInitial, GaussianInitial, StudyConfig
-from .sampling import trial_initial_states
+from .chunks import ChunkTask, plan_chunks, run_chunk
+from .config import GaussianInitial, StudyConfig
+from .executors import run_in_process, run_on_dask
+from .groups import REPULSION_KEYS, ROBOT_KEYS, Group, study_groups
 from .summary import summarize_groups
 
 __all__ = [
@@ -65,227 +63,6 @@ __all__ = [
     "study_identity",
 ]
 
-#: Sweep keys that set a field of the law's :class:`~formationlab.controllers.Repulsion`.
-REPULSION_KEYS = ("eta", "influence")
-#: Sweep keys that set a property of the robots.
-ROBOT_KEYS = ("diameter",)
-
-
-# ----------------------------------------------------------------------------- groups
-
-
-@dataclass(frozen=True, kw_only=True, eq=False)
-class Group:
-    """One law at one point of the sweep.
-
-    Attributes
-    ----------
-    index : int
-        0-based position in the study (the ``group`` column of the trials).
-    law : Law
-        The law with the point's parameters.
-    formation : Formation
-        The formation with the point's robot parameters (``diameter``).
-    parameters : dict
-        The swept parameters that apply to this law, ``{key: value}``.
-    """
-
-    index: int
-    law: Law
-    formation: Formation
-    parameters: dict[str, float]
-
-    def describe(self) -> dict[str, Any]:
-        """JSON-ready: ``law``, ``parameters`` and the law's full ``law_parameters``."""
-        return {
-            "group": self.index,
-            "law": self.law.name,
-            "parameters": dict(self.parameters),
-            "law_parameters": dataclasses.asdict(self.law),
-            "diameters": self.formation.diameters.tolist(),
-        }
-
-
-def _fields(cls: type) -> set[str]:
-    return {f.name for f in dataclasses.fields(cls) if f.init}
-
-
-def _base_law(name: str, law: Law) -> Law:
-    """Law ``name`` with the parameters it shares (by name) with the scenario's ``law``."""
-    if name == law.name:
-        return law
-    cls = LAWS[name]
-    shared = _fields(cls) & _fields(type(law))
-    return cls(**{k: getattr(law, k) for k in shared})
-
-
-def _applies(key: str, cls: type) -> bool:
-    names = _fields(cls)
-    return key in ROBOT_KEYS or key in names or (key in REPULSION_KEYS and "repulsion" in names)
-
-
-def _apply(law: Law, formation: Formation, point: dict[str, float]) -> tuple[Law, Formation]:
-    names = _fields(type(law))
-    params: dict[str, Any] = {k: v for k, v in point.items() if k in names}
-    rep = {k: v for k, v in point.items() if k in REPULSION_KEYS and k not in names}
-    if rep:
-        params["repulsion"] = dataclasses.replace(law.repulsion, **rep)  # type: ignore[attr-defined]
-    if "diameter" in point:
-        formation = formation.with_diameters(point["diameter"])
-    return law.with_params(**params) if params else law, formation
-
-
-def study_groups(formation: Formation, law: Law, config: StudyConfig) -> list[Group]:
-    """The groups of a study: every law of ``config.laws`` at every point of its sweep.
-
-    A law runs the product of the sweep lists of the keys that apply to it
-    (its dataclass fields, ``eta``/``influence`` of its repulsion, ``diameter``).
-
-    Raises
-    ------
-    ParameterError
-        An unknown law, a sweep key that applies to none of the laws, or a sweep
-        value a law or the formation rejects.
-    """
-    names = config.laws or (law.name,)
-    for name in names:
-        if name not in LAWS:
-            raise ParameterError(
-                f"study.laws: unknown law {name!r}; known laws: {', '.join(sorted(LAWS))}"
-            )
-    keys = list(config.sweep)
-    for key in keys:
-        if not any(_applies(key, LAWS[name]) for name in names):
-            takes = sorted(set().union(*(_fields(LAWS[n]) for n in names)) - {"repulsion"})
-            raise ParameterError(
-                f"study.sweep.{key}: no law of the study ({', '.join(names)}) has a parameter "
-                f"{key!r}; sweepable: {', '.join([*takes, *REPULSION_KEYS, *ROBOT_KEYS])}"
-            )
-    groups: list[Group] = []
-    for name in names:
-        base = _base_law(name, law)
-        mine = [k for k in keys if _applies(k, type(base))]
-        for values in itertools.product(*(config.sweep[k] for k in mine)):
-            point = {k: float(v) for k, v in zip(mine, values, strict=True)}
-            try:
-                g_law, g_formation = _apply(base, formation, point)
-            except UserInputError as exc:
-                where = ", ".join(f"{k} = {v:g}" for k, v in point.items())
-                raise ParameterError(f"study.sweep ({name}, {where}): {exc}") from None
-            groups.append(
-                Group(index=len(groups), law=g_law, formation=g_formation, parameters=point)
-            )
-    return groups
-
-
-# ----------------------------------------------------------------------------- chunks
-
-
-@dataclass(frozen=True, kw_only=True, eq=False)
-class ChunkTask:
-    """Trials ``start <= t < stop`` of one group: one unit of work (picklable)."""
-
-    group: Group
-    chunk: int
-    start: int
-    stop: int
-    seed: int
-    initial: BoxInitial | GaussianInitial
-    center: NDArray[np.float64] | None
-    dt: float
-    duration: float
-    tolerances: Tolerances
-    backend: str
-    sweep_keys: tuple[str, ...] = ()
-
-    @property
-    def id(self) -> str:
-        """``g003-c000012``: group and chunk number, the chunk's file name."""
-        return f"g{self.group.index:03d}-c{self.chunk:06d}"
-
-    @property
-    def size(self) -> int:
-        return self.stop - self.start
-
-
-def plan_chunks(
-    groups: list[Group],
-    config: StudyConfig,
-    *,
-    seed: int,
-    dt: float,
-    duration: float,
-    center: ArrayLike | None = None,
-) -> list[ChunkTask]:
-    """Cut every group's ``config.trials`` trials into chunks of ``config.chunk_size``."""
-    c = None if center is None else np.asarray(center, dtype=float)
-    tasks = []
-    n, size = config.trials, config.chunk_size
-    for g in groups:
-        for k in range(math.ceil(n / size)):
-            tasks.append(
-                ChunkTask(
-                    group=g,
-                    chunk=k,
-                    start=k * size,
-                    stop=min((k + 1) * size, n),
-                    seed=seed,
-                    initial=config.initial,
-                    center=c,
-                    dt=dt,
-                    duration=duration,
-                    tolerances=config.tol,
-                    backend=config.backend,
-                    sweep_keys=tuple(config.sweep),
-                )
-            )
-    return tasks
-
-
-def run_chunk(task: ChunkTask) -> pd.DataFrame:
-    """Run one chunk; one row per trial (columns: see :mod:`formationlab.io.trials`)."""
-    from .batch import run_batch
-
-    g = task.group
-    f = g.formation
-    trials = np.arange(task.start, task.stop, dtype=np.int64)
-    q0 = trial_initial_states(f, task.initial, task.seed, trials, center=task.center)
-    res = run_batch(
-        f,
-        g.law,
-        q0,
-        dt=task.dt,
-        duration=task.duration,
-        tolerances=task.tolerances,
-        backend=task.backend,
-    )
-    cols: dict[str, Any] = {
-        "group": np.full(trials.size, g.index, dtype=np.int64),
-        "trial": trials,
-        "seed": np.full(trials.size, task.seed, dtype=np.int64),
-        "law": np.full(trials.size, g.law.name, dtype=object),
-    }
-    for key in task.sweep_keys:
-        cols[key] = np.full(trials.size, g.parameters.get(key, np.nan), dtype=float)
-    cols.update(
-        outcome=np.asarray(res.outcome, dtype=object),
-        max_distance_error=np.asarray(res.max_distance_error, dtype=float),
-        converged_time=np.asarray(res.converged_time, dtype=float),
-        min_clearance=np.asarray(res.min_clearance, dtype=float),
-        steps=np.asarray(res.steps, dtype=np.int64),
-    )
-    for i in range(f.n):
-        cols[f"x{i + 1}_init"] = q0[:, i, 0]
-        cols[f"y{i + 1}_init"] = q0[:, i, 1]
-    qf = np.asarray(res.q_final, dtype=float)
-    for i in range(f.n):
-        cols[f"x{i + 1}"] = qf[:, i, 0]
-        cols[f"y{i + 1}"] = qf[:, i, 1]
-    return pd.DataFrame(cols)
-
-
-# ----------------------------------------------------------------------------- execution
-
 
 class ChunkStore(Protocol):
     """Where finished chunks are kept (:class:`formationlab.io.trials.ChunkFolder`)."""
@@ -293,71 +70,6 @@ class ChunkStore(Protocol):
     def load(self, chunk_id: str) -> pd.DataFrame | None: ...
 
     def save(self, chunk_id: str, frame: pd.DataFrame) -> None: ...
-
-
-def _worker_init() -> None:  # pragma: no cover - runs in the pool's processes
-    # One process per core: keep each kernel on one thread (read when numba loads).
-    os.environ["NUMBA_NUM_THREADS"] = "1"
-
-
-def _in_process(tasks: list[ChunkTask], workers: int) -> Iterator[tuple[ChunkTask, pd.DataFrame]]:
-    if workers <= 1 or len(tasks) <= 1:
-        for t in tasks:
-            yield t, run_chunk(t)
-        return
-    ctx = get_context("spawn")
-    with ProcessPoolExecutor(
-        max_workers=min(workers, len(tasks)), mp_context=ctx, initializer=_worker_init
-    ) as pool:
-        futures = {pool.submit(run_chunk, t): t for t in tasks}
-        try:
-            for fut in as_completed(futures):
-                yield futures[fut], fut.result()
-        finally:
-            for fut in futures:
-                fut.cancel()
-
-
-def _on_dask(
-    tasks: list[ChunkTask], scheduler: str, workers: int | None
-) -> Iterator[tuple[ChunkTask, pd.DataFrame]]:
-    try:
-        from distributed import Client, LocalCluster
-        from distributed import as_completed as dask_completed
-    except ImportError:  # pragma: no cover - depends on the installation
-        raise ParameterError(
-            "--scheduler needs dask.distributed: pip install 'formationlab[distributed]'"
-        ) from None
-    cluster = None
-    if scheduler == "local":
-        cluster = LocalCluster(
-            n_workers=workers or os.cpu_count() or 1,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            env={"NUMBA_NUM_THREADS": "1"},
-        )
-        client = Client(cluster)
-    else:
-        try:
-            client = Client(scheduler, timeout="20s")
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise ParameterError(
-                f"cannot reach the dask scheduler at {scheduler!r} ({exc}); check the address "
-                '(e.g. "tcp://host:8786") or use --scheduler local'
-            ) from None
-    run = uuid.uuid4().hex[:8]
-    try:
-        futures = {}
-        for t in tasks:
-            fut = client.submit(run_chunk, t, key=f"formationlab-{run}-{t.id}", pure=False)
-            futures[fut.key] = (fut, t)
-        for fut in dask_completed([f for f, _ in futures.values()]):
-            yield futures[fut.key][1], fut.result()
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
 
 
 # ----------------------------------------------------------------------------- the study
@@ -503,9 +215,9 @@ def run_study(
         progress(done, total)
     todo = [t for t in tasks if t.id not in frames]
     if scheduler is not None:
-        stream = _on_dask(todo, scheduler, workers)
+        stream = run_on_dask(todo, scheduler, workers)
     else:
-        stream = _in_process(todo, workers or 1)
+        stream = run_in_process(todo, workers or 1)
     for task, frame in stream:
         if store is not None:
             store.save(task.id, frame)

@@ -1,0 +1,128 @@
+"""Chunks: a fixed number of consecutive trials of one group, the unit of work.
+
+A :class:`ChunkTask` is picklable (it is sent to worker processes and dask
+workers); :func:`run_chunk` draws the chunk's initial states
+(:mod:`formationlab.studies.sampling`), runs the batched kernel
+:func:`formationlab.studies.batch.run_batch` on them and returns one row per
+trial (the columns of ``trials.parquet``, see :mod:`formationlab.io.trials`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import ArrayLike, NDArray
+
+from ..analysis import Tolerances
+from .config import BoxInitial, GaussianInitial, StudyConfig
+from .groups import Group
+from .sampling import trial_initial_states
+
+__all__ = ["ChunkTask", "plan_chunks", "run_chunk"]
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class ChunkTask:
+    """Trials ``start <= t < stop`` of one group: one unit of work (picklable)."""
+
+    group: Group
+    chunk: int
+    start: int
+    stop: int
+    seed: int
+    initial: BoxInitial | GaussianInitial
+    center: NDArray[np.float64] | None
+    dt: float
+    duration: float
+    tolerances: Tolerances
+    backend: str
+    sweep_keys: tuple[str, ...] = ()
+
+    @property
+    def id(self) -> str:
+        """``g003-c000012``: group and chunk number, the chunk's file name."""
+        return f"g{self.group.index:03d}-c{self.chunk:06d}"
+
+    @property
+    def size(self) -> int:
+        return self.stop - self.start
+
+
+def plan_chunks(
+    groups: list[Group],
+    config: StudyConfig,
+    *,
+    seed: int,
+    dt: float,
+    duration: float,
+    center: ArrayLike | None = None,
+) -> list[ChunkTask]:
+    """Cut every group's ``config.trials`` trials into chunks of ``config.chunk_size``."""
+    c = None if center is None else np.asarray(center, dtype=float)
+    tasks = []
+    n, size = config.trials, config.chunk_size
+    for g in groups:
+        for k in range(math.ceil(n / size)):
+            tasks.append(
+                ChunkTask(
+                    group=g,
+                    chunk=k,
+                    start=k * size,
+                    stop=min((k + 1) * size, n),
+                    seed=seed,
+                    initial=config.initial,
+                    center=c,
+                    dt=dt,
+                    duration=duration,
+                    tolerances=config.tol,
+                    backend=config.backend,
+                    sweep_keys=tuple(config.sweep),
+                )
+            )
+    return tasks
+
+
+def run_chunk(task: ChunkTask) -> pd.DataFrame:
+    """Run one chunk; one row per trial (columns: see :mod:`formationlab.io.trials`)."""
+    from .batch import run_batch
+
+    g = task.group
+    f = g.formation
+    trials = np.arange(task.start, task.stop, dtype=np.int64)
+    q0 = trial_initial_states(f, task.initial, task.seed, trials, center=task.center)
+    res = run_batch(
+        f,
+        g.law,
+        q0,
+        dt=task.dt,
+        duration=task.duration,
+        tolerances=task.tolerances,
+        backend=task.backend,
+    )
+    cols: dict[str, Any] = {
+        "group": np.full(trials.size, g.index, dtype=np.int64),
+        "trial": trials,
+        "seed": np.full(trials.size, task.seed, dtype=np.int64),
+        "law": np.full(trials.size, g.law.name, dtype=object),
+    }
+    for key in task.sweep_keys:
+        cols[key] = np.full(trials.size, g.parameters.get(key, np.nan), dtype=float)
+    cols.update(
+        outcome=np.asarray(res.outcome, dtype=object),
+        max_distance_error=np.asarray(res.max_distance_error, dtype=float),
+        converged_time=np.asarray(res.converged_time, dtype=float),
+        min_clearance=np.asarray(res.min_clearance, dtype=float),
+        steps=np.asarray(res.steps, dtype=np.int64),
+    )
+    for i in range(f.n):
+        cols[f"x{i + 1}_init"] = q0[:, i, 0]
+        cols[f"y{i + 1}_init"] = q0[:, i, 1]
+    qf = np.asarray(res.q_final, dtype=float)
+    for i in range(f.n):
+        cols[f"x{i + 1}"] = qf[:, i, 0]
+        cols[f"y{i + 1}"] = qf[:, i, 1]
+    return pd.DataFrame(cols)

@@ -1,0 +1,89 @@
+"""Where chunks run: in this process, in a pool of processes, or on dask.distributed.
+
+Each executor takes the chunks to run and yields ``(task, trials)`` pairs as
+chunks finish, in whatever order they finish; the caller saves and collects
+them. Worker processes run the numba kernel on one thread each (one process per
+core), set through ``NUMBA_NUM_THREADS`` before numba is loaded.
+"""
+
+from __future__ import annotations
+
+import os
+import uuid
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from multiprocessing import get_context
+
+import pandas as pd
+
+from ..errors import ParameterError
+from .chunks import ChunkTask, run_chunk
+
+__all__ = ["run_in_process", "run_on_dask"]
+
+
+def _worker_init() -> None:  # pragma: no cover - runs in the pool's processes
+    # One process per core: keep each kernel on one thread (read when numba loads).
+    os.environ["NUMBA_NUM_THREADS"] = "1"
+
+
+def run_in_process(
+    tasks: list[ChunkTask], workers: int
+) -> Iterator[tuple[ChunkTask, pd.DataFrame]]:
+    if workers <= 1 or len(tasks) <= 1:
+        for t in tasks:
+            yield t, run_chunk(t)
+        return
+    ctx = get_context("spawn")
+    with ProcessPoolExecutor(
+        max_workers=min(workers, len(tasks)), mp_context=ctx, initializer=_worker_init
+    ) as pool:
+        futures = {pool.submit(run_chunk, t): t for t in tasks}
+        try:
+            for fut in as_completed(futures):
+                yield futures[fut], fut.result()
+        finally:
+            for fut in futures:
+                fut.cancel()
+
+
+def run_on_dask(
+    tasks: list[ChunkTask], scheduler: str, workers: int | None
+) -> Iterator[tuple[ChunkTask, pd.DataFrame]]:
+    try:
+        from distributed import Client, LocalCluster
+        from distributed import as_completed as dask_completed
+    except ImportError:  # pragma: no cover - depends on the installation
+        raise ParameterError(
+            "--scheduler needs dask.distributed: pip install 'formationlab[distributed]'"
+        ) from None
+    cluster = None
+    if scheduler == "local":
+        cluster = LocalCluster(
+            n_workers=workers or os.cpu_count() or 1,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            env={"NUMBA_NUM_THREADS": "1"},
+        )
+        client = Client(cluster)
+    else:
+        try:
+            client = Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise ParameterError(
+                f"cannot reach the dask scheduler at {scheduler!r} ({exc}); check the address "
+                '(e.g. "tcp://host:8786") or use --scheduler local'
+            ) from None
+    run = uuid.uuid4().hex[:8]
+    try:
+        futures = {}
+        for t in tasks:
+            fut = client.submit(run_chunk, t, key=f"formationlab-{run}-{t.id}", pure=False)
+            futures[fut.key] = (fut, t)
+        for fut in dask_completed([f for f, _ in futures.values()]):
+            yield futures[fut.key][1], fut.result()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
