@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import re
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -32,8 +31,8 @@ import tomli_w
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from ._scenario_parts import format_errors, line_of, param_key, unknown
-from ._scenario_parts import params as _p
+from ._scenario_build import build_formation, build_from_registry, stem
+from ._scenario_parts import format_errors, line_of
 from .controllers import LAWS, Law
 from .errors import ScenarioError, UserInputError
 from .integrators import INTEGRATORS, Integrator
@@ -328,108 +327,23 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         at = f" (line {line})" if line else ""
         return ScenarioError(f"{source}: {where}{at}: {message}")
 
-    n = len(rob.positions)
-    if isinstance(rob.diameters, list) and len(rob.diameters) != n:
-        raise fail(
-            "robots.diameters",
-            f"give one number or one per robot: there are {n} positions but "
-            f"{len(rob.diameters)} diameters",
-        )
-    orientation = frm.orientation
-    if orientation is None:
-        orientation = "template" if frm.template is not None else "table" if frm.alpha else "free"
-    if frm.template is not None:
-        if len(frm.template) != n:
-            raise fail(
-                "formation.template",
-                f"the template has {len(frm.template)} points but there are {n} robots "
-                "(robots.positions); give one template point per robot",
-            )
-        if frm.distances is not None:
-            raise fail(
-                "formation.distances",
-                "give distances or a template, not both: the template sets the distances",
-            )
-        if frm.alpha is not None:
-            raise fail(
-                "formation.alpha",
-                "give an alpha table or a template, not both: the template sets the orientation",
-            )
-        if orientation == "table":
-            raise fail(
-                "formation.orientation",
-                'orientation = "table" needs an alpha table, not a template; use "template", '
-                '"mirror" or "free" with a template',
-            )
-    else:
-        if orientation in ("template", "mirror"):
-            raise fail(
-                "formation.orientation",
-                f'orientation = "{orientation}" needs a template; add formation.template = '
-                '[[x1, y1], ...] or use orientation = "free"',
-            )
-        if orientation == "table" and frm.alpha is None:
-            raise fail(
-                "formation.orientation",
-                'orientation = "table" needs formation.alpha = [[i, j, k, value], ...]',
-            )
-        if frm.alpha is not None and orientation != "table":
-            raise fail(
-                "formation.alpha",
-                f'an alpha table is only used with orientation = "table", got "{orientation}"',
-            )
-    distances = 1.0 if frm.distances is None else frm.distances
-    try:
-        if frm.template is not None:
-            formation = Formation.from_template(
-                frm.template,
-                edges=frm.edges,
-                diameters=rob.diameters,
-                orientation=orientation,  # type: ignore[arg-type]
-                alpha_values=ctl.alpha_values,
-            )
-        elif orientation == "table":
-            formation = Formation.from_alpha_table(
-                frm.alpha or [],
-                n=n,
-                edges=frm.edges,
-                distances=distances,
-                diameters=rob.diameters,
-                alpha_values=ctl.alpha_values,
-            )
-        else:
-            formation = Formation.from_distances(
-                n, edges=frm.edges, distances=distances, diameters=rob.diameters
-            )
-    except UserInputError as exc:
-        raise fail(_formation_key(str(exc), frm), str(exc)) from None
-    if frm.distances is None and frm.template is None:
-        warnings.append("formation.distances not given: every d_ij = 1")
-    if not formation.is_connected:
-        raise fail(
-            "formation.edges",
-            "the graph is not connected, so the formation cannot hold together; add edges "
-            "between its parts",
-        )
-    if not formation.is_rigid:
-        warnings.append(
-            "the graph is not rigid: the distances do not fix the shape (add edges to make "
-            f"it rigid; {n} robots need at least {2 * n - 3} well-placed edges)"
-        )
+    formation = build_formation(rob, frm, ctl.alpha_values, fail, warnings)
     try:
         q0 = formation.check_positions(np.asarray(rob.positions, dtype=float))
     except UserInputError as exc:
         raise fail("robots.positions", str(exc)) from None
 
-    law = _build_law(ctl, fail)
+    law = build_from_registry(LAWS, "law", ctl.law, ctl.model_extra, "controller", fail)
     if formation.alpha is None and "k_a" in {f.name for f in dataclasses.fields(law)}:
         warnings.append(
             f"law {law.name!r} has an angular term but the orientation is free, so it acts as "
             'the distance law; set formation.orientation (e.g. "template") to use it'
         )
-    integrator = _build_integrator(sim, fail)
+    integrator = build_from_registry(
+        INTEGRATORS, "integrator", sim.integrator, sim.model_extra, "simulation", fail
+    )
     return Scenario(
-        name=model.name or _stem(source),
+        name=model.name or stem(source),
         text=text,
         source=source,
         description=model.description,
@@ -443,55 +357,3 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         equilibria=model.equilibria,
         warnings=tuple(warnings),
     )
-
-
-def _formation_key(message: str, frm: FormationModel) -> str:
-    """The key a formation builder's message is about (for the line number)."""
-    if "collinear" in message or "template" in message:
-        return "formation.template"
-    if "alpha" in message:
-        return "formation.alpha"
-    if "edge" in message and "desired distance" not in message:
-        return "formation.edges"
-    if "diameters" in message and "distance" not in message:
-        return "robots.diameters"
-    if frm.distances is None and frm.template is not None:
-        return "formation.template"
-    return "formation.distances"
-
-
-def _stem(source: str) -> str:
-    stem = re.split(r"[\\/]", source)[-1]
-    stem = stem.removesuffix(".toml")
-    return "scenario" if stem.startswith("<") else stem
-
-
-def _build_law(ctl: ControllerModel, fail: Any) -> Law:
-    if ctl.law not in LAWS:
-        raise fail("controller.law", unknown("law", ctl.law, LAWS))
-    cls = LAWS[ctl.law]
-    params = _p(
-        cls,
-        dict(ctl.model_extra or {}),
-        "controller",
-        SECTIONS["controller"],
-        f"law {ctl.law!r}",
-        fail,
-    )
-    try:
-        return cls(**params)
-    except UserInputError as exc:
-        raise fail(param_key("controller", params, str(exc)), str(exc)) from None
-
-
-def _build_integrator(sim: SimulationModel, fail: Any) -> Integrator:
-    if sim.integrator not in INTEGRATORS:
-        raise fail("simulation.integrator", unknown("integrator", sim.integrator, INTEGRATORS))
-    cls = INTEGRATORS[sim.integrator]
-    extra = dict(sim.model_extra or {})
-    what = f"integrator {sim.integrator!r}"
-    params = _p(cls, extra, "simulation", SECTIONS["simulation"], what, fail)
-    try:
-        return cls(**params)
-    except UserInputError as exc:
-        raise fail(param_key("simulation", params, str(exc)), str(exc)) from None
