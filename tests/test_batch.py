@@ -300,3 +300,16 @@ def test_paper_section_4_runs_agree_with_the_simulator(table, outcome):
         assert res.steps[0] == 4000
         np.testing.assert_allclose(res.q_final[0], sim.q[-1], rtol=0, atol=1e-12)
         assert res.outcome[0] == sim.outcome() == outcome
+
+
+def test_non_finite_step_ends_the_trial_at_its_last_finite_state():
+    # Squared distance from r = 1e120: u = k (r^2 - d^2) r overflows to infinity, so
+    # the first step is not finite; like the simulator's "non-finite" status the trial
+    # keeps q0 (and, moving with infinite speed and distances unmet, has not converged).
+    f = fl.Formation.from_distances(2, distances=1.0, diameters=0.2)
+    q0 = np.array([[[0.0, 0.0], [1e120, 0.0]], [[0.0, 0.0], [1.5, 0.0]]])
+    for backend in ("numba", "numpy"):
+        res = run_batch(f, SquaredDistanceLaw(), q0, dt=DT, duration=0.01, backend=backend)
+        np.testing.assert_array_equal(res.steps, [0, 10])
+        np.testing.assert_array_equal(res.q_final[0], q0[0])
+        assert res.outcome[0] == "not-converged" and np.isnan(res.converged_time[0])
