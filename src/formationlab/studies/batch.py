@@ -76,7 +76,10 @@ class BatchResult:
         Least ``r_ij - a_ij`` over every accepted state of the run (the step
         rejected for reaching contact is not part of the run).
     steps : ndarray of int64, shape (B,)
-        Steps actually simulated.
+        Steps actually simulated (accepted). A trial ends early when it has
+        converged, when its next step would reach contact (``"collision"``) or
+        when its next step is not finite (like the simulator's ``"non-finite"``
+        status: it keeps its last finite state and is classified from there).
     """
 
     q_final: NDArray[np.float64]
