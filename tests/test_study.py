@@ -363,3 +363,17 @@ def test_docstring_examples_of_the_study_modules():
 
     result = doctest.testmod(formationlab.studies.sampling)
     assert result.attempted > 0 and result.failed == 0
+
+
+def test_gaussian_starts_around_the_template_end_in_the_template():
+    """Starts within a few hundredths of the desired square stay there (it is stable)."""
+    square = fl.Formation.from_template([[0, 0], [1, 0], [1, 1], [0, 1]], diameters=0.2)
+    config = parse_study(
+        {"trials": 16, "initial": {"kind": "gaussian", "sigma": 0.02}, "backend": "numpy"}
+    )
+    res = run_study(square, LAW, config, seed=2, dt=DT, duration=DURATION)
+    assert (res.trials["outcome"] == "desired").all()
+    start = res.trials[[f"{c}{i}_init" for i in range(1, 5) for c in "xy"]].to_numpy()
+    assert np.abs(start - square.template.reshape(-1)).max() < 5 * 0.02
+    with pytest.raises(ParameterError, match="centre"):  # no template, no centre given
+        run_study(TRIANGLE, LAW, config, seed=2, dt=DT, duration=DURATION)

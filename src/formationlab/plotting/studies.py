@@ -220,7 +220,7 @@ def plot_shape(
     ax = _new_axes(ax, (2.5, 2.5))
     q = np.asarray(q, dtype=float)
     segs = np.stack([q[edges[:, 0]], q[edges[:, 1]]], axis=1)
-    lc = LineCollection(segs, colors=color, linewidths=1.0, alpha=0.7)
+    lc = LineCollection(list(segs), colors=color, linewidths=1.0, alpha=0.7)
     ax.add_collection(lc)
     artists: list[Any] = [lc]
     for i, (x, y) in enumerate(q):

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
@@ -39,7 +39,7 @@ class ChunkTask:
     dt: float
     duration: float
     tolerances: Tolerances
-    backend: str
+    backend: Literal["numba", "numpy"]
     sweep_keys: tuple[str, ...] = ()
 
     @property

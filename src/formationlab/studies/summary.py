@@ -82,14 +82,14 @@ def summarize_groups(trials: pd.DataFrame, groups: list[dict[str, Any]]) -> list
     for g, meta in enumerate(groups):
         rows = by_group.get(g)
         n = 0 if rows is None else len(rows)
-        counts = {o: 0 for o in OUTCOMES}
+        counts: dict[str, int] = {o: 0 for o in OUTCOMES}
         if rows is not None:
             for o, c in rows["outcome"].value_counts().items():
                 counts[str(o)] = int(c)
         entry = dict(meta)
         entry["trials"] = n
         entry["counts"] = counts
-        if n:
+        if rows is not None and n:
             k = np.array([counts[o] for o in OUTCOMES])
             lo, hi = wilson_interval(k, n)
             entry["fractions"] = {o: counts[o] / n for o in OUTCOMES}
