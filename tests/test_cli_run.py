@@ -312,6 +312,9 @@ def test_non_rigid_graph_warns_and_runs(tmp_path: Path) -> None:
     res = invoke("run", path, "--out", tmp_path / "out", "-q")
     assert res.exit_code == 0, res.output
     assert "warning:" in res.stderr and "not rigid" in res.stderr
+    with xr.open_dataset(tmp_path / "out" / "trajectory.nc", engine="h5netcdf") as ds:
+        assert "sigma" not in ds  # the distance law has no switching surfaces
+        assert ds["edge"].values.tolist() == ["1-2", "1-4", "2-3", "3-4"]
 
 
 def test_a_failed_write_leaves_the_previous_file_intact(
@@ -348,3 +351,14 @@ def test_examples_run_through_the_cli(name: str, tmp_path: Path) -> None:
         assert ds.sizes["robot"] == len(raw["robots"]["positions"])
         n, edges = ds.sizes["robot"], raw["formation"]["edges"]
         assert ds.sizes["edge"] == (n * (n - 1) // 2 if edges == "complete" else len(edges))
+
+
+def test_animation_frames_are_bounded_evenly_spaced_and_keep_both_ends() -> None:
+    from formationlab.plotting.animation import frame_indices
+
+    t = np.linspace(0.0, 60.0, 60_001)
+    idx = frame_indices(t, 150)
+    assert len(idx) == 150 and idx[0] == 0 and idx[-1] == len(t) - 1
+    np.testing.assert_allclose(np.diff(t[idx]), 60.0 / 149, atol=1e-3 + 1e-12)
+    short = np.arange(10.0)
+    np.testing.assert_array_equal(frame_indices(short, 150), np.arange(10))
