@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -47,6 +48,13 @@ def equilibria(
         int | None, typer.Option(min=0, help="Random starts (default 200, or [equilibria].starts).")
     ] = None,
     seed: Annotated[int | None, typer.Option(help="Seed of the random starts (default 0).")] = None,
+    law: Annotated[
+        str | None,
+        typer.Option(
+            "--law",
+            help="Use this law instead of the scenario's (same [controller] values where shared).",
+        ),
+    ] = None,
     follow: Annotated[
         str | None,
         typer.Option(help="Follow each undesired equilibrium in a gain: PARAM=FROM:TO."),
@@ -65,7 +73,8 @@ def equilibria(
     relabellings are merged, and each equilibrium is classified by the
     eigenvalues of the closed loop's Jacobian: stable, saddle (with its number
     of unstable directions), degenerate, or filippov (on a switching surface).
-    Writes DIR/equilibria.json and DIR/gallery.png (desired shape first); with
+    --law compares another law on the same formation. Writes
+    DIR/equilibria.json and DIR/gallery.png (desired shape first); with
     --follow also DIR/continuation.json and DIR/continuation.png.
     """
     from .. import simulate
@@ -77,6 +86,8 @@ def equilibria(
     from ..io.scenario import load_scenario
 
     sc = load_scenario(scenario)
+    if law is not None and law != sc.law.name:
+        sc = dataclasses.replace(sc, law=_law_named(law, sc.law))
     table: dict[str, Any] = dict(sc.equilibria or {})
     unknown = set(table) - _TABLE_KEYS
     if unknown:
@@ -111,7 +122,12 @@ def equilibria(
         outs.append(settled.outcome)
         source["random_starts"] = {"count": n_starts, "seed": seed_value, "duration": duration}
     cat = catalogue(sc.formation, sc.law, np.concatenate(cands), outcomes=np.concatenate(outs))
-    data = {"scenario": sc.name, "source": source, **cat.to_dict()}
+    data = {
+        "scenario": sc.name,
+        "parameters": sc.parameters,
+        "source": source,
+        **cat.to_dict(),
+    }
     files = ["equilibria.json", "gallery.png"]
     save_figure(_gallery(cat, sc.name), folder / "gallery.png")
     if spec:
@@ -171,3 +187,14 @@ def _both_ways(
     return Branch(
         parameter=name, values=values, equilibria=eqs, end=f"down: {down.end}; up: {up.end}"
     )
+
+
+def _law_named(name: str, base: Any) -> Any:
+    """The law ``name`` with the parameters it shares with ``base`` (others default)."""
+    from ..controllers import LAWS, get_law
+
+    if name not in LAWS:
+        get_law(name)  # raises the error that lists the known laws
+    own = {f.name for f in dataclasses.fields(LAWS[name]) if f.init}
+    shared = {f.name: getattr(base, f.name) for f in dataclasses.fields(base) if f.name in own}
+    return get_law(name, **shared)

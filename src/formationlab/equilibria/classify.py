@@ -182,6 +182,7 @@ def classify_equilibrium(
 
         lam = reduced_eigenvalues(jacobian(field, q), q)
     ztol = _zero_tol(lam)
+    lam = np.where(np.abs(lam.imag) <= ztol, lam.real, lam)  # round-off pairs of a real double
     unstable = int(np.sum(lam.real > ztol))
     if on:
         stability: Stability = "filippov"

@@ -100,6 +100,7 @@ def refine(
     tol: float = 1e-9,
     surface_tol: float = 1e-7,
     max_surfaces: int = 2,
+    band: float = 1e-2,
 ) -> Refined:
     """Refine ``q0`` (shape ``(n, 2)``) to an equilibrium of ``law`` on ``formation``.
 
@@ -113,8 +114,11 @@ def refine(
         to the size of the configuration squared (``sigma`` is an area plus
         ``theta``).
     max_surfaces : int
-        Most surfaces a Filippov equilibrium is searched on at once (the
-        nearest ones to ``q0``).
+        Most surfaces a Filippov equilibrium is searched on at once.
+    band : float
+        Surfaces with ``|sigma_s(q0)|`` below ``band`` times the size of the
+        configuration squared are where ``q0`` chatters: that set is tried
+        first, then the nearest surfaces one, two, ... at a time.
 
     Returns
     -------
@@ -151,40 +155,40 @@ def refine(
         return Refined(q=smooth, weights=w0, surfaces=(), residual=res, success=False, message=why)
     order = np.argsort(np.abs(sigma0))
     best: Refined | None = None
-    for size in range(1, min(max_surfaces, sigma0.size) + 1):
-        for subset in combinations(order[: max_surfaces + 1].tolist(), size):
-            cand = _solve_filippov(formation, law, q0, w0, tuple(sorted(subset)), scale)
-            q, w = cand
-            res_f = _residual(formation, law, q, w)
-            sig = np.asarray(law.switching(formation, q), dtype=float)
-            on = np.zeros(sig.size, bool)
-            on[list(subset)] = True
-            ok = (
-                res_f <= atol
-                and bool(np.all(np.abs(sig[on]) <= stol))
-                and bool(np.all((sig[~on] >= 0) == (w[~on] > 0.5)))
-                and bool(np.all(np.abs(sig[~on]) > stol))
-                and bool(np.all((w[on] > 0) & (w[on] < 1)))
+    for subset in _subsets(sigma0, order, max_surfaces, band * scale**2):
+        cand = _solve_filippov(formation, law, q0, w0, tuple(sorted(subset)), scale)
+        q, w = cand
+        res_f = _residual(formation, law, q, w)
+        sig = np.asarray(law.switching(formation, q), dtype=float)
+        on = np.zeros(sig.size, bool)
+        on[list(subset)] = True
+        ok = (
+            res_f <= atol
+            and bool(np.all(np.abs(sig[on]) <= stol))
+            and bool(np.all((sig[~on] >= 0) == (w[~on] > 0.5)))
+            and bool(np.all(np.abs(sig[~on]) > stol))
+            and bool(np.all((w[on] > 0) & (w[on] < 1)))
+        )
+        if ok:
+            return Refined(
+                q=q,
+                weights=w,
+                surfaces=tuple(int(s) for s in subset),
+                residual=res_f,
+                success=True,
+                message="Filippov equilibrium on a switching surface",
             )
-            if ok:
-                return Refined(
-                    q=q,
-                    weights=w,
-                    surfaces=tuple(int(s) for s in subset),
-                    residual=res_f,
-                    success=True,
-                    message="Filippov equilibrium on a switching surface",
-                )
-            if best is None or res_f < best.residual:
-                best = Refined(
-                    q=q,
-                    weights=w,
-                    surfaces=tuple(int(s) for s in subset),
-                    residual=res_f,
-                    success=False,
-                    message=why + "; no Filippov equilibrium on the nearest surfaces either",
-                )
-    assert best is not None  # at least one subset was tried (sigma0.size > 0)
+        if best is None or res_f < best.residual:
+            best = Refined(
+                q=q,
+                weights=w,
+                surfaces=tuple(int(s) for s in subset),
+                residual=res_f,
+                success=False,
+                message=why + "; no Filippov equilibrium on the nearest surfaces either",
+            )
+    if best is None:  # pragma: no cover - sigma0.size > 0 gives at least one subset
+        raise RuntimeError("no switching surface to try")
     return best
 
 
@@ -252,3 +256,17 @@ def _solve_filippov(
         max_nfev=200 * size,
     )
     return unpack(sol.x)
+
+
+def _subsets(
+    sigma0: NDArray, order: NDArray, max_surfaces: int, band: float
+) -> list[tuple[int, ...]]:
+    """Sets of surfaces to try: those ``q0`` chatters on, then the nearest ones."""
+    near = tuple(sorted(int(s) for s in np.flatnonzero(np.abs(sigma0) <= band)))
+    out = [near] if near else []
+    for size in range(1, min(max_surfaces, sigma0.size) + 1):
+        for subset in combinations(order[: max_surfaces + 1].tolist(), size):
+            key = tuple(sorted(subset))
+            if key not in out:
+                out.append(key)
+    return out

@@ -23,7 +23,7 @@ from ..analysis import Tolerances, classify
 from ..controllers import Law
 from ..dynamics import System
 from ..errors import ParameterError
-from ..integrators import RK4, FixedStepIntegrator
+from ..integrators import RK4, FixedStepIntegrator, ImplicitEuler
 from ..spec import Formation
 
 __all__ = ["Settled", "random_starts", "settle"]
@@ -87,7 +87,7 @@ class Settled:
     q : ndarray, shape (B, n, 2)
         Final (or last accepted, for collisions) positions.
     u : ndarray, shape (B, n, 2)
-        Controls there.
+        Velocities of the last step (the Filippov velocity on a surface).
     outcome : ndarray of str, shape (B,)
         :data:`formationlab.OUTCOMES` of each trial.
     """
@@ -109,21 +109,37 @@ def settle(
 ) -> Settled:
     """Integrate a batch of starts ``q0`` (``(B, n, 2)``) until they stop or ``duration``.
 
-    The batch is stepped together; trials stop being stepped once every robot
-    is slower than ``speed``. A step that would reach contact is retried in 50
-    substeps (the field is stiff near contact, the exact flow never touches);
-    if that fails too the trial stops with outcome ``"collision"``. The
-    default integrator is ``RK4(dt=0.01)``.
+    The batch is stepped together. A trial stops once its robots move slower
+    than ``speed`` (displacement per step over ``dt``, checked every 10 steps:
+    on a sliding-mode equilibrium the one-sided fields do not vanish, the
+    motion does). A step that would reach contact is retried in 50 substeps
+    (the field is stiff near contact, the exact flow never touches); if that
+    fails too the trial stops with outcome ``"collision"``.
+
+    The default integrator is ``RK4(dt=0.01)`` for a smooth law and
+    ``ImplicitEuler(dt=0.01)`` for a switching one: explicit schemes chatter
+    across an attractive switching surface and can both miss a sliding
+    equilibrium and leave it by a spurious drift, the implicit one lands on
+    the surface and slides (``formationlab.integrators.implicit``).
+
+    Returns
+    -------
+    Settled
+        ``u`` is the velocity of the last step (the Filippov velocity on a
+        surface), which the outcome classification uses.
     """
     q = formation.check_positions(q0).copy()
     if q.ndim != 3:
         raise ParameterError(f"settle takes starts of shape (B, n, 2), got {q.shape}")
-    integ = integrator or RK4(dt=0.01)
+    if integrator is None:
+        integrator = RK4(dt=0.01) if law.smooth else ImplicitEuler(dt=0.01)
+    integ = integrator
     system = System(formation=formation, law=law)
     iu, ju = np.triu_indices(formation.n, k=1)
     contact = formation.contact_matrix[iu, ju]
     live = np.ones(len(q), bool)
     hit = np.zeros(len(q), bool)
+    vel = np.zeros_like(q)
     steps = int(np.ceil(duration / integ.dt))
     for k in range(steps):
         idx = np.flatnonzero(live)
@@ -137,15 +153,15 @@ def settle(
         hit[idx[bad]] = True
         live[idx[bad]] = False
         good = idx[~bad]
+        vel[good] = (new[~bad] - q[good]) / integ.dt
         q[good] = new[~bad]
-        if k % 50 == 0 and good.size:
-            v = np.max(np.linalg.norm(system.rhs(q[good]), axis=-1), axis=-1)
+        if k % 10 == 0 and good.size:
+            v = np.max(np.linalg.norm(vel[good], axis=-1), axis=-1)
             live[good[v < speed]] = False
-    u = system.rhs(q)
     outcome = np.array(
-        [classify(formation, q[b], u[b], tolerances, contact=bool(hit[b])) for b in range(len(q))]
+        [classify(formation, q[b], vel[b], tolerances, contact=bool(hit[b])) for b in range(len(q))]
     )
-    return Settled(q=q, u=u, outcome=outcome)
+    return Settled(q=q, u=vel, outcome=outcome)
 
 
 def _step(integ: FixedStepIntegrator, system: System, q: NDArray, dt: float, sub: int) -> NDArray:

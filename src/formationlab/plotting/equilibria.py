@@ -19,11 +19,15 @@ _COLOURS = {
 }
 
 
-def plot_equilibrium(formation: Any, eq: Any, ax: Any = None, *, title: str = "") -> list[Any]:
+def plot_equilibrium(
+    formation: Any, eq: Any, ax: Any = None, *, title: str = "", span: float | None = None
+) -> list[Any]:
     """Draw one equilibrium: robots (to scale, numbered 1..n) and the formation's edges.
 
-    Edges are coloured by ``r_ij - d_ij`` (blue short, red long, black met).
-    Returns the artists.
+    Edges are coloured by ``r_ij - d_ij`` (blue short, red long, black met);
+    the frame's colour is the class (green stable, orange saddle, purple
+    Filippov, grey degenerate). ``span`` fixes the width shown (a common scale
+    for a gallery). Returns the artists.
     """
     if ax is None:
         _, ax = plt.subplots(figsize=(3, 3))
@@ -40,7 +44,8 @@ def plot_equilibrium(formation: Any, eq: Any, ax: Any = None, *, title: str = ""
         artists.append(c)
         artists.append(ax.annotate(str(i + 1), (x, y), ha="center", va="center", fontsize=8))
     ax.set_aspect("equal")
-    span = float(np.ptp(q, axis=0).max()) + formation.diameters.max() + 0.2
+    if span is None:
+        span = _span(q, formation)
     centre = (q.max(axis=0) + q.min(axis=0)) / 2
     ax.set_xlim(centre[0] - span / 2, centre[0] + span / 2)
     ax.set_ylim(centre[1] - span / 2, centre[1] + span / 2)
@@ -54,6 +59,10 @@ def plot_equilibrium(formation: Any, eq: Any, ax: Any = None, *, title: str = ""
     return artists
 
 
+def _span(q: Any, formation: Any) -> float:
+    return float(np.ptp(q, axis=0).max()) + float(formation.diameters.max()) + 0.2
+
+
 def gallery_figure(catalogue: Any, *, columns: int = 4, title: str = "") -> Any:
     """All equilibria of a catalogue, the desired one first, with class and count."""
     eqs = catalogue.equilibria
@@ -63,12 +72,18 @@ def gallery_figure(catalogue: Any, *, columns: int = 4, title: str = "") -> Any:
     fig, axes = plt.subplots(rows, cols, figsize=(2.6 * cols, 2.8 * rows), squeeze=False)
     for ax in axes.ravel()[len(eqs) :]:
         ax.axis("off")
+    span = max((_span(eq.q, catalogue.formation) for eq in eqs), default=1.0)
     for idx, (eq, count, ax) in enumerate(zip(eqs, catalogue.counts, axes.ravel(), strict=False)):
         kind = eq.stability
         if eq.stability in ("saddle", "filippov") and eq.unstable_directions:
             kind += f" ({eq.unstable_directions} unstable)"
-        label = "desired" if eq.desired else f"#{idx + 1}"
-        plot_equilibrium(catalogue.formation, eq, ax, title=f"{label}: {kind}\n{count} trials")
+        label = f"#{idx + 1}" + (" desired" if eq.desired else "")
+        lines = [f"{label}: {kind}", f"{count} trial{'' if count == 1 else 's'}"]
+        if eq.surfaces:
+            lines.append("on " + ", ".join(eq.surfaces))
+        elif eq.active:
+            lines.append("active " + ", ".join(eq.active))
+        plot_equilibrium(catalogue.formation, eq, ax, title="\n".join(lines), span=span)
     if not eqs:
         axes[0, 0].text(0.5, 0.5, "no equilibrium found", ha="center", va="center")
     if title:
