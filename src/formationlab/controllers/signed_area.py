@@ -79,7 +79,8 @@ def _desired_areas_cached(formation: Formation) -> tuple[NDArray[np.int64], NDAr
     first: dict[tuple[int, int, int], tuple[int, int, int]] = {}
     for i, j, k in np.argwhere(formation.restricted):
         tri = (int(i), int(j), int(k))
-        srt = tuple(sorted(tri))
+        lo, mid, hi = sorted(tri)
+        srt = (lo, mid, hi)
         parity = 1.0 if tuple(srt.index(x) for x in tri) in _EVEN else -1.0
         s = float(formation.desired_sign[tri]) * parity  # desired sign of c_abc
         if srt in signs and signs[srt] != s:
@@ -92,7 +93,7 @@ def _desired_areas_cached(formation: Formation) -> tuple[NDArray[np.int64], NDAr
         signs.setdefault(srt, s)
         first.setdefault(srt, tri)
     tris = np.array(sorted(signs), dtype=np.int64).reshape(-1, 3)
-    target = np.array([signs[tuple(t)] * _area_size(formation, t) for t in tris.tolist()])
+    target = np.array([signs[srt] * _area_size(formation, list(srt)) for srt in sorted(signs)])
     for arr in (tris, target):
         arr.setflags(write=False)
     return tris, target
@@ -108,7 +109,7 @@ def _area_size(formation: Formation, tri: list[int]) -> float:
         x, y, z = dm[a, b], dm[b, c], dm[a, c]
         s = 0.5 * (x + y + z)
         return float(np.sqrt(max(s * (s - x) * (s - y) * (s - z), 0.0)))  # Heron
-    if formation.alpha_values == "angle":
+    if formation.alpha_values == "angle" and formation.alpha is not None:
         for i, j, k in ((a, b, c), (b, c, a), (c, a, b)):
             if adj[i, j] and adj[i, k]:
                 return 0.5 * dm[i, j] * dm[i, k] * abs(np.sin(formation.alpha[i, j, k]))
@@ -137,10 +138,11 @@ def grad_area_penalty(formation: Formation, q: NDArray[np.float64]) -> NDArray[n
     if len(tris) == 0:
         return out
     err = signed_areas(tris, q) - target  # (..., t)
+    corner = np.eye(formation.n)[tris]  # (t, 3, n): one-hot robot of each corner
     for m in range(3):
         nxt, prv = tris[:, (m + 1) % 3], tris[:, (m + 2) % 3]
-        g = 0.5 * perp(q[..., prv, :] - q[..., nxt, :])  # eq. (23), halved
-        np.add.at(out, (..., tris[:, m], slice(None)), err[..., None] * g)
+        g = 0.5 * perp(q[..., prv, :] - q[..., nxt, :])  # eq. (23), halved; (..., t, 2)
+        out = out + np.einsum("...td,tn->...nd", err[..., None] * g, corner[:, m, :])
     return out
 
 

@@ -269,7 +269,7 @@ def _run_numba(
     status = np.zeros(n_trials, dtype=np.int8)
     mc = np.full(n_trials, np.inf)
     with _KERNEL_LOCK:
-        kernels.run_chunks(
+        kernels.run_chunks(  # type: ignore[call-arg]
             q0, CHUNK, *args, dt, n_steps, check_every, speed, q_out, u_out, steps, status, mc
         )
     return RawBatch(q_final=q_out, u_final=u_out, steps=steps, status=status, min_clearance=mc)
@@ -292,7 +292,7 @@ def _kernel_law(formation: Formation, law: Law) -> tuple:
     rep = law.repulsion  # type: ignore[attr-defined]
     k_area = theta = 0.0
     angular = _angular_terms(formation, 0.0)
-    triangles = (np.zeros(0, np.int64),) * 3 + (np.zeros(0),)
+    triangles: tuple[NDArray, ...] = (np.zeros(0, np.int64),) * 3 + (np.zeros(0),)
     if isinstance(law, DistanceLaw | AngleRestrictedLaw):
         kind, gain_edge, gain_rep = LOG_BARRIER, float(law.k_c), float(law.k_c)
         if isinstance(law, AngleRestrictedLaw) and formation.alpha is not None and law.k_a > 0:
