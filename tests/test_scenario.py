@@ -104,6 +104,7 @@ def test_every_example_validates() -> None:
         sc = load_scenario(p)
         assert sc.formation.is_connected
         assert sc.q0.shape == (sc.n, 2)
+        assert not sc.q0.flags.writeable
 
 
 def test_examples_have_the_graphs_the_readme_promises() -> None:

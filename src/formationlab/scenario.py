@@ -332,6 +332,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         q0 = formation.check_positions(np.asarray(rob.positions, dtype=float))
     except UserInputError as exc:
         raise fail("robots.positions", str(exc)) from None
+    q0.setflags(write=False)  # the scenario is frozen, its arrays too
 
     law = build_from_registry(LAWS, "law", ctl.law, ctl.model_extra, "controller", fail)
     if formation.alpha is None and "k_a" in {f.name for f in dataclasses.fields(law)}:
