@@ -226,3 +226,53 @@ def test_study_end_states_are_read_by_law(tmp_path):
         read_study_end_states(tmp_path, 2, "signed-area")
     with pytest.raises(ScenarioError, match="lacks the columns"):
         read_study_end_states(tmp_path, 3, "distance")
+
+
+def test_filippov_equilibrium_of_the_square_attracts_at_its_sliding_rate():
+    """The square with both diagonals under the angle-restricted law (docs/equilibria.md).
+
+    The start is a rough guess of a flattened shape; what is checked is the
+    definition of a Filippov equilibrium (on the surfaces, a convex combination
+    of the one-sided fields vanishes, both sides point into the surfaces) and
+    that a simulation returns to it at the rate of the sliding eigenvalue.
+    """
+    square = fl.Formation.from_template([[0, 0], [1, 0], [1, 1], [0, 1]], diameters=A)
+    law = fl.AngleRestrictedLaw(k_c=2.0, k_a=3.0, theta=0.5)
+    guess = np.array([[-0.23, 0.12], [0.23, 0.12], [-1.02, -0.12], [1.02, -0.12]])
+    ref = refine(square, law, guess)
+    assert ref.success and ref.filippov
+    eq = classify_equilibrium(square, law, ref)
+    assert eq.stability == "filippov" and eq.attractive and not eq.desired
+    assert set(eq.surfaces) == {"alpha_134", "alpha_234"}
+    on = list(ref.surfaces)
+    sigma = law.switching(square, ref.q)
+    assert np.all(np.abs(sigma[on]) < 1e-10)
+    assert np.all((ref.weights[on] > 0) & (ref.weights[on] < 1))
+    assert np.max(np.abs(law.control_with(square, ref.q, ref.weights))) < 1e-9
+    # the one-sided fields point into each surface (finite-difference gradient of sigma)
+    h = 1e-6
+    grad = np.zeros((len(on), 4, 2))
+    for a in range(4):
+        for b in range(2):
+            e = np.zeros((4, 2))
+            e[a, b] = h
+            grad[:, a, b] = (law.switching(square, ref.q + e) - law.switching(square, ref.q - e))[
+                on
+            ] / (2 * h)
+    for t, s in enumerate(on):
+        w = ref.weights.copy()
+        w[s] = 0.0
+        assert np.sum(grad[t] * law.control_with(square, ref.q, w)) > 0
+        w[s] = 1.0
+        assert np.sum(grad[t] * law.control_with(square, ref.q, w)) < 0
+    assert eq.unstable_directions == 0 and eq.growth_rate < 0
+    start = ref.q + 1e-3 * np.random.default_rng(4).standard_normal(ref.q.shape)
+    res = fl.simulate(
+        square, law, start, duration=1.0, integrator=fl.get_integrator("implicit-euler", dt=4e-3)
+    )
+    err = np.linalg.norm(
+        fl.distance_errors(square, res.q) - (eq.distances - square.distances), axis=-1
+    )
+    late = res.t >= 0.3
+    slope = np.polyfit(res.t[late], np.log(err[late]), 1)[0]
+    assert slope == pytest.approx(eq.growth_rate, rel=0.05)
