@@ -33,6 +33,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import FormationError
+from .graph import as_edges, complete_edges, is_connected, is_rigid
+from .orientation import alpha_from_shape, switching_surfaces
 
 __all__ = [
     "AlphaValues",
@@ -44,53 +46,6 @@ __all__ = [
 
 Orientation = Literal["free", "template", "mirror", "table"]
 AlphaValues = Literal["sign", "angle"]
-
-#: A template triple whose |c_ijk| is below this fraction of the product of its
-#: two side lengths (|sin| of the angle at i) counts as collinear.
-COLLINEAR_SIN = 1e-6
-
-
-def complete_edges(n: int) -> NDArray[np.int64]:
-    """Edges ``(i, j)``, ``i < j``, of the complete graph on ``n`` robots, shape ``(m, 2)``."""
-    if n < 2:
-        raise FormationError(f"a formation needs at least 2 robots, got {n}")
-    i, j = np.triu_indices(n, k=1)
-    return np.stack([i, j], axis=1).astype(np.int64)
-
-
-def _as_edges(edges: str | ArrayLike, n: int, *, one_based: bool) -> NDArray[np.int64]:
-    if isinstance(edges, str):
-        if edges != "complete":
-            raise FormationError(
-                f'edges must be "complete" or a list of robot pairs, got the string {edges!r}'
-            )
-        return complete_edges(n)
-    arr = np.asarray(edges)
-    if arr.size == 0:
-        raise FormationError("the edge list is empty: give at least one pair of robots")
-    if arr.ndim != 2 or arr.shape[1] != 2:
-        raise FormationError(f"edges must be pairs [i, j], got an array of shape {arr.shape}")
-    if not np.all(np.isfinite(arr.astype(float))) or not np.all(arr == np.round(arr)):
-        raise FormationError("edges must hold whole robot numbers")
-    arr = arr.astype(np.int64)
-    base = 1 if one_based else 0
-    seen: set[tuple[int, int]] = set()
-    out = []
-    for i, j in arr:
-        for x in (i, j):
-            if not base <= x < n + base:
-                raise FormationError(
-                    f"edge ({i}, {j}) names robot {x}, but robots are numbered "
-                    f"{base}..{n - 1 + base}"
-                )
-        if i == j:
-            raise FormationError(f"edge ({i}, {j}) joins robot {i} to itself")
-        key = (min(i, j) - base, max(i, j) - base)
-        if key in seen:
-            raise FormationError(f"edge ({i}, {j}) is given twice")
-        seen.add(key)
-        out.append(key)
-    return np.asarray(sorted(out), dtype=np.int64)
 
 
 def _per_item(value: float | ArrayLike, count: int, what: str, per: str) -> NDArray[np.float64]:
@@ -104,13 +59,6 @@ def _per_item(value: float | ArrayLike, count: int, what: str, per: str) -> NDAr
     if not np.all(np.isfinite(arr)):
         raise FormationError(f"{what} must be finite numbers, got {arr.tolist()}")
     return arr
-
-
-def _signed_angle(u: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Counter-clockwise angle from ``u`` to ``v`` in ``(-pi, pi]``."""
-    cross = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
-    dot = u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1]
-    return np.arctan2(cross, dot)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -155,7 +103,7 @@ class Formation:
             raise FormationError(f"diameters must be a list of n >= 2 numbers, got {d.shape}")
         if not np.all(np.isfinite(d)) or np.any(d < 0):
             raise FormationError(f"diameters must be finite and >= 0, got {d.tolist()}")
-        edges = _as_edges(self.edges, n, one_based=False)
+        edges = as_edges(self.edges, n, one_based=False)
         dist = _per_item(self.distances, len(edges), "distances", "edge")
         a = 0.5 * (d[edges[:, 0]] + d[edges[:, 1]])
         bad = np.flatnonzero(dist <= a)
@@ -238,7 +186,7 @@ class Formation:
             raise FormationError(f"a formation needs an integer n >= 2 robots, got {n!r}")
         diam = _per_item(diameters, int(n), "diameters", "robot")
         raw_edges = edges
-        e = _as_edges(edges, int(n), one_based=one_based)
+        e = as_edges(edges, int(n), one_based=one_based)
         dist = np.asarray(distances, dtype=float)
         if dist.ndim == 1 and not isinstance(raw_edges, str):
             # distances follow the user's edge order; _as_edges sorted the pairs
@@ -281,13 +229,13 @@ class Formation:
                 f'a template orientation is "template", "mirror" or "free", got {orientation!r}'
             )
         n = tpl.shape[0]
-        e = _as_edges(edges, n, one_based=one_based)
+        e = as_edges(edges, n, one_based=one_based)
         dist = np.linalg.norm(tpl[e[:, 1]] - tpl[e[:, 0]], axis=-1)
         diam = _per_item(diameters, n, "diameters", "robot")
         alpha = None
         if orientation != "free":
             shape = tpl if orientation == "template" else tpl * np.array([-1.0, 1.0])
-            alpha = _alpha_from_shape(shape, e, alpha_values)
+            alpha = alpha_from_shape(shape, e, alpha_values)
         return cls(
             diameters=diam,
             edges=e,
@@ -459,22 +407,8 @@ class Formation:
         index : ndarray of int, shape (n, n, n)
             Surface of each restricted triple ``(i, j, k)``; -1 elsewhere.
         """
-        n = self.n
-        index = np.full((n, n, n), -1, dtype=np.int64)
-        keys: dict[tuple[int, int, int, float], int] = {}
-        for i, j, k in np.argwhere(self.restricted):
-            tri = (int(i), int(j), int(k))
-            srt = tuple(sorted(tri))
-            perm = [srt.index(x) for x in tri]
-            parity = 1.0 if perm in ([0, 1, 2], [1, 2, 0], [2, 0, 1]) else -1.0
-            beta = float(self.alpha[i, j, k]) * parity  # type: ignore[index]
-            key = (*srt, beta)
-            index[i, j, k] = keys.setdefault(key, len(keys))  # type: ignore[arg-type]
-        tris = np.array([k[:3] for k in keys], dtype=np.int64).reshape(-1, 3)
-        beta = np.array([k[3] for k in keys], dtype=float)
-        for arr in (tris, beta, index):
-            arr.setflags(write=False)
-        return tris, beta, index
+        alpha = np.zeros((self.n,) * 3) if self.alpha is None else self.alpha
+        return switching_surfaces(alpha, self.restricted)
 
     @property
     def kappa(self) -> float:
@@ -484,34 +418,12 @@ class Formation:
     @cached_property
     def is_connected(self) -> bool:
         """Whether the graph is connected."""
-        seen = {0}
-        frontier = [0]
-        adj = self.adjacency
-        while frontier:
-            i = frontier.pop()
-            for j in np.flatnonzero(adj[i]):
-                if int(j) not in seen:
-                    seen.add(int(j))
-                    frontier.append(int(j))
-        return len(seen) == self.n
+        return is_connected(self.adjacency)
 
     @cached_property
     def is_rigid(self) -> bool:
-        """Generic infinitesimal rigidity in the plane (rank of the rigidity matrix).
-
-        The rank is evaluated at a generic (seeded random) placement, so the
-        answer is the graph's, not the template's.
-        """
-        n = self.n
-        if n == 2:
-            return len(self.edges) == 1
-        q = np.random.default_rng(12345).normal(size=(n, 2))
-        rows = np.zeros((len(self.edges), 2 * n))
-        for e, (i, j) in enumerate(self.edges):
-            diff = q[i] - q[j]
-            rows[e, 2 * i : 2 * i + 2] = diff
-            rows[e, 2 * j : 2 * j + 2] = -diff
-        return bool(np.linalg.matrix_rank(rows) == 2 * n - 3)
+        """Generic infinitesimal rigidity of the graph in the plane (:func:`graph.is_rigid`)."""
+        return is_rigid(self.edges, self.n)
 
     def check_positions(self, q: ArrayLike, *, what: str = "initial positions") -> NDArray:
         """Validate positions ``q`` of shape ``(..., n, 2)``: finite, no overlapping robots.
@@ -539,32 +451,3 @@ class Formation:
                 "use smaller diameters"
             )
         return arr
-
-
-def _alpha_from_shape(
-    shape: NDArray[np.float64], edges: NDArray[np.int64], alpha_values: AlphaValues
-) -> NDArray[np.float64]:
-    """``alpha_ijk`` that drive towards ``shape`` (paper's sign convention, eq. 2).
-
-    ``alpha_ijk = -angle(r_ij -> r_ik)`` (angles) or its sign, for every ordered
-    pair ``j != k`` of neighbours of ``i``. Collinear triples have no orientation
-    and are rejected.
-    """
-    n = shape.shape[0]
-    adj = np.zeros((n, n), bool)
-    adj[edges[:, 0], edges[:, 1]] = adj[edges[:, 1], edges[:, 0]] = True
-    r = shape[None, :, :] - shape[:, None, :]  # r[i, j] = q_j - q_i
-    ang = _signed_angle(r[:, :, None, :], r[:, None, :, :])  # ccw angle r_ij -> r_ik
-    length = np.linalg.norm(r, axis=-1)
-    sin = np.abs(np.sin(ang))
-    mask = adj[:, :, None] & adj[:, None, :] & ~np.eye(n, dtype=bool)[None]
-    coincident = mask & ((length[:, :, None] == 0) | (length[:, None, :] == 0))
-    collinear = mask & ((sin < COLLINEAR_SIN) | coincident)
-    if np.any(collinear):
-        i, j, k = np.argwhere(collinear)[0] + 1
-        raise FormationError(
-            f"robots {i}, {j} and {k} are collinear in the template, so the triple has no "
-            'orientation; move one of them off the line or use orientation = "free"'
-        )
-    alpha = np.where(mask, -ang, 0.0)  # paper's sign: opposite to the ccw angle
-    return np.sign(alpha) if alpha_values == "sign" else alpha
