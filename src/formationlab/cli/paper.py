@@ -67,5 +67,6 @@ def paper(
             f"{key:26s} outcome={s['outcome']:10s} orientation={s['orientation']} "
             f"max |r_ij - d_ij| = {s['max_distance_error']:.2e}",
             highlight=False,
+            soft_wrap=True,
         )
-    err_console.print(f"wrote figures and summary.json to {folder}", highlight=False)
+    err_console.print(f"wrote figures and summary.json to {folder}", highlight=False, soft_wrap=True)
