@@ -63,6 +63,7 @@ def test_paper_simulation_files_build_the_papers_formation_and_law() -> None:
         assert sc.duration == 15.0
         assert sc.formation.orientation == "table"
         # alpha_ikj = -alpha_ijk completes the printed table (eq. 3)
+        assert sc.formation.alpha is not None
         assert sc.formation.alpha[0, 2, 1] == -table[(1, 2, 3)]
 
 
@@ -121,11 +122,13 @@ def test_template_gives_distances_and_mirror_flips_every_sign() -> None:
     text = BASE.replace("distances = 1.0", f"template = {tpl}\norientation = 'template'")
     text = text.replace('law = "distance"', 'law = "angle-restricted"')
     f = parse(text).formation
+    assert f.alpha is not None
     # edges (1,2), (1,3), (2,3) have lengths 3, 4, 5
     np.testing.assert_allclose(f.distances, [3.0, 4.0, 5.0])
     # template turns counter-clockwise (c_123 = 12 > 0): the paper's alpha_123 is negative
     assert f.alpha[0, 1, 2] == -1.0
     g = parse(text.replace("'template'", "'mirror'")).formation
+    assert g.alpha is not None
     np.testing.assert_array_equal(g.alpha, -f.alpha)
     free = parse(text.replace("'template'", "'free'")).formation
     assert free.alpha is None
@@ -136,6 +139,7 @@ def test_alpha_values_angle_gives_the_templates_angles() -> None:
     text = BASE.replace("distances = 1.0", f"template = {tpl}")
     text = text.replace('law = "distance"', 'law = "angle-restricted"\nalpha_values = "angle"')
     f = parse(text).formation
+    assert f.alpha is not None
     # angle at robot 1 from r_12 to r_13 is +pi/2 (ccw); the paper's sign is opposite
     assert f.alpha[0, 1, 2] == pytest.approx(-np.pi / 2)
     assert f.kappa == pytest.approx(np.pi)
