@@ -162,7 +162,8 @@ class ImplicitEuler(FixedStepIntegrator):
                     out += (dt * (wj[m] - w0[j])) * directions[j]
                 return out
 
-            for wj, free in self._assignments(len(involved)):
+            guess = self._guess(system, involved, end_state, w0)
+            for wj, free in self._assignments(len(involved), guess):
                 ok, wj = self._solve_free(system, involved, end_state, wj, free)
                 if not ok:
                     continue
@@ -192,10 +193,34 @@ class ImplicitEuler(FixedStepIntegrator):
         return best[1] if best is not None else q_pred
 
     @staticmethod
-    def _assignments(m: int):
-        """Weights in {0, 1, free} for ``m`` surfaces, fewer free ones first."""
+    def _guess(system, involved, end_state, w0) -> tuple[float, ...]:
+        """Each surface's own verdict, the others held at ``w0``: off, on or free.
+
+        Off if ``q+`` lands on the off side with either weight, on if on the on
+        side with either, free if the two weights land on opposite sides.
+        """
+        m = len(involved)
+        base = np.array([w0[j] for j in involved])
+        guess = []
+        for i, j in enumerate(involved):
+            ends = []
+            for value in (0.0, 1.0):
+                wj = base.copy()
+                wj[i] = value
+                ends.append(system.sigma(end_state(wj))[j])
+            if ends[0] < 0 and ends[1] < 0:
+                guess.append(0.0)
+            elif ends[0] >= 0 and ends[1] >= 0:
+                guess.append(1.0)
+            else:
+                guess.append(_FREE)
+        return tuple(guess) if m else ()
+
+    @staticmethod
+    def _assignments(m: int, first: tuple[float, ...] = ()):
+        """Weights in {0, 1, free} for ``m`` surfaces: ``first``, then fewer free ones first."""
         choices = list(itertools.product((0.0, 1.0, _FREE), repeat=m))
-        choices.sort(key=lambda c: sum(x == _FREE for x in c))
+        choices.sort(key=lambda c: (c != first, sum(x == _FREE for x in c)))
         for c in choices:
             wj = np.array(c)
             yield wj, [i for i in range(m) if c[i] == _FREE]
@@ -233,7 +258,12 @@ class ImplicitEuler(FixedStepIntegrator):
                 return True, wj
             if np.sign(r0) == np.sign(r1):
                 return False, wj
-            x = brentq(lambda x: residual(np.array([x]))[0], 0.0, 1.0, xtol=1e-15, rtol=1e-15)
+            # sigma is quadratic in w for the paper's law (c_abc is bilinear in positions,
+            # which are affine in w): the parabola through w = 0, 1/2, 1 gives the root;
+            # keep it if it is one to the tolerance, else bracket it (any smooth sigma)
+            x = _parabola_root(r0, residual(np.full(1, 0.5))[0], r1)
+            if not (0.0 <= x <= 1.0 and abs(residual(np.array([x]))[0]) <= 0.1 * self.tol):
+                x = brentq(lambda x: residual(np.array([x]))[0], 0.0, 1.0, xtol=1e-15, rtol=1e-15)
             wj[free] = x
             return True, wj
         x = np.full(len(free), 0.5)  # Newton; sigma is quadratic in w, so central
@@ -258,3 +288,19 @@ class ImplicitEuler(FixedStepIntegrator):
             return False, wj
         wj[free] = np.clip(x, 0.0, 1.0)
         return True, wj
+
+
+def _parabola_root(r0: float, rm: float, r1: float) -> float:
+    """Root in [0, 1] of the parabola through (0, r0), (1/2, rm), (1, r1), r0 r1 < 0."""
+    a = 2.0 * (r1 - 2.0 * rm + r0)
+    b = r1 - r0 - a
+    if abs(a) <= 1e-12 * (abs(b) + abs(r0)):
+        return -r0 / b
+    disc = b * b - 4.0 * a * r0
+    if disc < 0:
+        return float("nan")
+    sq = np.sqrt(disc)
+    qq = -0.5 * (b + np.copysign(sq, b))  # the stable pair of roots
+    roots = [qq / a, r0 / qq if qq != 0 else float("nan")]
+    inside = [x for x in roots if 0.0 <= x <= 1.0]
+    return float(inside[0]) if inside else float("nan")
