@@ -17,7 +17,15 @@ from importlib.metadata import PackageNotFoundError, version
 from .analysis import OUTCOMES, Tolerances, classify, distance_errors, triangle_orientation
 from .controllers import LAWS, AngleRestrictedLaw, DistanceLaw, Law, Repulsion, get_law
 from .dynamics import SingleIntegrator, System
-from .integrators import INTEGRATORS, RK4, Euler, Integrator, get_integrator
+from .integrators import (
+    INTEGRATORS,
+    RK4,
+    Euler,
+    Filippov,
+    ImplicitEuler,
+    Integrator,
+    get_integrator,
+)
 from .potentials import dphi_dr, khatib, phi, psi, triple_products
 from .simulation import SimulationResult, simulate
 from .spec import Formation, FormationError
@@ -35,8 +43,10 @@ __all__ = [
     "AngleRestrictedLaw",
     "DistanceLaw",
     "Euler",
+    "Filippov",
     "Formation",
     "FormationError",
+    "ImplicitEuler",
     "Integrator",
     "Law",
     "Repulsion",
