@@ -89,6 +89,8 @@ def animate_run(
         raise ValueError(f"q must have shape (T, n, 2) with T = len(t), got {q.shape}")
     n = q.shape[1]
     frames = frame_indices(t, max_frames)
+    # trails are drawn through at most ~2000 states, so long runs stay cheap to render
+    path = frame_indices(t, max(2000, max_frames))
     colors = robot_colors(n)
 
     fig = Figure(figsize=(size, size), dpi=dpi, layout="constrained")
@@ -124,9 +126,11 @@ def animate_run(
         idx = frames[k]
         now = q[idx]
         graph.set_segments(list(np.stack([now[edges[:, 0]], now[edges[:, 1]]], axis=1)))
-        start = 0 if trail is None else int(np.searchsorted(t, t[idx] - trail))
+        since = -np.inf if trail is None else t[idx] - trail
+        sel = path[(path < idx) & (t[path] >= since)]
+        sel = np.append(sel, idx)
         for i in range(n):
-            trails[i].set_data(q[start : idx + 1, i, 0], q[start : idx + 1, i, 1])
+            trails[i].set_data(q[sel, i, 0], q[sel, i, 1])
             discs[i].center = (now[i, 0], now[i, 1])
             labels[i].xy = (now[i, 0], now[i, 1])
         clock.set_text(f"{title + ': ' if title else ''}t = {t[idx]:.2f} s")
