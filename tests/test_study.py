@@ -377,3 +377,13 @@ def test_gaussian_starts_around_the_template_end_in_the_template():
     assert np.abs(start - square.template.reshape(-1)).max() < 5 * 0.02
     with pytest.raises(ParameterError, match="centre"):  # no template, no centre given
         run_study(TRIANGLE, LAW, config, seed=2, dt=DT, duration=DURATION)
+
+
+def test_study_command_refuses_a_bad_study_table_before_writing(tmp_path, capsys):
+    path = tmp_path / "bad.toml"
+    path.write_text(SCENARIO.replace("trials = 24", "trails = 24"), encoding="utf-8")
+    out = tmp_path / "out"
+    assert cli("study", str(path), "--out", str(out)) == 2
+    err = capsys.readouterr().err
+    assert "study.trails" in err and "Traceback" not in err
+    assert not out.exists()

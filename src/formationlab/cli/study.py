@@ -18,9 +18,11 @@ def study(
     out: Annotated[Path, typer.Option("--out", "-o", help="Folder for the results.")],
     trials: Annotated[
         int | None,
-        typer.Option("--trials", "-n", help="Trials per group (overrides study.trials)."),
+        typer.Option("--trials", "-n", min=1, help="Trials per group (overrides study.trials)."),
     ] = None,
-    seed: Annotated[int, typer.Option("--seed", "-s", help="Seed of the study (>= 0).")] = 0,
+    seed: Annotated[
+        int, typer.Option("--seed", "-s", min=0, max=2**63 - 1, help="Seed of the study (>= 0).")
+    ] = 0,
     scheduler: Annotated[
         str | None,
         typer.Option(
@@ -31,14 +33,15 @@ def study(
     workers: Annotated[
         int | None,
         typer.Option(
+            min=1,
             help="With --scheduler local: the cluster's processes (default one per core). "
             "Without --scheduler: above 1, a pool of single-threaded processes instead of this "
-            "process's multi-threaded kernel (default 1)."
+            "process's multi-threaded kernel (default 1).",
         ),
     ] = None,
     chunk_size: Annotated[
         int | None,
-        typer.Option("--chunk-size", help="Trials per chunk (overrides study.chunk_size)."),
+        typer.Option("--chunk-size", min=1, help="Trials per chunk (overrides study.chunk_size)."),
     ] = None,
     dt: Annotated[
         float | None, typer.Option("--dt", help="Euler step in seconds (overrides study.dt).")
