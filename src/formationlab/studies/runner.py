@@ -158,7 +158,8 @@ def run_study(
     config : StudyConfig
         The ``[study]`` table.
     seed : int
-        Seed of the study (>= 0); trial ``t`` uses ``SeedSequence(seed, spawn_key=(t,))``.
+        Seed of the study (>= 0); trial ``t``'s start depends on ``(seed, t)`` only
+        (:mod:`formationlab.studies.sampling`).
     dt, duration : float
         Euler step and simulated time per trial (config values take precedence).
     center : array_like, shape (n, 2), optional
