@@ -160,7 +160,7 @@ def equilibria(
         for k, (eq, count) in enumerate(zip(cat.equilibria, cat.counts, strict=True)):
             extra = f", {eq.unstable_directions} unstable" if eq.unstable_directions else ""
             typer.echo(
-                f"#{k + 1} {'desired ' if eq.desired else ''}{eq.stability}{extra}: "
+                f"#{k + 1} {eq.outcome} {eq.stability}{extra}: "
                 f"{count} trials, max Re(lambda) = {eq.growth_rate:.4g}"
             )
         typer.echo(f"wrote {folder}/")

@@ -67,6 +67,8 @@ class Catalogue:
                         else [[z.real, z.imag] for z in lam]
                     ),
                     "desired": eq.desired,
+                    "outcome": eq.outcome,
+                    "zero_directions": eq.zero_directions,
                     "count": count,
                     "active_restrictions": list(eq.active),
                     "switching_surfaces": list(eq.surfaces),

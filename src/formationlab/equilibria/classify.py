@@ -61,6 +61,13 @@ class Equilibrium:
         Decreasing real part; rigid-motion modes (and surface normals) removed.
     desired : bool
         Whether ``q`` is the desired formation (:func:`formationlab.classify`).
+    outcome : str
+        ``"desired"``, ``"mirror"`` (distances met, every restricted triple
+        reversed) or ``"incorrect"``: what :func:`formationlab.classify` calls a
+        run that stops here.
+    zero_directions : int
+        Eigenvalues with a zero real part to the tolerance (a continuum of
+        equilibria, or a bifurcation point): why a state is ``degenerate``.
     active : tuple of str
         Labels (1-based, e.g. ``"alpha_123"``) of the restrictions whose step is on.
     surfaces : tuple of str
@@ -79,6 +86,8 @@ class Equilibrium:
     unstable_directions: int
     eigenvalues: NDArray[np.complex128]
     desired: bool
+    outcome: str = "incorrect"
+    zero_directions: int = 0
     active: tuple[str, ...] = ()
     surfaces: tuple[str, ...] = ()
     weights: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
@@ -192,7 +201,7 @@ def classify_equilibrium(
         stability = "saddle"
     else:
         stability = "stable"
-    desired = classify(formation, q, np.zeros_like(q), tolerances) == "desired"
+    outcome = classify(formation, q, np.zeros_like(q), tolerances)
     r = np.linalg.norm(q[formation.edges[:, 1]] - q[formation.edges[:, 0]], axis=-1)
     return Equilibrium(
         q=q,
@@ -201,7 +210,9 @@ def classify_equilibrium(
         stability=stability,
         unstable_directions=unstable,
         eigenvalues=lam,
-        desired=desired,
+        desired=outcome == "desired",
+        outcome=outcome,
+        zero_directions=int(np.sum(np.abs(lam.real) <= ztol)),
         active=active,
         surfaces=tuple(labels[s] for s in on),
         weights=w,

@@ -63,9 +63,16 @@ def _span(q: Any, formation: Any) -> float:
     return float(np.ptp(q, axis=0).max()) + float(formation.diameters.max()) + 0.2
 
 
-def gallery_figure(catalogue: Any, *, columns: int = 4, title: str = "") -> Any:
-    """All equilibria of a catalogue, the desired one first, with class and count."""
-    eqs = catalogue.equilibria
+def gallery_figure(catalogue: Any, *, columns: int = 4, title: str = "", limit: int = 12) -> Any:
+    """The equilibria of a catalogue, the desired one first, with class and count.
+
+    At most ``limit`` panels (the catalogue's order: desired, then by count);
+    the title says how many more there are.
+    """
+    eqs = catalogue.equilibria[:limit]
+    more = len(catalogue.equilibria) - len(eqs)
+    if more:
+        title = f"{title} (+{more} more, see equilibria.json)"
     k = max(len(eqs), 1)
     cols = min(columns, k)
     rows = -(-k // cols)
@@ -77,7 +84,7 @@ def gallery_figure(catalogue: Any, *, columns: int = 4, title: str = "") -> Any:
         kind = eq.stability
         if eq.stability in ("saddle", "filippov") and eq.unstable_directions:
             kind += f" ({eq.unstable_directions} unstable)"
-        label = f"#{idx + 1}" + (" desired" if eq.desired else "")
+        label = f"#{idx + 1}" + ("" if eq.outcome == "incorrect" else f" {eq.outcome}")
         lines = [f"{label}: {kind}", f"{count} trial{'' if count == 1 else 's'}"]
         if eq.surfaces:
             lines.append("on " + ", ".join(eq.surfaces))
