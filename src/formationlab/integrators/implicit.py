@@ -109,9 +109,11 @@ class ImplicitEuler(FixedStepIntegrator):
         if q.ndim == 2:
             if not bad.any():
                 return q_pred  # no surface crossed: explicit Euler exactly
-            return self._correct(system, q, sigma0, base, dt, counters)
+            return self._correct(system, q, sigma0, base, q_pred, bad, dt, counters)
         for b in np.flatnonzero(np.any(bad, axis=-1)):
-            q_pred[b] = self._correct(system, flat[b], sigma0[b], base[b], dt, counters)
+            q_pred[b] = self._correct(
+                system, flat[b], sigma0[b], base[b], q_pred[b], bad[b], dt, counters
+            )
         return q_pred.reshape(q.shape)
 
     def _inconsistent(
@@ -127,17 +129,18 @@ class ImplicitEuler(FixedStepIntegrator):
         q: NDArray[np.float64],
         sigma0: NDArray[np.float64],
         base: NDArray[np.float64],
+        q_pred: NDArray[np.float64],
+        bad: NDArray[np.bool_],
         dt: float,
         counters: dict[str, float],
     ) -> NDArray[np.float64]:
         """The step from one state ``q`` (n, 2) whose explicit-Euler prediction is inconsistent.
 
         ``sigma0`` (s,) are the switching functions at ``q``, ``base`` (n, 2) the
-        field with the predictor's weights ``Upsilon(sigma0)``.
+        field with the predictor's weights ``Upsilon(sigma0)``, ``q_pred`` the
+        predicted end ``q + dt base`` and ``bad`` (s,) the surfaces it disagrees with.
         """
         w0 = (sigma0 >= 0).astype(float)
-        q_pred = q + dt * base
-        bad = self._inconsistent(sigma0, system.sigma(q_pred))
         counters["corrected_steps"] = counters.get("corrected_steps", 0.0) + 1
         evals = 1
         involved: list[int] = []
@@ -152,12 +155,10 @@ class ImplicitEuler(FixedStepIntegrator):
                 evals += 1
             involved += new
             new = []
-            start = q + dt * base
 
-            def end_state(
-                wj: NDArray[np.float64], J: list[int] = involved, start: NDArray = start
-            ) -> NDArray:
-                out = start.copy()
+            def end_state(wj: NDArray[np.float64], J: list[int] = involved) -> NDArray:
+                """``q+`` for the weights ``wj`` of the involved surfaces (f is affine in w)."""
+                out = q_pred.copy()
                 for m, j in enumerate(J):
                     out += (dt * (wj[m] - w0[j])) * directions[j]
                 return out
