@@ -40,6 +40,7 @@ def test_registry_names():
         (Filippov, {"rtol": 0.0}),
         (Filippov, {"save_dt": float("nan")}),
         (Filippov, {"max_events": 0}),
+        (Filippov, {"method": "euler"}),
     ],
 )
 def test_bad_parameters_are_refused(cls, params):

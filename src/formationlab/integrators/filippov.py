@@ -50,6 +50,7 @@ from .base import Integrator, Progress, RawSolution, Status, register_integrator
 __all__ = ["OFF", "ON", "SLIDE", "Filippov"]
 
 OFF, ON, SLIDE = 0, 1, 2
+_METHODS = ("DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")  # solve_ivp's
 _SLACK = 1e-9  # sliding weights within [-slack, 1 + slack] count as in [0, 1]
 
 
@@ -179,7 +180,8 @@ class Filippov(Integrator):
     method : str
         ``solve_ivp`` method. Default ``"DOP853"``.
     save_dt : float
-        Spacing of the saved states, seconds (event times are saved too). Default 0.01.
+        Spacing of the saved states, seconds (event times are saved too); ``run``'s
+        ``save_every`` multiplies it. Default 0.01.
     touch_tol : float
         At an event, surfaces with ``|sigma| <= touch_tol`` are touched and get
         their modes decided together. Default 1e-8.
@@ -212,6 +214,10 @@ class Filippov(Integrator):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
                 raise ParameterError(f"Filippov.{name} must be a finite number > 0, got {v!r}")
+        if self.method not in _METHODS:
+            raise ParameterError(
+                f"Filippov.method must be one of {', '.join(_METHODS)}, got {self.method!r}"
+            )
         if not (isinstance(self.mu, int | float) and np.isfinite(self.mu) and self.mu >= 0):
             raise ParameterError(f"Filippov.mu must be a finite number >= 0, got {self.mu!r}")
         if not (isinstance(self.max_events, int) and self.max_events >= 1):
