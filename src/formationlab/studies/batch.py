@@ -259,6 +259,8 @@ def _run_numba(
     check_every: int,
     speed: float,
 ) -> RawBatch:
+    import numba
+
     from . import kernels
 
     args = _kernel_law(formation, law)
@@ -269,9 +271,16 @@ def _run_numba(
     status = np.zeros(n_trials, dtype=np.int8)
     mc = np.full(n_trials, np.inf)
     with _KERNEL_LOCK:
-        kernels.run_chunks(  # type: ignore[call-arg]
-            q0, CHUNK, *args, dt, n_steps, check_every, speed, q_out, u_out, steps, status, mc
-        )
+        # hand the chunks out one at a time (numba's setting is per thread, restored
+        # below): chunks stop early by different amounts, and a busy machine may slow
+        # one thread down
+        previous = numba.set_parallel_chunksize(1)
+        try:
+            kernels.run_chunks(  # type: ignore[call-arg]
+                q0, CHUNK, *args, dt, n_steps, check_every, speed, q_out, u_out, steps, status, mc
+            )
+        finally:
+            numba.set_parallel_chunksize(previous)
     return RawBatch(q_final=q_out, u_final=u_out, steps=steps, status=status, min_clearance=mc)
 
 
