@@ -313,3 +313,19 @@ def test_equilateral_angle_template_has_one_surface():
         [[0.0, 0.0], [1.0, 0.0], [0.5, np.sqrt(3) / 2]], diameters=0.2, alpha_values="angle"
     )
     assert len(f.surfaces[1]) == 1
+
+
+def test_rk4_is_first_order_through_a_sliding_phase():
+    # its stages straddle the surface: fourth order is lost where the field switches
+    f = triangle(SIM1_TABLE)
+    ref = fl.simulate(f, LAW, SLIDING_Q0, duration=1.5, integrator=Filippov()).final
+    errors = [
+        np.max(
+            np.abs(
+                fl.simulate(f, LAW, SLIDING_Q0, duration=1.5, integrator=fl.RK4(dt=dt)).final - ref
+            )
+        )
+        for dt in (2e-3, 1e-3)
+    ]
+    assert np.log2(errors[0] / errors[1]) == pytest.approx(1.0, abs=0.3)
+    assert errors[1] > 1e-4  # far above what fourth order would leave at dt = 1e-3
