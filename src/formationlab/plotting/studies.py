@@ -142,10 +142,11 @@ def fractions_figure(
     fig, axes = plt.subplots(
         1,
         len(laws),
-        figsize=(3.6 * len(laws) + 0.6, 3.4),
+        figsize=(3.6 * len(laws) + 0.6, 3.8),
         sharex=True,
         sharey=True,
         squeeze=False,
+        layout="constrained",
     )
     for ax, law in zip(axes[0], laws, strict=True):
         mine = [g for g in groups if g["law"] == law]
@@ -153,10 +154,10 @@ def fractions_figure(
         if ax is not axes[0, 0]:
             ax.set_ylabel("")
     handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="upper center", ncol=len(outs), frameon=False)
+    ncol = len(outs) if len(laws) > 1 else min(len(outs), 3)
+    fig.legend(handles, labels, loc="outside lower center", ncol=ncol, frameon=False)
     if title:
-        fig.suptitle(title, y=1.08)
-    fig.tight_layout(rect=(0, 0, 1, 0.9))
+        fig.suptitle(title)
     return fig
 
 
