@@ -387,3 +387,18 @@ def test_study_command_refuses_a_bad_study_table_before_writing(tmp_path, capsys
     err = capsys.readouterr().err
     assert "study.trails" in err and "Traceback" not in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("name", "n_groups"),
+    # four laws, only angle-restricted has k_a (5 values): 3 + 5; one law, 5 thetas x 3 diameters
+    [("study-triangle", 8), ("study-square", 8), ("study-square-theta", 15)],
+)
+def test_example_study_tables_are_valid(name, n_groups):
+    from pathlib import Path
+
+    from formationlab.io.scenario import load_scenario
+
+    sc = load_scenario(Path(__file__).resolve().parents[1] / "examples" / f"{name}.toml")
+    groups = study_groups(sc.formation, sc.law, parse_study(sc.study, source=sc.source))
+    assert len(groups) == n_groups
