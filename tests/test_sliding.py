@@ -302,13 +302,8 @@ def test_nearly_coincident_surfaces_are_separate_sliding_motions():
     assert np.max(np.abs(eul.final - ref.final)) > 0.05
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="Formation.surfaces groups beta by exact float equality: the three angles of an "
-    "equilateral template differ in the last bits, so one surface is split in two by "
-    "round-off and the sliding-mode integrators follow a split motion (see docs/integrators.md)",
-)
 def test_equilateral_angle_template_has_one_surface():
+    """The three angles of an equilateral template differ in their last bits; one surface."""
     f = fl.Formation.from_template(
         [[0.0, 0.0], [1.0, 0.0], [0.5, np.sqrt(3) / 2]], diameters=0.2, alpha_values="angle"
     )

@@ -11,10 +11,13 @@ from numpy.typing import NDArray
 
 from .errors import FormationError
 
-__all__ = ["COLLINEAR_SIN", "alpha_from_shape", "signed_angle", "switching_surfaces"]
+__all__ = ["BETA_RTOL", "COLLINEAR_SIN", "alpha_from_shape", "signed_angle", "switching_surfaces"]
 
 #: A template triple whose |sin| of the angle at i is below this counts as collinear.
 COLLINEAR_SIN = 1e-6
+
+#: Two triples of one triangle share a switching surface when their ``beta`` agree to this.
+BETA_RTOL = 1e-9
 
 
 def signed_angle(u: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -59,17 +62,25 @@ def switching_surfaces(
     """Distinct switching surfaces ``beta c_abc + theta = 0`` (see ``Formation.surfaces``)."""
     n = alpha.shape[0]
     index = np.full((n, n, n), -1, dtype=np.int64)
-    keys: dict[tuple[int, int, int, float], int] = {}
+    tris: list[tuple[int, int, int]] = []
+    betas: list[float] = []
     for i, j, k in np.argwhere(restricted):
         tri = (int(i), int(j), int(k))
         srt = tuple(sorted(tri))
         perm = [srt.index(x) for x in tri]
         parity = 1.0 if perm in ([0, 1, 2], [1, 2, 0], [2, 0, 1]) else -1.0
         beta = float(alpha[i, j, k]) * parity
-        key = (*srt, beta)
-        index[i, j, k] = keys.setdefault(key, len(keys))  # type: ignore[arg-type]
-    tris = np.array([k[:3] for k in keys], dtype=np.int64).reshape(-1, 3)
-    beta = np.array([k[3] for k in keys], dtype=float)
-    for arr in (tris, beta, index):
+        # the same surface when beta agrees to round-off (angles of a template carry it)
+        for s, (t, b) in enumerate(zip(tris, betas, strict=True)):
+            if t == srt and abs(b - beta) <= BETA_RTOL * max(1.0, abs(b)):
+                index[i, j, k] = s
+                break
+        else:
+            index[i, j, k] = len(tris)
+            tris.append(srt)  # type: ignore[arg-type]
+            betas.append(beta)
+    tri_arr = np.array(tris, dtype=np.int64).reshape(-1, 3)
+    beta_arr = np.array(betas, dtype=float)
+    for arr in (tri_arr, beta_arr, index):
         arr.setflags(write=False)
-    return tris, beta, index
+    return tri_arr, beta_arr, index
