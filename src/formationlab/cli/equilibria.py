@@ -59,6 +59,10 @@ def equilibria(
         str | None,
         typer.Option(help="Follow each undesired equilibrium in a gain: PARAM=FROM:TO."),
     ] = None,
+    follow_steps: Annotated[
+        int | None,
+        typer.Option(min=2, help="Values of the gain in --follow (default 24, evenly spaced)."),
+    ] = None,
     force: Annotated[
         bool, typer.Option("--force", help="Replace the files of an earlier run in --out.")
     ] = False,
@@ -99,7 +103,7 @@ def equilibria(
     seed_value = int(seed if seed is not None else table.get("seed", 0))
     duration = float(table.get("duration", 60.0))
     follow = follow if follow is not None else table.get("follow")
-    follow_steps = int(table.get("follow_steps", 24))
+    follow_steps = int(follow_steps or table.get("follow_steps", 24))
     spec = _parse_follow(follow) if follow else None
     if spec and not hasattr(sc.law, spec[0]):
         raise ParameterError(f"the law {sc.law.name!r} has no parameter {spec[0]!r} to follow")
@@ -145,6 +149,7 @@ def equilibria(
                     "values": b.values.tolist(),
                     "stability": [e.stability for e in b.equilibria],
                     "growth_rate": [e.growth_rate for e in b.equilibria],
+                    "attractive": [e.attractive for e in b.equilibria],
                     "distances": [e.distances.tolist() for e in b.equilibria],
                     "positions": [e.q.tolist() for e in b.equilibria],
                     "end": b.end,

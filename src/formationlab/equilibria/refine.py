@@ -141,8 +141,9 @@ def refine(
         Most surfaces a Filippov equilibrium is searched on at once.
     band : float
         Surfaces with ``|sigma_s(q0)|`` below ``band`` times the size of the
-        configuration squared are where ``q0`` chatters: that set is tried
-        first, then the nearest surfaces one, two, ... at a time.
+        configuration squared are those ``q0`` sits on: a Filippov equilibrium
+        on exactly that set is tried before anything else; then the frozen
+        smooth piece; then the nearest surfaces one, two, ... at a time.
 
     Returns
     -------
@@ -157,6 +158,37 @@ def refine(
     atol = tol * u_scale
     stol = surface_tol * scale**2 + surface_tol
 
+    def try_filippov(subset: tuple[int, ...]) -> Refined:
+        q, w = _solve_filippov(formation, law, q0, w0, subset, scale)
+        res_f = _residual(formation, law, q, w)
+        sig = np.asarray(law.switching(formation, q), dtype=float)
+        on = np.zeros(sig.size, bool)
+        on[list(subset)] = True
+        ok = (
+            res_f <= atol
+            and bool(np.all(np.abs(sig[on]) <= stol))
+            and bool(np.all((sig[~on] >= 0) == (w[~on] > 0.5)))
+            and bool(np.all(np.abs(sig[~on]) > stol))
+            and bool(np.all((w[on] > 0) & (w[on] < 1)))
+        )
+        return Refined(
+            q=q,
+            weights=w,
+            surfaces=subset,
+            residual=res_f,
+            success=ok,
+            message="Filippov equilibrium on a switching surface" if ok else "",
+        )
+
+    smooth_law = law.smooth or sigma0.size == 0
+    subsets = [] if smooth_law else _subsets(sigma0, max_surfaces, band * scale**2)
+    # a state that sits on surfaces (an implicit scheme's end, or a continuation
+    # step) is first refined on them: the frozen field of one side could lead far away
+    if subsets and np.all(np.abs(sigma0[list(subsets[0])]) <= band * scale**2):
+        first = try_filippov(subsets[0])
+        if first.success:
+            return first
+        subsets = subsets[1:]
     smooth = _solve_piece(formation, law, q0, w0, scale)
     res = _residual(formation, law, smooth, w0)
     sig = np.asarray(law.switching(formation, smooth), dtype=float)
@@ -175,44 +207,20 @@ def refine(
         if res > atol
         else "the root of the frozen field lies across a switching surface"
     )
-    if law.smooth or sigma0.size == 0:
-        return Refined(q=smooth, weights=w0, surfaces=(), residual=res, success=False, message=why)
-    order = np.argsort(np.abs(sigma0))
-    best: Refined | None = None
-    for subset in _subsets(sigma0, order, max_surfaces, band * scale**2):
-        cand = _solve_filippov(formation, law, q0, w0, tuple(sorted(subset)), scale)
-        q, w = cand
-        res_f = _residual(formation, law, q, w)
-        sig = np.asarray(law.switching(formation, q), dtype=float)
-        on = np.zeros(sig.size, bool)
-        on[list(subset)] = True
-        ok = (
-            res_f <= atol
-            and bool(np.all(np.abs(sig[on]) <= stol))
-            and bool(np.all((sig[~on] >= 0) == (w[~on] > 0.5)))
-            and bool(np.all(np.abs(sig[~on]) > stol))
-            and bool(np.all((w[on] > 0) & (w[on] < 1)))
-        )
-        if ok:
-            return Refined(
-                q=q,
-                weights=w,
-                surfaces=tuple(int(s) for s in subset),
-                residual=res_f,
-                success=True,
-                message="Filippov equilibrium on a switching surface",
-            )
-        if best is None or res_f < best.residual:
+    best = Refined(q=smooth, weights=w0, surfaces=(), residual=res, success=False, message=why)
+    for subset in subsets:
+        cand = try_filippov(subset)
+        if cand.success:
+            return cand
+        if cand.residual < best.residual:
             best = Refined(
-                q=q,
-                weights=w,
-                surfaces=tuple(int(s) for s in subset),
-                residual=res_f,
+                q=cand.q,
+                weights=cand.weights,
+                surfaces=subset,
+                residual=cand.residual,
                 success=False,
                 message=why + "; no Filippov equilibrium on the nearest surfaces either",
             )
-    if best is None:  # pragma: no cover - sigma0.size > 0 gives at least one subset
-        raise RuntimeError("no switching surface to try")
     return best
 
 
@@ -271,10 +279,9 @@ def _solve_filippov(
     return q, w
 
 
-def _subsets(
-    sigma0: NDArray, order: NDArray, max_surfaces: int, band: float
-) -> list[tuple[int, ...]]:
-    """Sets of surfaces to try: those ``q0`` chatters on, then the nearest ones."""
+def _subsets(sigma0: NDArray, max_surfaces: int, band: float) -> list[tuple[int, ...]]:
+    """Sets of surfaces to try: those ``q0`` sits on (``|sigma| <= band``), then the nearest."""
+    order = np.argsort(np.abs(sigma0))
     near = tuple(sorted(int(s) for s in np.flatnonzero(np.abs(sigma0) <= band)))
     out = [near] if near else []
     for size in range(1, min(max_surfaces, sigma0.size) + 1):

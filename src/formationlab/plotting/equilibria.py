@@ -76,7 +76,7 @@ def gallery_figure(catalogue: Any, *, columns: int = 4, title: str = "", limit: 
     k = max(len(eqs), 1)
     cols = min(columns, k)
     rows = -(-k // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(2.6 * cols, 2.8 * rows), squeeze=False)
+    fig, axes = plt.subplots(rows, cols, figsize=(2.6 * cols, 3.1 * rows), squeeze=False)
     for ax in axes.ravel()[len(eqs) :]:
         ax.axis("off")
     span = max((_span(eq.q, catalogue.formation) for eq in eqs), default=1.0)
