@@ -130,7 +130,7 @@ def main() -> None:
     arrays = (q0, res.q_final, res.u_final, res.outcome, res.max_distance_error)
     arrays += (res.converged_time, res.min_clearance, res.steps)
     per_trial = sum(x.nbytes for x in arrays) / n_million
-    scratch = (4 * 3 * 2 + 4) * 8 * CHUNK
+    scratch = (4 * 3 * 2 + 4) * 8 * CHUNK  # four (n, 2, chunk) buffers and four (chunk,)
     print(
         f"  arrays per trial (input and result): {per_trial:.0f} bytes, "
         f"{per_trial * n_million / 2**20:.0f} MiB in all; kernel scratch per chunk of "

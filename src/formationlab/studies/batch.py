@@ -46,8 +46,11 @@ KERNEL_LAWS = ("distance", "angle-restricted", "squared-distance", "signed-area"
 
 Backend = Literal["numba", "numpy"]
 
-#: Trials per chunk of the numba backend (the unit of parallel work).
-CHUNK = 256
+#: Most trials per chunk of the numba backend (the unit of parallel work): long
+#: loops over trials amortise each loop's set-up; fewer when a batch is small, so
+#: that every thread gets about four chunks.
+CHUNK = 1024
+MIN_CHUNK = 64
 #: The numba kernel already uses every core, and numba's fallback threading layer
 #: ("workqueue", when neither TBB nor OpenMP is found) must not be entered from two
 #: threads at once: calls are serialised.
@@ -270,6 +273,7 @@ def _run_numba(
     steps = np.zeros(n_trials, dtype=np.int64)
     status = np.zeros(n_trials, dtype=np.int8)
     mc = np.full(n_trials, np.inf)
+    chunk = _chunk_size(n_trials, numba.get_num_threads())
     with _KERNEL_LOCK:
         # hand the chunks out one at a time (numba's setting is per thread, restored
         # below): chunks stop early by different amounts, and a busy machine may slow
@@ -277,11 +281,16 @@ def _run_numba(
         previous = numba.set_parallel_chunksize(1)
         try:
             kernels.run_chunks(  # type: ignore[call-arg]
-                q0, CHUNK, *args, dt, n_steps, check_every, speed, q_out, u_out, steps, status, mc
+                q0, chunk, *args, dt, n_steps, check_every, speed, q_out, u_out, steps, status, mc
             )
         finally:
             numba.set_parallel_chunksize(previous)
     return RawBatch(q_final=q_out, u_final=u_out, steps=steps, status=status, min_clearance=mc)
+
+
+def _chunk_size(n_trials: int, threads: int) -> int:
+    """Trials per chunk: about four chunks per thread, within ``[MIN_CHUNK, CHUNK]``."""
+    return int(min(CHUNK, max(MIN_CHUNK, -(-n_trials // (4 * threads)))))
 
 
 def _kernel_law(formation: Formation, law: Law) -> tuple:

@@ -54,50 +54,49 @@ def _controls(
     for b in range(nact):
         gap[b] = np.inf
     rep = -gain_rep * eta / s0
+    # (arrays are indexed directly, without views: a view costs reference counting)
     for p in range(pi.shape[0]):
         i = pi[p]
         j = pj[p]
         a = pa[p]
-        xi, yi, xj, yj = q[i, 0], q[i, 1], q[j, 0], q[j, 1]
-        uxi, uyi, uxj, uyj = u[i, 0], u[i, 1], u[j, 0], u[j, 1]
         if pedge[p] and kind == LOG_BARRIER:
             inv_da = 1.0 / (pd[p] - a)
             for b in range(nact):
-                dx = xj[b] - xi[b]
-                dy = yj[b] - yi[b]
+                dx = q[j, 0, b] - q[i, 0, b]
+                dy = q[j, 1, b] - q[i, 1, b]
                 r = math.sqrt(dx * dx + dy * dy)
                 clr = r - a
                 gap[b] = min(gap[b], clr)
                 g = gain_edge * (clr * inv_da - 1.0) / (clr * r)  # k_c phi'(r) / r, eqs. (7), (8)
-                uxi[b] += g * dx
-                uyi[b] += g * dy
-                uxj[b] -= g * dx
-                uyj[b] -= g * dy
+                u[i, 0, b] += g * dx
+                u[i, 1, b] += g * dy
+                u[j, 0, b] -= g * dx
+                u[j, 1, b] -= g * dy
         elif pedge[p]:
             d2 = pd[p] * pd[p]
             for b in range(nact):
-                dx = xj[b] - xi[b]
-                dy = yj[b] - yi[b]
+                dx = q[j, 0, b] - q[i, 0, b]
+                dy = q[j, 1, b] - q[i, 1, b]
                 r2 = dx * dx + dy * dy
                 gap[b] = min(gap[b], math.sqrt(r2) - a)
                 g = gain_edge * (r2 - d2)  # Krick et al. 2009
-                uxi[b] += g * dx
-                uyi[b] += g * dy
-                uxj[b] -= g * dx
-                uyj[b] -= g * dy
+                u[i, 0, b] += g * dx
+                u[i, 1, b] += g * dy
+                u[j, 0, b] -= g * dx
+                u[j, 1, b] -= g * dy
         else:
             for b in range(nact):
-                dx = xj[b] - xi[b]
-                dy = yj[b] - yi[b]
+                dx = q[j, 0, b] - q[i, 0, b]
+                dy = q[j, 1, b] - q[i, 1, b]
                 r = math.sqrt(dx * dx + dy * dy)
                 s = r - a
                 gap[b] = min(gap[b], s)
                 # k_r gamma'(s) / r with gamma'(s) = -eta (1/s - 1/s0) / s^2 (Khatib)
                 g = rep * (s0 - s) / (s * s * s * r) if s < s0 else 0.0
-                uxi[b] += g * dx
-                uyi[b] += g * dy
-                uxj[b] -= g * dx
-                uyj[b] -= g * dy
+                u[i, 0, b] += g * dx
+                u[i, 1, b] += g * dy
+                u[j, 0, b] -= g * dx
+                u[j, 1, b] -= g * dy
     # eqs. (11), (13), (14), (23): per restricted triangle (a, b, c), c_abc once; a term
     # (i, j, k) with c_ijk = par c_abc adds -w Upsilon(alpha_ijk c_ijk + theta) k x r_jk
     # to u_i, w = 2 k_a alpha_ijk (the ordered pairs (j, k), (k, j) of eq. 13 are equal).
@@ -105,36 +104,38 @@ def _controls(
         ia = ra[t]
         ib = rb[t]
         ic = rc[t]
-        xa, ya, xb, yb, xc, yc = q[ia, 0], q[ia, 1], q[ib, 0], q[ib, 1], q[ic, 0], q[ic, 1]
         for b in range(nact):
-            cbuf[b] = (xb[b] - xa[b]) * (yc[b] - ya[b]) - (yb[b] - ya[b]) * (xc[b] - xa[b])
+            cbuf[b] = (q[ib, 0, b] - q[ia, 0, b]) * (q[ic, 1, b] - q[ia, 1, b]) - (
+                q[ib, 1, b] - q[ia, 1, b]
+            ) * (q[ic, 0, b] - q[ia, 0, b])
         for v in range(roff[t], roff[t + 1]):
             i = vi[v]
+            j = vj[v]
+            k = vk[v]
             al = valpha[v]
             par = vpar[v]
             w0 = vw[v]
-            xj, yj, xk, yk = q[vj[v], 0], q[vj[v], 1], q[vk[v], 0], q[vk[v], 1]
-            uxi, uyi = u[i, 0], u[i, 1]
             for b in range(nact):
                 w = w0 if al * (par * cbuf[b]) + theta >= 0.0 else 0.0  # Upsilon(0) = 1
-                uxi[b] += w * (yk[b] - yj[b])
-                uyi[b] -= w * (xk[b] - xj[b])
+                u[i, 0, b] += w * (q[k, 1, b] - q[j, 1, b])
+                u[i, 1, b] -= w * (q[k, 0, b] - q[j, 0, b])
     for t in range(sa.shape[0]):  # signed-area penalty, grad_a A_abc = 1/2 k x r_bc
         ia = sa[t]
         ib = sb[t]
         ic = sc[t]
         target = starget[t]
-        xa, ya, xb, yb, xc, yc = q[ia, 0], q[ia, 1], q[ib, 0], q[ib, 1], q[ic, 0], q[ic, 1]
-        uxa, uya, uxb, uyb, uxc, uyc = u[ia, 0], u[ia, 1], u[ib, 0], u[ib, 1], u[ic, 0], u[ic, 1]
         for b in range(nact):
-            area = 0.5 * ((xb[b] - xa[b]) * (yc[b] - ya[b]) - (yb[b] - ya[b]) * (xc[b] - xa[b]))
+            xa, ya = q[ia, 0, b], q[ia, 1, b]
+            xb, yb = q[ib, 0, b], q[ib, 1, b]
+            xc, yc = q[ic, 0, b], q[ic, 1, b]
+            area = 0.5 * ((xb - xa) * (yc - ya) - (yb - ya) * (xc - xa))
             g = k_area * 0.5 * (area - target)
-            uxa[b] += g * (yc[b] - yb[b])
-            uya[b] -= g * (xc[b] - xb[b])
-            uxb[b] += g * (ya[b] - yc[b])
-            uyb[b] -= g * (xa[b] - xc[b])
-            uxc[b] += g * (yb[b] - ya[b])
-            uyc[b] -= g * (xb[b] - xa[b])
+            u[ia, 0, b] += g * (yc - yb)
+            u[ia, 1, b] -= g * (xc - xb)
+            u[ib, 0, b] += g * (ya - yc)
+            u[ib, 1, b] -= g * (xa - xc)
+            u[ic, 0, b] += g * (yb - ya)
+            u[ic, 1, b] -= g * (xb - xa)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
@@ -224,10 +225,9 @@ def _run_chunk(
             fin[b] = 0.0
         for i in range(n):
             for d in range(2):
-                qs, qps, us = q[i, d], qp[i, d], u[i, d]
                 for b in range(nact):
-                    x = qs[b] + dt * us[b]  # explicit Euler
-                    qps[b] = x  # the next state, written over the older one
+                    x = q[i, d, b] + dt * u[i, d, b]  # explicit Euler
+                    qp[i, d, b] = x  # the next state, written over the older one
                     fin[b] += x * 0.0  # NaN unless x is finite
         q, qp = qp, q
         u, up = up, u
