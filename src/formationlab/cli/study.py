@@ -80,7 +80,9 @@ def study(
     )
     dt = float(config.dt or getattr(sc.integrator, "dt", None) or 1e-3)
     duration = float(config.duration or sc.duration)
-    center = sc.formation.template if sc.formation.template is not None else sc.q0
+    center = None  # of gaussian starts: the template, else the scenario's positions
+    if config.initial.kind == "gaussian":
+        center = sc.formation.template if sc.formation.template is not None else sc.q0
     groups = study_groups(sc.formation, sc.law, config)
     identity = study_identity(groups, config, seed=seed, dt=dt, duration=duration, center=center)
     store = ChunkFolder(out, identity)
@@ -118,12 +120,11 @@ def study(
         workers=workers,
         store=store,
         resume=resume,
-        out=out,
     )
     _write_outputs(out, sc, result, identity)
 
 
-def _run_with_progress(run: Any, *args: Any, out: Path, store: Any, **kwargs: Any) -> Any:
+def _run_with_progress(run: Any, *args: Any, store: Any, **kwargs: Any) -> Any:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
     with Progress(
@@ -142,10 +143,9 @@ def _run_with_progress(run: Any, *args: Any, out: Path, store: Any, **kwargs: An
             return run(*args, store=store, progress=progress, **kwargs)
         except KeyboardInterrupt:
             bar.stop()
-            kept = len(list(store.folder.glob("g*-c*.parquet")))
             fail(
-                f"interrupted; {kept} finished chunks are kept in {store.folder}: run the same "
-                "command with --resume to finish",
+                f"interrupted; {store.finished()} finished chunks are kept in {store.folder}: "
+                "run the same command with --resume to finish",
                 code=130,
             )
 

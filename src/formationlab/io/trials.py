@@ -110,7 +110,7 @@ class ChunkFolder:
         """
         manifest = self.folder / "manifest.json"
         if manifest.exists():
-            return len(list(self.folder.glob("g*-c*.parquet")))
+            return self.finished()
         others = sorted(self.root.glob("*/manifest.json"), key=lambda p: p.stat().st_mtime)
         if not others:
             raise ParameterError(
@@ -126,6 +126,10 @@ class ChunkFolder:
             f"{', '.join(diff) or 'the formation'}); resume with the same scenario, --seed, "
             "--trials and chunk size, or start afresh in an empty folder"
         )
+
+    def finished(self) -> int:
+        """How many finished chunks the folder holds."""
+        return len(list(self.folder.glob("g*-c*.parquet")))
 
     def load(self, chunk_id: str) -> pd.DataFrame | None:
         """The chunk's trials, or None if it has not finished."""
