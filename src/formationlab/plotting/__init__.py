@@ -17,16 +17,20 @@ from .runs import (
     plot_trajectories,
     run_figures,
 )
+from .studies import plot_fractions, plot_shape, study_figures
 
 __all__ = [
     "PAPER_FIGURES",
     "paper_figures",
     "plot_controls",
     "plot_distance_errors",
+    "plot_fractions",
     "plot_lyapunov",
     "plot_result",
+    "plot_shape",
     "plot_trajectories",
     "run_figures",
+    "study_figures",
 ]
 
 _KINDS = {
