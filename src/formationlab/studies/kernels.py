@@ -6,8 +6,9 @@ plain SIMD loop. Chunks run in parallel (``prange``); inside a chunk, trials
 that stop are swapped out of the live range (compaction), so that early
 stopping saves work instead of masking it.
 
-The law enters as data (:class:`KernelLaw`, built by
-:mod:`formationlab.studies.batch`):
+The law enters as plain arrays and numbers (built from the formation and the
+law object by :mod:`formationlab.studies.batch`), so one compiled kernel serves
+every law and formation:
 
 * every pair ``i < j``: edge (``d_ij``, ``a_ij``) or not (Khatib's repulsion);
   on an edge either the paper's ``phi_ij`` (``kind = LOG_BARRIER``, eqs. 5, 7)
