@@ -7,6 +7,7 @@ the classification are checked on hand-built cases.
 
 import math
 
+import numba
 import numpy as np
 import pytest
 
@@ -184,16 +185,23 @@ def test_short_runs_do_not_converge():
 
 
 def test_chunking_and_compaction_do_not_change_results(monkeypatch):
-    # Trials are independent: the result of a trial must not depend on its chunk or
-    # on which other trials stopped before it (the kernel compacts its live trials).
+    # Trials are independent: the result of a trial must not depend on its chunk, on
+    # the number of threads, or on which other trials stopped before it (the kernel
+    # compacts its live trials).
     f = square_one_diagonal()
     law = LAWS["angle-restricted"]
     q0 = draws(f, 23, 1.5, seed=5)
     full = run_batch(f, law, q0, dt=DT, duration=2.0, check_every=3)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        single = run_batch(f, law, q0, dt=DT, duration=2.0, check_every=3)
+    finally:
+        numba.set_num_threads(threads)
     monkeypatch.setattr(batch, "CHUNK", 4)
     small = run_batch(f, law, q0, dt=DT, duration=2.0, check_every=3)
     part = run_batch(f, law, q0[9:14], dt=DT, duration=2.0, check_every=3)
-    for other, sl in ((small, slice(None)), (part, slice(9, 14))):
+    for other, sl in ((small, slice(None)), (part, slice(9, 14)), (single, slice(None))):
         np.testing.assert_array_equal(other.q_final, full.q_final[sl])
         np.testing.assert_array_equal(other.steps, full.steps[sl])
         np.testing.assert_array_equal(other.min_clearance, full.min_clearance[sl])
