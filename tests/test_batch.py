@@ -321,3 +321,21 @@ def test_non_finite_step_ends_the_trial_at_its_last_finite_state():
         np.testing.assert_array_equal(res.steps, [0, 10])
         np.testing.assert_array_equal(res.q_final[0], q0[0])
         assert res.outcome[0] == "not-converged" and np.isnan(res.converged_time[0])
+
+
+@pytest.mark.parametrize(
+    "law",
+    [fl.AngleRestrictedLaw(k_c=1.5, k_a=2.0, theta=0.2), SignedAreaLaw(k=0.5, k_s=3.0, k_r=1.0)],
+)
+def test_angle_valued_alpha_on_a_ring(law):
+    # A ring of four (no diagonals): restricted triples (i, j, k) whose j and k are not
+    # neighbours, angle-valued alpha, non-default gains; kernel against the reference.
+    f = fl.Formation.from_template(
+        SQUARE, edges=[[1, 2], [2, 3], [3, 4], [4, 1]], alpha_values="angle"
+    )
+    assert f.alpha_values == "angle" and not np.all(np.isin(np.abs(f.alpha), [0.0, 1.0]))
+    q0 = draws(f, 8, 1.5, seed=21)
+    a, b = (run_batch(f, law, q0, dt=DT, duration=1.5, backend=x) for x in ("numba", "numpy"))
+    np.testing.assert_array_equal(a.steps, b.steps)
+    np.testing.assert_array_equal(a.outcome, b.outcome)
+    np.testing.assert_allclose(a.q_final, b.q_final, rtol=0, atol=1e-9)
