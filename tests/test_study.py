@@ -392,7 +392,12 @@ def test_study_command_refuses_a_bad_study_table_before_writing(tmp_path, capsys
 @pytest.mark.parametrize(
     ("name", "n_groups"),
     # four laws, only angle-restricted has k_a (5 values): 3 + 5; one law, 5 thetas x 3 diameters
-    [("study-triangle", 8), ("study-square", 8), ("study-square-theta", 15)],
+    [
+        ("study-triangle", 8),
+        ("study-square", 8),
+        ("study-square-theta", 15),
+        ("study-triangle-million", 1),
+    ],
 )
 def test_example_study_tables_are_valid(name, n_groups):
     from pathlib import Path
