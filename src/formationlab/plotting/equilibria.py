@@ -76,14 +76,18 @@ def gallery_figure(catalogue: Any, *, columns: int = 4, title: str = "", limit: 
     k = max(len(eqs), 1)
     cols = min(columns, k)
     rows = -(-k // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(2.6 * cols, 3.1 * rows), squeeze=False)
+    fig, axes = plt.subplots(
+        rows, cols, figsize=(2.6 * cols, 3.1 * rows + 0.4), squeeze=False, layout="constrained"
+    )
     for ax in axes.ravel()[len(eqs) :]:
         ax.axis("off")
     span = max((_span(eq.q, catalogue.formation) for eq in eqs), default=1.0)
     for idx, (eq, count, ax) in enumerate(zip(eqs, catalogue.counts, axes.ravel(), strict=False)):
         kind = eq.stability
-        if eq.stability in ("saddle", "filippov") and eq.unstable_directions:
+        if eq.unstable_directions:
             kind += f" ({eq.unstable_directions} unstable)"
+        if eq.attractive:
+            kind += ", attractive"
         label = f"#{idx + 1}" + ("" if eq.outcome == "incorrect" else f" {eq.outcome}")
         lines = [f"{label}: {kind}", f"{count} trial{'' if count == 1 else 's'}"]
         if eq.surfaces:
@@ -95,7 +99,6 @@ def gallery_figure(catalogue: Any, *, columns: int = 4, title: str = "", limit: 
         axes[0, 0].text(0.5, 0.5, "no equilibrium found", ha="center", va="center")
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
     return fig
 
 
