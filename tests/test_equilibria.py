@@ -228,6 +228,32 @@ def test_study_end_states_are_read_by_law(tmp_path):
         read_study_end_states(tmp_path, 3, "distance")
 
 
+def test_study_end_states_keep_the_scenarios_point_of_a_sweep(tmp_path):
+    pd = pytest.importorskip("pandas")
+    from formationlab.errors import ScenarioError
+    from formationlab.io.equilibria import read_study_end_states
+
+    frame = pd.DataFrame(
+        {
+            "law": ["angle-restricted"] * 3 + ["distance"],
+            "k_a": [1.0, 3.0, 3.0, np.nan],
+            "outcome": ["desired", "incorrect", "desired", "mirror"],
+            "x1": [0.0, 1.0, 2.0, 3.0],
+            "y1": [0.0, 1.0, 2.0, 3.0],
+            "x2": [5.0, 6.0, 7.0, 8.0],
+            "y2": [5.0, 6.0, 7.0, 8.0],
+        }
+    )
+    frame.to_parquet(tmp_path / "trials.parquet")
+    q, outcome = read_study_end_states(tmp_path, 2, "angle-restricted", {"k_a": 3.0, "k_c": 2.0})
+    assert outcome.tolist() == ["incorrect", "desired"]
+    np.testing.assert_array_equal(q[:, 0, 0], [1.0, 2.0])
+    q, outcome = read_study_end_states(tmp_path, 2, "distance", {"k_c": 2.0})
+    assert outcome.tolist() == ["mirror"]
+    with pytest.raises(ScenarioError, match="k_a = 1, 3"):
+        read_study_end_states(tmp_path, 2, "angle-restricted", {"k_a": 5.0})
+
+
 def test_filippov_equilibrium_of_the_square_attracts_at_its_sliding_rate():
     """The square with both diagonals under the angle-restricted law (docs/equilibria.md).
 
@@ -276,3 +302,68 @@ def test_filippov_equilibrium_of_the_square_attracts_at_its_sliding_rate():
     late = res.t >= 0.3
     slope = np.polyfit(res.t[late], np.log(err[late]), 1)[0]
     assert slope == pytest.approx(eq.growth_rate, rel=0.05)
+
+
+def test_continuation_follows_the_hand_balance_of_the_equilateral_equilibrium(sim2):
+    """Along k_a the shrunken triangle of simulation 2 keeps the balance of docs/paper.md.
+
+    On the median of an equilateral triangle of side r the two pulls of phi and the
+    push of psi (eq. 23, ordered pairs) balance when
+    k_c sqrt(3) (1/(d - a) - 1/(r - a)) + 2 k_a r = 0, i.e.
+    k_a = sqrt(3) k_c (1/(r - a) - 1/(d - a)) / (2 r).
+    """
+    from formationlab.equilibria import follow
+
+    law = fl.AngleRestrictedLaw(k_c=2.0, k_a=3.0, theta=0.5)
+    run = fl.simulate(sim2, law, [[-3, -3], [3, -3], [0, 3]], duration=8.0, save_every=1000)
+    branch = follow(sim2, law, run.q[-1], "k_a", [3.0, 2.0, 1.0, 0.5])
+    assert branch.end == "end of range"
+    np.testing.assert_allclose(branch.values, [3.0, 2.0, 1.0, 0.5])
+    for k_a, eq in zip(branch.values, branch.equilibria, strict=True):
+        r = eq.distances[0]
+        np.testing.assert_allclose(eq.distances, r, rtol=1e-9)
+        balance = np.sqrt(3) * 2.0 * (1 / (r - A) - 1 / (D - A)) / (2 * r)
+        assert balance == pytest.approx(k_a, rel=1e-8)
+        assert eq.stability == "stable"  # below k_a* = 3.608 (docs/equilibria.md)
+    sides = [eq.distances[0] for eq in branch.equilibria]
+    assert np.all(np.diff(sides) > 0)  # the triangle grows back towards d as k_a falls
+
+
+def test_relabelling_by_a_symmetry_of_the_square_is_the_same_equilibrium():
+    square = fl.Formation.from_template([[0, 0], [1, 0], [1, 1], [0, 1]], diameters=A)
+    law = fl.DistanceLaw(k_c=K_C)
+    kite = refine(square, law, np.array([[-0.7, 0.0], [0.7, 0.1], [0.0, -0.5], [0.05, 0.45]]))
+    assert kite.success
+    eq = classify_equilibrium(square, law, kite)
+    assert eq.outcome == "incorrect" and eq.stability == "stable"
+    turned = kite.q[[3, 0, 1, 2]]  # robot k takes robot k-1's place: the 90-degree turn
+    assert same_equilibrium(square, kite.q, rotate(turned, 0.3) + 1.0)
+    again = classify_equilibrium(square, law, refine(square, law, turned + 1e-3))
+    np.testing.assert_allclose(again.eigenvalues, eq.eigenvalues, rtol=1e-5)
+    # swapping two adjacent robots is not a symmetry of the square's graph data
+    assert not same_equilibrium(square, kite.q, kite.q[[1, 0, 2, 3]])
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--follow", "k_a=3"], "--follow takes PARAM=FROM:TO"),
+        (["--law", "no-such-law"], "unknown law"),
+        (["--follow", "eta=0.1:1", "--law", "distance"], "has no parameter"),
+    ],
+)
+def test_equilibria_command_rejects_bad_options(tmp_path, capsys, args, message):
+    from formationlab.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(
+            [
+                "equilibria",
+                str(EXAMPLES / "paper-simulation-1.toml"),
+                "--out",
+                str(tmp_path / "o"),
+                *args,
+            ]
+        )
+    assert exc.value.code == 2
+    assert message in capsys.readouterr().err

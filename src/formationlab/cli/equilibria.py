@@ -114,7 +114,12 @@ def equilibria(
     outs = [np.array([own.outcome()])]
     source: dict[str, Any] = {"scenario_run": 1}
     if from_study is not None:
-        q, o = read_study_end_states(from_study, sc.n, sc.law.name)
+        numbers = {
+            f.name: getattr(sc.law, f.name)
+            for f in dataclasses.fields(sc.law)
+            if isinstance(getattr(sc.law, f.name), int | float)
+        }
+        q, o = read_study_end_states(from_study, sc.n, sc.law.name, numbers)
         cands.append(q)
         outs.append(o)
         source["study"] = {"path": str(from_study), "trials": len(q)}

@@ -28,7 +28,10 @@ def write_equilibria(data: dict[str, Any], target: str | os.PathLike[str]) -> Pa
 
 
 def read_study_end_states(
-    study: str | os.PathLike[str], n: int, law: str
+    study: str | os.PathLike[str],
+    n: int,
+    law: str,
+    parameters: dict[str, float] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.str_]]:
     """Final positions and outcomes of a study's trials of ``law``.
 
@@ -40,6 +43,10 @@ def read_study_end_states(
         Number of robots: columns ``x1, y1, ..., xn, yn`` (1-based) must exist.
     law : str
         Only rows whose ``law`` column equals this name are read.
+    parameters : dict, optional
+        The law's parameters (e.g. ``{"k_a": 3.0}``). A study that swept one of
+        them has a column of that name; only rows at this value (or NaN, not
+        applicable) are read, so that the end states belong to the law refined.
 
     Returns
     -------
@@ -73,5 +80,16 @@ def read_study_end_states(
             f"{path} holds no trial of the law {law!r}; use a study that ran it, "
             "or leave out --from-study to use random starts"
         )
+    for key, value in (parameters or {}).items():
+        if key in frame.columns and key not in ("law", "outcome"):
+            column = frame[key].to_numpy(dtype=float)
+            keep = np.isnan(column) | np.isclose(column, float(value), rtol=1e-12, atol=0.0)
+            if not keep.any():
+                swept = ", ".join(f"{v:g}" for v in np.unique(column[~np.isnan(column)]))
+                raise ScenarioError(
+                    f"{path}: the study ran {law!r} at {key} = {swept}, not at the "
+                    f"scenario's {key} = {float(value):g}; set {key} to one of those"
+                )
+            frame = frame[keep]
     q = np.stack([frame[[f"x{i}", f"y{i}"]].to_numpy(dtype=float) for i in range(1, n + 1)], axis=1)
     return q, frame["outcome"].to_numpy(dtype=str)
