@@ -23,6 +23,7 @@ rotation modes removed (:mod:`formationlab.equilibria.jacobian`):
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -113,7 +114,9 @@ def _zero_tol(lam: NDArray[np.complex128]) -> float:
     return 1e-6 * max(1.0, float(np.max(np.abs(lam)))) if lam.size else 1e-6
 
 
-def _sliding_field(formation: Formation, law: Law, weights: NDArray, on: list[int]):  # type: ignore[no-untyped-def]
+def _sliding_field(
+    formation: Formation, law: Law, weights: NDArray, on: list[int]
+) -> tuple[Callable[[NDArray], NDArray], Callable[[NDArray], NDArray]]:
     """The sliding field ``u_{w*(q)}(q)`` on the surfaces ``on``: ``grad sigma . u = 0``.
 
     ``u_w`` is affine in ``w``, so ``w*`` solves a small linear system at every ``q``.

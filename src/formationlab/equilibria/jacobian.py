@@ -99,5 +99,5 @@ def reduced_eigenvalues(
     if extra is not None:
         modes = np.concatenate([modes, np.asarray(extra, dtype=float)], axis=1)
     basis = complement(modes)
-    lam = np.linalg.eigvals(basis.T @ jac @ basis)
+    lam = np.linalg.eigvals(basis.T @ jac @ basis).astype(np.complex128)
     return lam[np.argsort(-lam.real, kind="stable")]
