@@ -79,7 +79,14 @@ def test_result_fields_and_shapes(results, cases):
     assert isinstance(res, BatchResult)
     b, n = cases["angle-restricted", "triangle"][2].shape[:2]
     assert res.q_final.shape == res.u_final.shape == (b, n, 2)
-    for name in ("outcome", "max_distance_error", "converged_time", "min_clearance", "steps"):
+    for name in (
+        "outcome",
+        "max_distance_error",
+        "converged_time",
+        "min_clearance",
+        "steps",
+        "net_speed",
+    ):
         assert getattr(res, name).shape == (b,)
     assert res.steps.dtype == np.int64
     assert set(res.outcome) <= set(fl.OUTCOMES)
@@ -96,6 +103,7 @@ def test_numba_equals_numpy_reference(results, law, shape):
     np.testing.assert_allclose(a.min_clearance, b.min_clearance, rtol=0, atol=1e-9)
     np.testing.assert_array_equal(np.isnan(a.converged_time), np.isnan(b.converged_time))
     np.testing.assert_allclose(a.converged_time, b.converged_time, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a.net_speed, b.net_speed, rtol=0, atol=1e-9)
 
 
 @pytest.mark.parametrize("law", list(LAWS))
@@ -115,8 +123,21 @@ def test_batch_equals_one_by_one_simulator(results, cases, law, shape):
         assert (sim.status == "step-collision") == collided
         np.testing.assert_allclose(res.q_final[t], sim.q[-1], rtol=0, atol=1e-9)
         np.testing.assert_allclose(res.u_final[t], sim.u[-1], rtol=0, atol=1e-9)
-        expected = classify(f, sim.q[-1], sim.u[-1], contact=sim.status == "step-collision")
+        # net speed between the trial's last two convergence checks (every 7 steps and
+        # at step 2000), from the simulator's positions at those steps
+        checks = [k for k in range(steps + 1) if k % 7 == 0 or k == 2000]
+        net = None
+        if len(checks) >= 2:
+            k1, k0 = checks[-1], checks[-2]
+            net = np.linalg.norm(sim.q[k1] - sim.q[k0], axis=-1).max() / ((k1 - k0) * DT)
+            assert res.net_speed[t] == pytest.approx(net, rel=1e-6, abs=1e-9)
+        else:
+            assert np.isnan(res.net_speed[t])
+        expected = classify(f, sim.q[-1], sim.u[-1], contact=collided, net_speed=net)
         assert res.outcome[t] == expected
+        if not np.isnan(res.converged_time[t]) and steps >= 7:
+            # a converged trial ends at a check: the simulator's own rule over 7 steps agrees
+            assert sim.outcome(fl.Tolerances(window=7 * DT)) == expected
         clearance = fl.System(formation=f, law=lw).clearance(sim.q)
         assert res.min_clearance[t] == pytest.approx(clearance.min(), abs=1e-9)
         errors = np.abs(fl.distance_errors(f, sim.q[-1])).max()
@@ -124,15 +145,18 @@ def test_batch_equals_one_by_one_simulator(results, cases, law, shape):
 
 
 def test_stopping_rules(results):
-    # converged trials stopped at a multiple of check_every with every |u_i| <= speed;
-    # the others ran to the end (2000 steps) or were stopped by contact.
+    # converged trials stopped at a multiple of check_every with every |u_i| <= speed
+    # or a net speed <= speed; the others ran to the end (2000 steps) or were stopped
+    # by contact.
     speed = fl.Tolerances().speed
     for per_backend in results.values():
         res = per_backend["numba"]
         conv = ~np.isnan(res.converged_time)
         assert np.all(res.steps[conv] % 7 == 0)
         np.testing.assert_allclose(res.converged_time[conv], res.steps[conv] * DT)
-        assert np.all(np.linalg.norm(res.u_final[conv], axis=-1).max(axis=-1) <= speed)
+        slow = np.linalg.norm(res.u_final, axis=-1).max(axis=-1) <= speed
+        assert np.all(slow[conv] | (res.net_speed[conv] <= speed))
+        assert not np.any(slow[~conv] & (res.outcome[~conv] != "collision"))
         other = ~conv & (res.outcome != "collision")
         assert np.all(res.steps[other] == 2000)
 
@@ -339,3 +363,111 @@ def test_angle_valued_alpha_on_a_ring(law):
     np.testing.assert_array_equal(a.steps, b.steps)
     np.testing.assert_array_equal(a.outcome, b.outcome)
     np.testing.assert_allclose(a.q_final, b.q_final, rtol=0, atol=1e-9)
+
+
+# ------------------------------------------------------ stopped: the net speed rule
+
+
+class Relay(fl.DistanceLaw):
+    """``u_i = (-sign(x_1 - 1/4), 0)``: explicit Euler from ``x_1 = 1/4 + dt/2`` chatters
+    between ``1/4 +- dt/2`` (|u| = 1 at every step, no net motion: the scalar picture of
+    a sliding-mode equilibrium)."""
+
+    name = "batch-relay-for-test"
+
+    def control(self, formation, q):
+        q = np.asarray(q, dtype=float)
+        u = np.zeros_like(q)
+        u[..., 0] = -np.sign(q[..., :1, 0] - 0.25)
+        return u
+
+
+class Drift(fl.DistanceLaw):
+    """``u_i = (2e-3, 0)``: a smooth motion, twice the speed tolerance."""
+
+    name = "batch-drift-for-test"
+
+    def control(self, formation, q):
+        u = np.zeros_like(np.asarray(q, dtype=float))
+        u[..., 0] = 2e-3
+        return u
+
+
+def test_chatter_at_rest_is_stopped_in_the_batch_as_in_the_simulator():
+    # two robots 2 apart, d = 1: wherever they stop, the distance is not met
+    f = fl.Formation.from_distances(2, distances=1.0, diameters=0.2)
+    q0 = np.array([[[0.25 + DT / 2, 0.0], [2.25 + DT / 2, 0.0]]])
+    res = run_batch(f, Relay(), q0, dt=DT, duration=1.0, backend="numpy")
+    # first test at k = 0 (no net speed yet), second at k = 10 (even: back at the start)
+    assert res.steps[0] == 10 and res.converged_time[0] == pytest.approx(0.01)
+    assert res.net_speed[0] < 1e-12 and np.abs(res.u_final[0]).max() == 1.0
+    assert res.outcome[0] == "incorrect"
+    sim = fl.simulate(f, Relay(), q0[0], duration=1.0, integrator=fl.Euler(dt=DT))
+    assert sim.outcome() == "incorrect"
+    # tests every 9 steps: one kick of dt remains, net speed 1e-3 / 9e-3 at every test
+    odd = run_batch(f, Relay(), q0, dt=DT, duration=1.0, check_every=9, backend="numpy")
+    assert odd.steps[0] == 1000 and np.isnan(odd.converged_time[0])
+    assert odd.outcome[0] == "not-converged"
+    # the last test (step 1000) comes one step after the one at 999
+    assert odd.net_speed[0] == pytest.approx(1e-3 / 1e-3)
+    # a smooth motion at 2e-3 is still moving, whatever the window
+    for window in (0.01, 0.5):
+        tol = fl.Tolerances(window=window)
+        drift = run_batch(f, Drift(), q0, dt=DT, duration=1.0, tolerances=tol, backend="numpy")
+        assert drift.outcome[0] == "not-converged" and drift.steps[0] == 1000
+        assert drift.net_speed[0] == pytest.approx(2e-3)
+
+
+def test_classify_batch_uses_the_net_speed_like_classify():
+    f = paper_triangle()
+    shrunk = np.array([[0.0, 0.0], [0.25, 0.4], [0.5, 0.0]])  # distances not met
+    fast = np.full((3, 2), 0.5)
+    net = np.array([0.0, 1e-3, 1.1e-3, np.nan, 5.0])
+    q = np.repeat(shrunk[None], len(net), axis=0)
+    u = np.repeat(fast[None], len(net), axis=0)
+    got = classify_batch(f, q, u, net_speed=net)
+    want = ["incorrect", "incorrect", "not-converged", "not-converged", "not-converged"]
+    np.testing.assert_array_equal(got, want)
+    for b in range(len(net)):
+        assert classify(f, q[b], u[b], net_speed=net[b]) == want[b]
+    assert classify(f, shrunk, fast) == "not-converged"  # no net speed: |u| decides
+
+
+SLIDING_TRIAL = 5  # of the square study (seed 1, k_a = 1), docs/studies.md
+
+
+def test_square_sliding_mode_equilibrium():
+    # The square with both diagonals, k_a = 1: trial 5 of seed 1 ends at a sliding-mode
+    # equilibrium on two switching surfaces (docs/studies.md). Explicit Euler at
+    # dt = 1e-3 does not chatter with period 2 there: the iterates wander in a band of
+    # about dt |u| (|u| = 0.54), so the net speed over the default 10 ms stays near 0.14
+    # and the trial is "not-converged"; over a 2 s window the wandering averages out.
+    from formationlab.io.scenario import load_scenario
+    from formationlab.studies.config import BoxInitial
+    from formationlab.studies.sampling import trial_initial_states
+
+    f = load_scenario("examples/study-square.toml").formation
+    law = fl.AngleRestrictedLaw(k_c=2.0, k_a=1.0, theta=0.5)
+    q0 = trial_initial_states(f, BoxInitial(half_width=3.0), 1, [SLIDING_TRIAL])
+    short = run_batch(f, law, q0, dt=DT, duration=15.0)
+    assert short.outcome[0] == "not-converged" and short.net_speed[0] > 0.05
+    assert np.linalg.norm(short.u_final[0], axis=-1).max() > 0.5
+    tol = fl.Tolerances(window=2.0)
+    a, b = (run_batch(f, law, q0, dt=DT, duration=15.0, tolerances=tol, backend=x)
+            for x in ("numba", "numpy"))  # fmt: skip
+    for res in (a, b):
+        assert res.outcome[0] == "incorrect" and res.net_speed[0] <= 1e-3
+        assert res.max_distance_error[0] > 0.9  # far from the square
+    assert a.steps[0] == b.steps[0] == 4000  # the second test of the 2 s window
+    sim = fl.simulate(f, law, q0[0], duration=b.steps[0] * DT, integrator=fl.Euler(dt=DT))
+    np.testing.assert_allclose(sim.q[-1], b.q_final[0], rtol=0, atol=1e-9)
+    # chattering amplifies rounding: the kernel's different order of operations ends
+    # elsewhere in the chattering band (about dt |u|), not on the reference's state
+    np.testing.assert_allclose(a.q_final[0], b.q_final[0], rtol=0, atol=1e-3)
+    assert sim.outcome(tol) == "incorrect" and sim.outcome() == "not-converged"
+    # the Filippov solution from there slides on the surfaces and comes to rest
+    fil = fl.simulate(f, law, a.q_final[0], duration=2.0, integrator=fl.get_integrator("filippov"))
+    assert fil.status == "success" and fil.stats["sliding_time"] > 1.99
+    late = fil.q[np.searchsorted(fil.t, 1.0)]
+    assert np.linalg.norm(fil.q[-1] - late, axis=-1).max() < 1e-5
+    assert np.linalg.norm(fil.q[-1] - a.q_final[0], axis=-1).max() < 5e-3

@@ -109,3 +109,89 @@ def test_result_summary_keys():
     assert set(s["distance_errors"]) == {"1-2", "1-3", "2-3"}
     assert len(res.t) == 4000 // 50 + 1
     assert s["max_distance_error"] < 1e-3
+
+
+# ------------------------------------------------------------- stopped: net speed
+# The scalar picture of Euler chattering on a switching surface: a relay
+# x_dot = -g sign(x - c) stepped by explicit Euler from x0 = c + g dt / 2 alternates
+# between c + g dt / 2 and c - g dt / 2: |u| = g at every step, no net motion (the
+# Filippov velocity at x = c is 0). A constant velocity v moves by v T in any window T.
+
+
+class _Relay(fl.DistanceLaw):
+    """Every robot: ``u = (-g sign(x_1 - c), 0)`` (robot 1's abscissa decides)."""
+
+    name = "relay-for-test"
+    g, c = 1.0, 0.25
+
+    def control(self, formation, q):
+        q = np.asarray(q, dtype=float)
+        u = np.zeros_like(q)
+        u[..., 0] = -self.g * np.sign(q[..., :1, 0] - self.c)
+        return u
+
+
+class _Drift(fl.DistanceLaw):
+    """Every robot: ``u = (v, 0)``, a smooth motion at constant speed ``v``."""
+
+    name = "drift-for-test"
+    v = 2e-3
+
+    def control(self, formation, q):
+        u = np.zeros_like(np.asarray(q, dtype=float))
+        u[..., 0] = self.v
+        return u
+
+
+def _pair():
+    """Two robots 2 apart with d_12 = 1: distances not met wherever they stop."""
+    f = fl.Formation.from_distances(2, distances=1.0, diameters=0.2)
+    return f, np.array([[0.25 + 5e-4, 0.0], [2.25 + 5e-4, 0.0]])
+
+
+def test_net_speed_of_sampled_chatter_and_of_steady_motion():
+    dt = 1e-3
+    t = dt * np.arange(40)
+    chatter = np.zeros((40, 1, 2))
+    chatter[:, 0, 0] = 0.25 + 5e-4 * (-1.0) ** np.arange(40)
+    ns = fl.analysis.net_speed(t, chatter, 0.01)  # 10 steps back: an even number
+    assert np.isnan(ns[:10]).all()  # no sample 10 ms back: unknown
+    assert np.all(ns[10:] < 1e-12)
+    odd = fl.analysis.net_speed(t, chatter, 0.009)  # 9 steps: one kick of 1e-3 remains
+    np.testing.assert_allclose(odd[9:], 1e-3 / 0.009, rtol=1e-9)
+    steady = np.zeros((40, 2, 2))
+    steady[:, :, 1] = 0.3 * t[:, None]
+    np.testing.assert_allclose(fl.analysis.net_speed(t, steady, 0.01)[10:], 0.3, rtol=1e-9)
+    # samples sparser than the window: over the shortest saved interval >= window
+    sparse = fl.analysis.net_speed(t[::4], steady[::4], 0.01)
+    assert np.isnan(sparse[:3]).all()
+    np.testing.assert_allclose(sparse[3:], 0.3, rtol=1e-9)
+
+
+def test_chatter_at_rest_is_stopped_and_steady_motion_is_not():
+    f, q0 = _pair()
+    res = fl.simulate(f, _Relay(), q0, duration=1.0, integrator=fl.Euler(dt=1e-3))
+    assert np.all(np.linalg.norm(res.u, axis=-1).max(axis=-1) == 1.0)  # never slow
+    np.testing.assert_allclose(res.q[-1, 0, 0] - 0.25, 5e-4 * (-1) ** 1000, atol=1e-12)
+    assert res.net_speed() < 1e-9
+    assert res.outcome() == "incorrect"  # stopped, distances not met
+    # stopped from the first time a sample lies one window back: t = 10 ms
+    assert res.converged_time() == pytest.approx(0.01)
+    # over an odd number of steps the net displacement is one kick: 1e-3 / 9e-3 > speed
+    odd = fl.Tolerances(window=0.009)
+    assert res.net_speed(odd) == pytest.approx(1e-3 / 0.009)
+    assert res.outcome(odd) == "not-converged" and res.converged_time(odd) is None
+    s = res.summary()
+    assert s["net_speed"] < 1e-9 and s["final_speed"] == 1.0 and s["tolerances"]["window"] == 0.01
+
+    drift = fl.simulate(f, _Drift(), q0, duration=1.0, integrator=fl.Euler(dt=1e-3))
+    assert drift.net_speed() == pytest.approx(2e-3)
+    assert drift.outcome() == "not-converged" and drift.converged_time() is None
+    # a run shorter than the window has no net speed: only |u| decides
+    short = fl.simulate(f, _Relay(), q0, duration=0.005, integrator=fl.Euler(dt=1e-3))
+    assert short.net_speed() is None and short.outcome() == "not-converged"
+
+
+def test_window_must_be_positive():
+    with pytest.raises(fl.errors.ParameterError, match="window"):
+        fl.Tolerances(window=0.0)

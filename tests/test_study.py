@@ -73,6 +73,8 @@ def test_study_table_defaults_and_overrides():
     assert c.laws is None and c.sweep == {} and c.tol == fl.Tolerances()
     c = parse_study({"trials": 10, "initial": {"kind": "gaussian", "sigma": 0.5}}, trials=7)
     assert c.trials == 7 and isinstance(c.initial, GaussianInitial) and c.initial.sigma == 0.5
+    c = parse_study({"tolerances": {"speed": 2e-3, "window": 0.5}})
+    assert c.tol == fl.Tolerances(distance=1e-2, speed=2e-3, window=0.5)
 
 
 @pytest.mark.parametrize(
@@ -84,6 +86,7 @@ def test_study_table_defaults_and_overrides():
         ({"sweep": {"k_a": []}}, ["sweep.k_a is empty"]),
         ({"laws": ["distance", "distance"]}, ["listed twice"]),
         ({"chunk_size": 0}, ["study.chunk_size"]),
+        ({"tolerances": {"window": 0.0}}, ["study.tolerances.window"]),
     ],
 )
 def test_bad_study_tables_name_the_key(table, words):
@@ -179,6 +182,12 @@ def test_trials_table_rows_and_columns(reference_run):
     assert set(t.loc[t["law"] == "angle-restricted", "k_a"]) == {0.5, 3.0}
     for i in (1, 2, 3):
         assert {f"x{i}", f"y{i}", f"x{i}_init", f"y{i}_init"} <= set(t.columns)
+    # the net speed between the last two convergence tests (every dt = 1e-2 here):
+    # unknown only for a trial that stopped at its first test, step 0
+    assert t["net_speed"].dtype == float and np.all(t["net_speed"].fillna(0.0) >= 0)
+    np.testing.assert_array_equal(np.isnan(t["net_speed"]), t["steps"] == 0)
+    end = t[np.isnan(t["converged_time"]) & (t["outcome"] != "collision")]
+    assert np.all(end["net_speed"] > 1e-3)  # ran to the end: no test passed
     # every group starts trial t from the same state (paired comparison)
     starts = t.pivot(index="trial", columns="group", values="x2_init").to_numpy()
     assert (starts == starts[:, :1]).all()

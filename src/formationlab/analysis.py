@@ -12,11 +12,18 @@ One classification is shared by every command (``run``, ``paper``, ``study``,
 ``mirror``
     distances met and *every* restricted triple reversed: the mirror image;
 ``incorrect``
-    stopped (largest ``|u_i|`` below ``Tolerances.speed``) with distances not
-    met, or distances met with only *some* triples reversed (a flip that a
-    non-rigid graph allows);
+    stopped (below) with distances not met, or distances met with only *some*
+    triples reversed (a flip that a non-rigid graph allows);
 ``not-converged``
     still moving at the end with distances not met.
+
+**Stopped** means: the instantaneous speed ``max_i |u_i|`` *or* the net speed
+over the last check interval, ``max_i |q_i(t) - q_i(t - T)| / T`` with
+``T = Tolerances.window``, is at most ``Tolerances.speed``. The second test is
+what recognises a sliding-mode (Filippov) equilibrium reached by explicit
+Euler: the iterates chatter across a switching surface with a large ``|u_i|``
+at every step while the net motion, like the Filippov velocity there, is zero.
+A smooth motion faster than ``speed`` fails both tests.
 """
 
 from __future__ import annotations
@@ -39,6 +46,7 @@ __all__ = [
     "converged_time",
     "distance_errors",
     "edge_labels",
+    "net_speed",
     "orientation_agreement",
     "triangle_orientation",
 ]
@@ -56,14 +64,20 @@ class Tolerances:
     distance : float
         Largest ``|r_ij - d_ij|`` over the edges for the distances to count as met.
     speed : float
-        Largest ``|u_i|`` for the robots to count as stopped.
+        Largest speed for the robots to count as stopped: instantaneous,
+        ``max_i |u_i|``, or net over the last ``window`` seconds (module docstring).
+    window : float
+        Length ``T`` of the check interval of the net speed
+        ``max_i |q_i(t) - q_i(t - T)| / T``, seconds. The batched studies test
+        convergence every ``window`` seconds (``round(window / dt)`` steps).
     """
 
     distance: float = 1e-2
     speed: float = 1e-3
+    window: float = 1e-2
 
     def __post_init__(self) -> None:
-        for name in ("distance", "speed"):
+        for name in ("distance", "speed", "window"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
                 raise ParameterError(f"tolerance {name} must be a finite number > 0, got {v!r}")
@@ -109,10 +123,14 @@ def classify(
     tolerances: Tolerances | None = None,
     *,
     contact: bool = False,
+    net_speed: float | None = None,
 ) -> Outcome:
     """The outcome of a final state ``q`` with controls ``u`` (both ``(n, 2)``).
 
     ``contact`` marks a run stopped at a rejected step (contact reached).
+    ``net_speed`` is ``max_i |q_i(t) - q_i(t - T)| / T`` over the last check
+    interval (:func:`net_speed`); None or NaN when unknown, and then only the
+    instantaneous speed decides whether the robots have stopped.
     """
     tol = tolerances or Tolerances()
     q = np.asarray(q, dtype=float)
@@ -129,15 +147,58 @@ def classify(
             return "mirror"
         return "incorrect"
     speed = np.max(np.linalg.norm(np.asarray(u, dtype=float), axis=-1))
-    return "incorrect" if speed <= tol.speed else "not-converged"
+    stopped = speed <= tol.speed or (net_speed is not None and net_speed <= tol.speed)
+    return "incorrect" if stopped else "not-converged"
 
 
-def converged_time(t: NDArray[np.float64], u: NDArray[np.float64], speed: float) -> float | None:
-    """First saved time after which every ``|u_i|`` stays below ``speed``; None if never.
+def net_speed(t: ArrayLike, q: ArrayLike, window: float) -> NDArray[np.float64]:
+    """Net speed over the last ``window`` seconds at every saved time, shape ``(T,)``.
 
-    ``t`` has shape ``(T,)`` and ``u`` shape ``(T, n, 2)``.
+    At saved time ``t_k`` it is ``max_i |q_i(t_k) - q_i(t_j)| / (t_k - t_j)`` with
+    ``t_j`` the latest saved time at least ``window`` before ``t_k`` (to a relative
+    1e-9, so that ``k dt`` rounding does not skip a sample). When samples are saved
+    more sparsely than ``window`` the interval is the shortest saved one that is
+    at least ``window`` long; where no sample lies ``window`` back (the first
+    ``window`` seconds of a run) the value is NaN: unknown, so that only the
+    instantaneous speed can count a state as stopped there.
+
+    Parameters
+    ----------
+    t : array_like, shape (T,)
+        Saved times, increasing.
+    q : array_like, shape (T, n, 2)
+        Positions at those times.
+    window : float
+        Interval ``T``, seconds.
+    """
+    t = np.asarray(t, dtype=float)
+    q = np.asarray(q, dtype=float)
+    j = np.searchsorted(t, t - window * (1.0 - 1e-9), side="right") - 1
+    out = np.full(t.shape, np.nan)
+    ok = j >= 0
+    d = q[ok] - q[j[ok]]
+    disp = np.sqrt(np.max(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1], axis=-1))
+    out[ok] = disp / (t[ok] - t[j[ok]])
+    return out
+
+
+def converged_time(
+    t: NDArray[np.float64],
+    u: NDArray[np.float64],
+    speed: float,
+    *,
+    q: NDArray[np.float64] | None = None,
+    window: float = 1e-2,
+) -> float | None:
+    """First saved time after which the robots stay stopped; None if never.
+
+    ``t`` has shape ``(T,)`` and ``u`` shape ``(T, n, 2)``. Stopped: every
+    ``|u_i| <= speed`` or, when the positions ``q`` ``(T, n, 2)`` are given, a net
+    speed over ``window`` seconds (:func:`net_speed`) ``<= speed``.
     """
     moving = np.max(np.linalg.norm(u, axis=-1), axis=-1) > speed
+    if q is not None:
+        moving &= ~(net_speed(t, q, window) <= speed)
     if moving[-1]:
         return None
     idx = np.flatnonzero(moving)

@@ -17,7 +17,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .analysis import Outcome, Tolerances, classify, converged_time, distance_errors, edge_labels
+from .analysis import (
+    Outcome,
+    Tolerances,
+    classify,
+    converged_time,
+    distance_errors,
+    edge_labels,
+    net_speed,
+)
 from .controllers import Law
 from .dynamics import System
 from .errors import ParameterError
@@ -94,19 +102,37 @@ class SimulationResult:
     def edge_labels(self) -> list[str]:
         return edge_labels(self.formation)
 
+    def net_speed(self, tolerances: Tolerances | None = None) -> float | None:
+        """Net speed over the last ``tolerances.window`` seconds of the run.
+
+        ``max_i |q_i(t_end) - q_i(t_j)| / (t_end - t_j)`` with ``t_j`` the latest saved
+        time at least ``window`` before the end (:func:`formationlab.analysis.net_speed`):
+        with ``save_every`` thinning the samples, over the shortest saved interval of at
+        least ``window``; None when the saved run is shorter than ``window``.
+        """
+        tol = tolerances or Tolerances()
+        v = float(net_speed(self.t, self.q, tol.window)[-1])
+        return v if np.isfinite(v) else None
+
     def outcome(self, tolerances: Tolerances | None = None) -> Outcome:
-        """Outcome of the final state (see :mod:`formationlab.analysis`)."""
+        """Outcome of the final state (see :mod:`formationlab.analysis`).
+
+        The robots count as stopped when the final ``max_i |u_i|`` or the net speed over
+        the last ``window`` seconds (:meth:`net_speed`) is at most ``tolerances.speed``.
+        """
         return classify(
             self.formation,
             self.q[-1],
             self.u[-1],
             tolerances,
             contact=self.status == "step-collision",
+            net_speed=self.net_speed(tolerances),
         )
 
     def converged_time(self, tolerances: Tolerances | None = None) -> float | None:
-        """First time after which every robot's speed stays below the tolerance."""
-        return converged_time(self.t, self.u, (tolerances or Tolerances()).speed)
+        """First saved time after which the robots stay stopped (instantaneous or net speed)."""
+        tol = tolerances or Tolerances()
+        return converged_time(self.t, self.u, tol.speed, q=self.q, window=tol.window)
 
     def summary(self, tolerances: Tolerances | None = None) -> dict[str, Any]:
         """A JSON-ready summary of the run (the ``summary.json`` of ``run`` and ``paper``).
@@ -122,7 +148,9 @@ class SimulationResult:
 
         tol = tolerances or Tolerances()
         err = self.distance_errors[-1]
-        active = [lab for lab, on in zip(self.restriction_labels, self.active[-1], strict=True) if on]
+        active = [
+            lab for lab, on in zip(self.restriction_labels, self.active[-1], strict=True) if on
+        ]
         return {
             "outcome": self.outcome(tol),
             "status": self.status,
@@ -132,10 +160,12 @@ class SimulationResult:
             "distance_errors": dict(zip(self.edge_labels, err.tolist(), strict=True)),
             "max_distance_error": float(np.max(np.abs(err))),
             "converged_time": self.converged_time(tol),
+            "final_speed": float(np.max(np.linalg.norm(self.u[-1], axis=-1))),
+            "net_speed": self.net_speed(tol),
             "orientation": triangle_orientation(self.q[-1]) if self.formation.n >= 3 else None,
             "active_restrictions_final": active,
             "diagnostics": dict(self.stats),
-            "tolerances": {"distance": tol.distance, "speed": tol.speed},
+            "tolerances": {"distance": tol.distance, "speed": tol.speed, "window": tol.window},
         }
 
     def plot(self, kind: str = "trajectories", ax: Any = None, **kwargs: Any) -> Any:

@@ -11,7 +11,9 @@
 one per swept parameter   its value; NaN for a law the parameter does not apply to
 ``outcome``               one of :data:`formationlab.OUTCOMES`
 ``max_distance_error``    largest ``|r_ij - d_ij|`` over the edges at the end
-``converged_time``        time when every speed fell below the tolerance; NaN if never
+``converged_time``        time of the first passed convergence test (instantaneous or
+                          net speed <= the tolerance); NaN if never
+``net_speed``             net speed over the last check interval (displacement / time)
 ``min_clearance``         least ``r_ij - a_ij`` over pairs and time
 ``steps``                 Euler steps taken (a trial stops once converged)
 ``x1_init, y1_init, ...`` initial positions

@@ -3,8 +3,12 @@
 ``run_batch(formation, law, q0)`` steps ``B`` initial states ``q0`` of shape
 ``(B, n, 2)`` with explicit Euler in float64 -- the same stepping as
 ``formationlab.simulate(..., integrator=Euler(dt=dt))``, trial by trial -- and
-stops each trial when it has converged (every ``|u_i| <= tolerances.speed``,
-tested every ``check_every`` steps), when a step would bring two robots into
+stops each trial when it has stopped moving (tested every ``check_every`` steps,
+``round(tolerances.window / dt)`` by default: the instantaneous speed
+``max_i |u_i|`` or the net speed since the previous test,
+``max_i |q_i(k) - q_i(k - check_every)| / (check_every dt)``, at most
+``tolerances.speed``; the net speed catches trials at rest on a switching
+surface across which Euler chatters), when a step would bring two robots into
 contact (outcome ``"collision"``, the simulator's ``"step-collision"``), or at
 ``duration``. The final states are classified exactly as
 :func:`formationlab.analysis.classify` does (:func:`classify_batch` is its
@@ -83,6 +87,10 @@ class BatchResult:
         converged, when its next step would reach contact (``"collision"``) or
         when its next step is not finite (like the simulator's ``"non-finite"``
         status: it keeps its last finite state and is classified from there).
+    net_speed : ndarray, shape (B,)
+        Net speed over the trial's last check interval,
+        ``max_i |q_i(k) - q_i(k')| / ((k - k') dt)`` between its last two
+        convergence tests ``k' < k``; NaN when it ended before its second test.
     """
 
     q_final: NDArray[np.float64]
@@ -92,6 +100,7 @@ class BatchResult:
     converged_time: NDArray[np.float64]
     min_clearance: NDArray[np.float64]
     steps: NDArray[np.int64]
+    net_speed: NDArray[np.float64]
 
 
 def run_batch(
@@ -122,12 +131,15 @@ def run_batch(
     duration : float
         Longest simulated time, seconds (``ceil(duration / dt)`` steps, as the simulator).
     tolerances : Tolerances, optional
-        Convergence (``speed``) and classification tolerances. Default ``Tolerances()``.
+        Convergence (``speed``, ``window``) and classification tolerances. Default
+        ``Tolerances()``.
     backend : {"numba", "numpy"}
         Compiled kernel or the numpy reference.
     check_every : int, optional
-        Test convergence every this many steps; default ``max(1, round(0.01 / dt))``
-        (every 10 ms of simulated time). A trial is stopped at the first test it passes.
+        Test convergence every this many steps; default
+        ``max(1, round(tolerances.window / dt))`` (every 10 ms of simulated time by
+        default). The net speed is measured over this interval. A trial is stopped
+        at the first test it passes.
 
     Returns
     -------
@@ -140,7 +152,7 @@ def run_batch(
             raise ParameterError(f"{name} must be a finite number > 0, got {v!r}")
     n_steps = steps_for(float(duration), float(dt))
     if check_every is None:
-        check_every = max(1, round(0.01 / dt))
+        check_every = max(1, round(tol.window / dt))
     if not isinstance(check_every, int | np.integer) or check_every < 1:
         raise ParameterError(f"check_every must be an integer >= 1, got {check_every!r}")
     if backend == "numba":
@@ -158,7 +170,12 @@ def run_batch(
     else:
         raise ParameterError(f'backend must be "numba" or "numpy", got {backend!r}')
     outcome = classify_batch(
-        formation, raw.q_final, raw.u_final, tol, contact=raw.status == STATUS_COLLISION
+        formation,
+        raw.q_final,
+        raw.u_final,
+        tol,
+        contact=raw.status == STATUS_COLLISION,
+        net_speed=raw.net_speed,
     )
     converged = raw.status == STATUS_CONVERGED
     return BatchResult(
@@ -169,6 +186,7 @@ def run_batch(
         converged_time=np.where(converged, raw.steps * float(dt), np.nan),
         min_clearance=raw.min_clearance,
         steps=raw.steps,
+        net_speed=raw.net_speed,
     )
 
 
@@ -213,16 +231,21 @@ def classify_batch(
     tolerances: Tolerances | None = None,
     *,
     contact: NDArray[np.bool_] | None = None,
+    net_speed: NDArray[np.float64] | None = None,
 ) -> NDArray[np.str_]:
     """:func:`formationlab.analysis.classify` of every trial: ``(B, n, 2) -> (B,)`` str.
 
-    ``contact`` ``(B,)`` marks trials stopped at a step rejected for reaching contact.
+    ``contact`` ``(B,)`` marks trials stopped at a step rejected for reaching contact;
+    ``net_speed`` ``(B,)`` is each trial's net speed over its last check interval (NaN
+    where unknown), which counts the trial as stopped when ``<= tolerances.speed``,
+    as the instantaneous speed does.
     """
     tol = tolerances or Tolerances()
     q = np.asarray(q, dtype=float)
     u = np.asarray(u, dtype=float)
     n_trials = q.shape[0]
     contact = np.zeros(n_trials, bool) if contact is None else np.asarray(contact, bool)
+    net = np.full(n_trials, np.nan) if net_speed is None else np.asarray(net_speed, float)
     labels = np.array(OUTCOMES)
     code = {name: m for m, name in enumerate(OUTCOMES)}
     iu, ju = np.triu_indices(formation.n, k=1)
@@ -244,6 +267,7 @@ def classify_batch(
         else:
             agree = disagree = np.zeros(len(qb), dtype=np.int64)
         stopped = np.max(np.linalg.norm(u[sl], axis=-1), axis=-1) <= tol.speed
+        stopped |= net[sl] <= tol.speed
         result = np.select(
             [collided, met & (disagree == 0), met & (agree == 0), met, stopped],
             [code[x] for x in ("collision", "desired", "mirror", "incorrect", "incorrect")],
@@ -273,6 +297,7 @@ def _run_numba(
     steps = np.zeros(n_trials, dtype=np.int64)
     status = np.zeros(n_trials, dtype=np.int8)
     mc = np.full(n_trials, np.inf)
+    ns = np.full(n_trials, np.nan)
     chunk = _chunk_size(n_trials, numba.get_num_threads())
     with _KERNEL_LOCK:
         # hand the chunks out one at a time (numba's setting is per thread, restored
@@ -281,11 +306,14 @@ def _run_numba(
         previous = numba.set_parallel_chunksize(1)
         try:
             kernels.run_chunks(  # type: ignore[call-arg]
-                q0, chunk, *args, dt, n_steps, check_every, speed, q_out, u_out, steps, status, mc
-            )
+                q0, chunk, *args, dt, n_steps, check_every, speed,
+                q_out, u_out, steps, status, mc, ns,
+            )  # fmt: skip
         finally:
             numba.set_parallel_chunksize(previous)
-    return RawBatch(q_final=q_out, u_final=u_out, steps=steps, status=status, min_clearance=mc)
+    return RawBatch(
+        q_final=q_out, u_final=u_out, steps=steps, status=status, min_clearance=mc, net_speed=ns
+    )
 
 
 def _chunk_size(n_trials: int, threads: int) -> int:

@@ -115,6 +115,7 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
         outcome=np.asarray(res.outcome, dtype=object),
         max_distance_error=np.asarray(res.max_distance_error, dtype=float),
         converged_time=np.asarray(res.converged_time, dtype=float),
+        net_speed=np.asarray(res.net_speed, dtype=float),
         min_clearance=np.asarray(res.min_clearance, dtype=float),
         steps=np.asarray(res.steps, dtype=np.int64),
     )

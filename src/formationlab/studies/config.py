@@ -21,8 +21,9 @@ Every key, its default and its meaning (``docs/studies.md`` shows examples):
     (``eta``, ``influence``) or of the robots (``diameter``: every robot's
     diameter). A law runs only the points of the keys it has: with
     ``k_a = [...]`` the distance law runs once, not once per ``k_a``.
-``tolerances`` (table, default ``{ distance = 1e-2, speed = 1e-3 }``)
-    Of the outcome classification (:class:`formationlab.Tolerances`).
+``tolerances`` (table, default ``{ distance = 1e-2, speed = 1e-3, window = 1e-2 }``)
+    Of the outcome classification (:class:`formationlab.Tolerances`); ``window``
+    is also the interval of the kernel's convergence test.
 ``chunk_size`` (int >= 1, default 1000)
     Trials per unit of work (a chunk is what a worker runs and what ``--resume``
     keeps). Results do not depend on it.
@@ -74,6 +75,7 @@ class TolerancesModel(BaseModel):
     model_config = _STRICT
     distance: float = Field(default=1e-2, gt=0)
     speed: float = Field(default=1e-3, gt=0)
+    window: float = Field(default=1e-2, gt=0)
 
 
 class StudyConfig(BaseModel):
@@ -117,7 +119,8 @@ class StudyConfig(BaseModel):
     @property
     def tol(self) -> Tolerances:
         """The tolerances as :class:`formationlab.Tolerances`."""
-        return Tolerances(distance=self.tolerances.distance, speed=self.tolerances.speed)
+        t = self.tolerances
+        return Tolerances(distance=t.distance, speed=t.speed, window=t.window)
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form, every default filled in."""

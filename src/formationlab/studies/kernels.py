@@ -144,7 +144,7 @@ def _run_chunk(
     q0, start, stop, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
     ra, rb, rc, roff, vi, vj, vk, valpha, vpar, vw, theta, sa, sb, sc, starget, k_area,
     dt, n_steps, check_every, speed,
-    q_out, u_out, steps_out, status_out, mc_out,
+    q_out, u_out, steps_out, status_out, mc_out, ns_out,
 ):  # fmt: skip
     n = q0.shape[1]
     m = stop - start
@@ -159,12 +159,16 @@ def _run_chunk(
     cbuf = np.empty(m)  # c_abc of one triangle
     fin = np.zeros(m)  # 0 while the last Euler step was finite
     code = np.full(m, -1, dtype=np.int8)  # -1: still running
+    qc = np.empty((n, 2, m))  # positions at the previous convergence check
+    ns = np.full(m, np.nan)  # net speed over the last check interval (NaN: none yet)
+    dbuf = np.empty(m)  # largest squared displacement since the previous check
     for b in range(m):
         for i in range(n):
             q[i, 0, b] = q0[start + b, i, 0]
             q[i, 1, b] = q0[start + b, i, 1]
     nact = m
     k = 0
+    kc = -1  # step of the previous check (the same for every live trial)
     while nact > 0:
         _controls(
             q, u, gap, cbuf, nact, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
@@ -182,13 +186,33 @@ def _run_chunk(
         for b in range(nact):
             mc[b] = min(mc[b], gap[b]) if code[b] < 0 else mc[b]
         if k % check_every == 0 or k == n_steps:
+            # stopped: instantaneous speed max |u_i| or net speed since the previous
+            # check, max |q_i(k) - q_i(kc)| / ((k - kc) dt), at most `speed`
             for b in range(nact):
+                dbuf[b] = 0.0
+            if kc >= 0:
+                for i in range(n):
+                    for b in range(nact):
+                        dx = q[i, 0, b] - qc[i, 0, b]
+                        dy = q[i, 1, b] - qc[i, 1, b]
+                        dbuf[b] = max(dbuf[b], dx * dx + dy * dy)
+            elapsed = (k - kc) * dt
+            for b in range(nact):
+                if code[b] >= 0:  # the step to this state was rejected
+                    continue
                 top = 0.0
                 for i in range(n):
                     top = max(top, u[i, 0, b] * u[i, 0, b] + u[i, 1, b] * u[i, 1, b])
-                if code[b] < 0 and math.sqrt(top) <= speed:
+                net = math.sqrt(dbuf[b]) / elapsed if kc >= 0 else np.nan
+                ns[b] = net
+                if math.sqrt(top) <= speed or net <= speed:
                     code[b] = STATUS_CONVERGED
                     stopping += 1
+            for i in range(n):
+                for d in range(2):
+                    for b in range(nact):
+                        qc[i, d, b] = q[i, d, b]
+            kc = k
         if k == n_steps:
             for b in range(nact):
                 if code[b] < 0:
@@ -209,14 +233,17 @@ def _run_chunk(
                 steps_out[g] = k - 1 if rejected else k
                 status_out[g] = code[b]
                 mc_out[g] = mc[b]
+                ns_out[g] = ns[b]
                 last = nact - 1
                 if b != last:  # the trial at `last` is running (visited already)
                     for i in range(n):
                         for d in range(2):
                             q[i, d, b] = q[i, d, last]
                             u[i, d, b] = u[i, d, last]
+                            qc[i, d, b] = qc[i, d, last]
                     ids[b] = ids[last]
                     mc[b] = mc[last]
+                    ns[b] = ns[last]
                 code[b] = -1
                 code[last] = -1
                 nact -= 1
@@ -240,13 +267,14 @@ def run_chunks(
     q0, chunk, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
     ra, rb, rc, roff, vi, vj, vk, valpha, vpar, vw, theta, sa, sb, sc, starget, k_area,
     dt, n_steps, check_every, speed,
-    q_out, u_out, steps_out, status_out, mc_out,
+    q_out, u_out, steps_out, status_out, mc_out, ns_out,
 ):  # fmt: skip
     """Step every trial of ``q0`` ``(B, n, 2)``; chunks of ``chunk`` trials run in parallel.
 
     Fills ``q_out``, ``u_out`` ``(B, n, 2)``, ``steps_out`` (int64), ``status_out``
-    (int8, the ``STATUS_*`` codes of :mod:`formationlab.studies.reference`) and
-    ``mc_out`` (least clearance), all of length ``B``.
+    (int8, the ``STATUS_*`` codes of :mod:`formationlab.studies.reference`),
+    ``mc_out`` (least clearance) and ``ns_out`` (net speed over the last check
+    interval), all of length ``B``.
     """
     n_trials = q0.shape[0]
     n_chunks = (n_trials + chunk - 1) // chunk
@@ -257,5 +285,5 @@ def run_chunks(
             q0, start, stop, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
             ra, rb, rc, roff, vi, vj, vk, valpha, vpar, vw, theta, sa, sb, sc, starget, k_area,
             dt, n_steps, check_every, speed,
-            q_out, u_out, steps_out, status_out, mc_out,
+            q_out, u_out, steps_out, status_out, mc_out, ns_out,
         )  # fmt: skip

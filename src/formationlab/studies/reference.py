@@ -6,9 +6,14 @@ exactly as :class:`formationlab.integrators.Euler` steps one
 (``q_{k+1} = q_k + dt u(q_k)``, using the law's own ``control``), and stops each
 trial on its own:
 
-* **converged**: at a step ``k`` with ``k % check_every == 0`` (or the last
-  step), every ``|u_i(q_k)| <= speed``; the trial ends at ``q_k`` with
-  ``converged_time = k dt``;
+* **converged**: at a check, a step ``k`` with ``k % check_every == 0`` (or the
+  last step), the trial has stopped: the instantaneous speed
+  ``max_i |u_i(q_k)|`` or the net speed since the previous check,
+  ``max_i |q_i(k) - q_i(k')| / ((k - k') dt)`` (``k'`` the previous check; none
+  at ``k = 0``), is at most ``speed``. The net speed recognises a trial at
+  rest on a switching surface across which explicit Euler chatters (a
+  sliding-mode equilibrium: large ``|u_i|`` every step, no net motion). The
+  trial ends at ``q_k`` with ``converged_time = k dt``;
 * **collision**: the step from ``q_k`` would bring some pair to
   ``r_ij <= a_ij`` (the simulator's ``"step-collision"``); the trial ends at
   ``q_k``, the last accepted state;
@@ -56,6 +61,9 @@ class RawBatch:
         ``STATUS_END``, ``STATUS_CONVERGED``, ``STATUS_COLLISION`` or ``STATUS_NON_FINITE``.
     min_clearance : ndarray, shape (B,)
         Least ``r_ij - a_ij`` over every accepted state of the trial.
+    net_speed : ndarray, shape (B,)
+        Net speed over the trial's last check interval; NaN when it ended before
+        its second check.
     """
 
     q_final: NDArray[np.float64]
@@ -63,6 +71,7 @@ class RawBatch:
     steps: NDArray[np.int64]
     status: NDArray[np.int8]
     min_clearance: NDArray[np.float64]
+    net_speed: NDArray[np.float64]
 
 
 def clearances(formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -97,7 +106,7 @@ def run_reference(
     check_every : int
         Test convergence at steps ``k`` divisible by it (and at the last step).
     speed : float
-        A trial has converged when every ``|u_i| <= speed``.
+        A trial has converged when its instantaneous or net speed is ``<= speed``.
     """
     q = np.array(q0, dtype=float)
     n_trials = q.shape[0]
@@ -106,7 +115,9 @@ def run_reference(
     steps = np.zeros(n_trials, dtype=np.int64)
     status = np.zeros(n_trials, dtype=np.int8)
     min_clear = np.full(n_trials, np.inf)
+    net = np.full(n_trials, np.nan)  # net speed over the last check interval
     live = np.arange(n_trials)  # trials still running; q[live] are their positions
+    qc, kc = q, -1  # positions of the live trials at the previous check, its step
 
     def finish(which: NDArray[np.bool_], code: int, k: int, qk: NDArray, uk: NDArray) -> None:
         ids = live[which]
@@ -121,6 +132,12 @@ def run_reference(
         min_clear[live] = np.minimum(min_clear[live], clearances(formation, qk))
         if k % check_every == 0 or k == n_steps:
             still = np.max(np.linalg.norm(uk, axis=-1), axis=-1) <= speed
+            if kc >= 0:
+                d = qk - qc
+                net[live] = np.sqrt(np.max(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1], -1))
+                net[live] /= (k - kc) * dt
+                still |= net[live] <= speed
+            qc, kc = qk, k
             finish(still, STATUS_CONVERGED, k, qk, uk)
         else:
             still = np.zeros(live.size, dtype=bool)
@@ -136,7 +153,12 @@ def run_reference(
         finish(bad_nf, STATUS_NON_FINITE, k, qk, uk)
         finish(bad_co, STATUS_COLLISION, k, qk, uk)
         keep = ~(still | bad_nf | bad_co)
-        live, qk = live[keep], q_new[keep]
+        live, qk, qc = live[keep], q_new[keep], qc[keep]
     return RawBatch(
-        q_final=q_final, u_final=u_final, steps=steps, status=status, min_clearance=min_clear
+        q_final=q_final,
+        u_final=u_final,
+        steps=steps,
+        status=status,
+        min_clearance=min_clear,
+        net_speed=net,
     )
