@@ -128,9 +128,9 @@ def main() -> None:
     verdict = "MET" if wall * scale < 60 else "NOT MET"
     print(f"  projected for 1e6 trials: {wall * scale:.1f} s; target < 60 s: {verdict}")
     arrays = (q0, res.q_final, res.u_final, res.outcome, res.max_distance_error)
-    arrays += (res.converged_time, res.min_clearance, res.steps)
+    arrays += (res.converged_time, res.min_clearance, res.steps, res.net_speed)
     per_trial = sum(x.nbytes for x in arrays) / n_million
-    scratch = (4 * 3 * 2 + 4) * 8 * CHUNK  # four (n, 2, chunk) buffers and four (chunk,)
+    scratch = (5 * 3 * 2 + 6) * 8 * CHUNK  # five (n, 2, chunk) buffers and six (chunk,)
     print(
         f"  arrays per trial (input and result): {per_trial:.0f} bytes, "
         f"{per_trial * n_million / 2**20:.0f} MiB in all; kernel scratch per chunk of "

@@ -297,6 +297,7 @@ _FIXED = {
     "outcome",
     "max_distance_error",
     "converged_time",
+    "net_speed",
     "min_clearance",
     "steps",
 }
