@@ -350,6 +350,7 @@ def test_relabelling_by_a_symmetry_of_the_square_is_the_same_equilibrium():
         (["--follow", "k_a=3"], "--follow takes PARAM=FROM:TO"),
         (["--law", "no-such-law"], "unknown law"),
         (["--follow", "eta=0.1:1", "--law", "distance"], "has no parameter"),
+        (["--integrator", "filippov"], "cannot settle a batch"),
     ],
 )
 def test_equilibria_command_rejects_bad_options(tmp_path, capsys, args, message):

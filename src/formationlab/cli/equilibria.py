@@ -14,7 +14,16 @@ from ._app import command
 
 __all__: list[str] = []
 
-_TABLE_KEYS = {"starts", "seed", "duration", "collinear", "follow", "follow_steps"}
+_TABLE_KEYS = {
+    "starts",
+    "seed",
+    "duration",
+    "collinear",
+    "integrator",
+    "dt",
+    "follow",
+    "follow_steps",
+}
 
 
 def _parse_follow(text: str) -> tuple[str, float, float]:
@@ -59,6 +68,14 @@ def equilibria(
         str | None,
         typer.Option(help="Follow each undesired equilibrium in a gain: PARAM=FROM:TO."),
     ] = None,
+    integrator: Annotated[
+        str | None,
+        typer.Option(
+            help="Integrator that settles the random starts: rk4 (smooth laws' default), "
+            "implicit-euler (switching laws' default; exact sliding, slow with many surfaces), "
+            "euler.",
+        ),
+    ] = None,
     follow_steps: Annotated[
         int | None,
         typer.Option(min=2, help="Values of the gain in --follow (default 24, evenly spaced)."),
@@ -102,6 +119,19 @@ def equilibria(
     n_starts = int(starts if starts is not None else table.get("starts", 200))
     seed_value = int(seed if seed is not None else table.get("seed", 0))
     duration = float(table.get("duration", 60.0))
+    collinear = float(table.get("collinear", 0.2))
+    integ_name = integrator if integrator is not None else table.get("integrator")
+    settler = None
+    if integ_name is not None:
+        from ..integrators import INTEGRATORS, FixedStepIntegrator, get_integrator
+
+        fixed = sorted(k for k, v in INTEGRATORS.items() if issubclass(v, FixedStepIntegrator))
+        if str(integ_name) not in fixed:
+            raise ParameterError(
+                f"cannot settle a batch of starts with the integrator {integ_name!r}; "
+                f"use one of {', '.join(fixed)}"
+            )
+        settler = get_integrator(str(integ_name), dt=float(table.get("dt", 0.01)))
     follow = follow if follow is not None else table.get("follow")
     follow_steps = int(follow_steps or table.get("follow_steps", 24))
     spec = _parse_follow(follow) if follow else None
@@ -125,11 +155,17 @@ def equilibria(
         source["study"] = {"path": str(from_study), "trials": len(q)}
     elif n_starts:
         rng = np.random.default_rng(seed_value)
-        q0 = random_starts(sc.formation, n_starts, rng)
-        settled = settle(sc.formation, sc.law, q0, duration=duration)
+        q0 = random_starts(sc.formation, n_starts, rng, collinear=collinear)
+        settled = settle(sc.formation, sc.law, q0, duration=duration, integrator=settler)
         cands.append(settled.q)
         outs.append(settled.outcome)
-        source["random_starts"] = {"count": n_starts, "seed": seed_value, "duration": duration}
+        source["random_starts"] = {
+            "count": n_starts,
+            "seed": seed_value,
+            "duration": duration,
+            "collinear": collinear,
+            "integrator": (settler or _default_settler(sc.law)).name,
+        }
     cat = catalogue(sc.formation, sc.law, np.concatenate(cands), outcomes=np.concatenate(outs))
     data = {
         "scenario": sc.name,
@@ -173,6 +209,11 @@ def equilibria(
                 f"#{k + 1} {eq.outcome} {eq.stability}{extra}: "
                 f"{count} trials, max Re(lambda) = {eq.growth_rate:.4g}"
             )
+        if cat.skipped:
+            typer.echo(
+                "skipped end states: "
+                + ", ".join(f"{k} {v}" for k, v in sorted(cat.skipped.items()))
+            )
         typer.echo(f"wrote {folder}/")
 
 
@@ -208,3 +249,9 @@ def _law_named(name: str, base: Any) -> Any:
     own = {f.name for f in dataclasses.fields(LAWS[name]) if f.init}
     shared = {f.name: getattr(base, f.name) for f in dataclasses.fields(base) if f.name in own}
     return get_law(name, **shared)
+
+
+def _default_settler(law: Any) -> Any:
+    from ..integrators import RK4, ImplicitEuler
+
+    return RK4(dt=0.01) if law.smooth else ImplicitEuler(dt=0.01)
