@@ -10,7 +10,7 @@ refines the others with :func:`~.refine.refine`, classifies them with
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -147,6 +147,4 @@ def catalogue(
 
 
 def _posed(eq: Equilibrium) -> Equilibrium:
-    from dataclasses import replace
-
     return replace(eq, q=canonical_pose(eq.q))

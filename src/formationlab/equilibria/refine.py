@@ -9,12 +9,13 @@ surface near one); :func:`refine` solves ``u(q) = 0`` from there with
   frozen at the end state's values the field is a smooth function, and its
   roots that keep the same steps are equilibria in the interior of that
   region. Smooth laws have no surfaces and this is the whole story.
-* **Switching surfaces.** When no root of a frozen piece is consistent with
-  its own steps, the end state sits on a surface: :func:`refine` then solves
-  for a Filippov (sliding-mode) equilibrium, ``sigma_s(q) = 0`` for the
-  surfaces in ``S`` and ``0 = u_w(q)`` for some weights ``w_s in [0, 1]``
-  (the convex combination of the two one-sided fields, eq. 11 with
-  ``Upsilon`` replaced by ``w_s``; ``formationlab.Law.control_with``).
+* **Switching surfaces.** When the end state sits on surfaces (an implicit
+  scheme lands there), or no root of a frozen piece is consistent with its
+  own steps, :func:`refine` solves for a Filippov (sliding-mode)
+  equilibrium: ``sigma_s(q) = 0`` for the surfaces in ``S`` and
+  ``0 = u_w(q)`` for some weights ``w_s in [0, 1]`` (the convex
+  combination of the two one-sided fields, eq. 11 with ``Upsilon``
+  replaced by ``w_s``; ``formationlab.Law.control_with``).
 
 Translation and rotation leave ``u`` unchanged (up to turning it), so the
 roots form three-dimensional orbits. The solver works modulo those: three
