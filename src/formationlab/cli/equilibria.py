@@ -121,7 +121,7 @@ def equilibria(
     duration = float(table.get("duration", 60.0))
     collinear = float(table.get("collinear", 0.2))
     integ_name = integrator if integrator is not None else table.get("integrator")
-    settler = None
+    settler: Any = None
     if integ_name is not None:
         from ..integrators import INTEGRATORS, FixedStepIntegrator, get_integrator
 
@@ -131,7 +131,8 @@ def equilibria(
                 f"cannot settle a batch of starts with the integrator {integ_name!r}; "
                 f"use one of {', '.join(fixed)}"
             )
-        settler = get_integrator(str(integ_name), dt=float(table.get("dt", 0.01)))
+        built = get_integrator(str(integ_name), dt=float(table.get("dt", 0.01)))
+        settler = built if isinstance(built, FixedStepIntegrator) else None
     follow = follow if follow is not None else table.get("follow")
     follow_steps = int(follow_steps or table.get("follow_steps", 24))
     spec = _parse_follow(follow) if follow else None
