@@ -54,14 +54,17 @@ def equilibria(
         typer.Option("--from-study", help="Use the end states of this study's trials."),
     ] = None,
     starts: Annotated[
-        int | None, typer.Option(min=0, help="Random starts (default 200, or [equilibria].starts).")
+        int | None,
+        typer.Option(
+            min=0, help="Random starts (default 200, or starts in the scenario's equilibria table)."
+        ),
     ] = None,
     seed: Annotated[int | None, typer.Option(help="Seed of the random starts (default 0).")] = None,
     law: Annotated[
         str | None,
         typer.Option(
             "--law",
-            help="Use this law instead of the scenario's (same [controller] values where shared).",
+            help="Use this law instead of the scenario's (its controller values where shared).",
         ),
     ] = None,
     follow: Annotated[
