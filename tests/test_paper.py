@@ -70,13 +70,12 @@ def test_simulation_2_unperturbed_is_trapped_in_the_symmetric_subspace(reproduct
 
 
 def test_symmetric_equilibrium_balances_phi_and_psi(trapped):
-    """At the trapped state: phi's pull along the median equals psi's push (hand derivation).
+    """At the trapped state: phi's repulsion along the median equals psi's push (hand derivation).
 
-    For an equilateral triangle of side r with all d = 1, robot i feels from phi
-    k_c * 2 phi'(r) cos(30 deg) towards the centroid... and from psi
-    2 k_a |r_jk| = 2 k_a r away from it along the same median (eq. 23).
-    Balance: k_c * 2 * phi'(r) * cos(pi/6) = -2 k_a r ... i.e.
-    k_c sqrt(3) (1/(1 - a) - 1/(r - a)) = -2 k_a r.
+    For an equilateral triangle of side r < d = 1, robot i feels from phi a force
+    k_c * 2 phi'(r) cos(30 deg) along the median (outwards, as phi'(r) < 0), and from
+    psi 2 k_a |r_jk| = 2 k_a r along the same median, inwards (eq. 23; the factor 2
+    counts the ordered pairs). Balance: k_c sqrt(3) (1/(1 - a) - 1/(r - a)) = -2 k_a r.
     """
     r = np.linalg.norm(np.diff(trapped.final[:2], axis=0))
     a, k_c, k_a = 0.2, 2.0, 3.0
