@@ -225,7 +225,7 @@ def test_simulation_2_perturbed_start_reaches_the_desired_formation_without_slid
         assert res.stats["switch_count"] == 1
         assert res.stats["sliding_time"] == 0.0
     else:  # implicit Euler may land on the surface for one step of the crossing
-        assert 1 <= res.stats["switch_count"] <= 2
+        assert res.stats["switch_count"] in (1, 2)
         assert res.stats["sliding_time"] <= 2 * SIM2_INTEGRATORS[name].dt
 
 

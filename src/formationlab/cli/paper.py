@@ -69,4 +69,6 @@ def paper(
             highlight=False,
             soft_wrap=True,
         )
-    err_console.print(f"wrote figures and summary.json to {folder}", highlight=False, soft_wrap=True)
+    err_console.print(
+        f"wrote figures and summary.json to {folder}", highlight=False, soft_wrap=True
+    )

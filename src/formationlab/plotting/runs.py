@@ -7,6 +7,7 @@ distance errors: fig. 9), usable for any formation.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -44,7 +45,7 @@ def _axes(ax: Axes | None, figsize: tuple[float, float] = (6.0, 4.0)) -> Axes:
 
 def _draw_graph(ax: Axes, formation: Any, q: np.ndarray, **style: Any) -> LineCollection:
     segs = np.stack([q[formation.edges[:, 0]], q[formation.edges[:, 1]]], axis=1)
-    lc = LineCollection(segs, **style)
+    lc = LineCollection(list(segs), **style)
     ax.add_collection(lc)
     return lc
 
@@ -157,13 +158,16 @@ def run_figures(result: Any, *, prefix: str = "") -> dict[str, Figure]:
     ``controls_y``, ``lyapunov``, ``distance_errors``. Figures are not managed by
     pyplot (no GUI); save them with :func:`formationlab.io.save_figure`."""
     out: dict[str, Figure] = {}
-    for name, fn, kw, size in (
+    panels: tuple[
+        tuple[str, Callable[..., list[Any]], dict[str, Any], tuple[float, float]], ...
+    ] = (
         ("trajectories", plot_trajectories, {}, (5.5, 5.5)),
         ("controls_x", plot_controls, {"axis": 0}, (6.0, 3.6)),
         ("controls_y", plot_controls, {"axis": 1}, (6.0, 3.6)),
         ("lyapunov", plot_lyapunov, {}, (6.0, 3.6)),
         ("distance_errors", plot_distance_errors, {}, (6.0, 3.6)),
-    ):
+    )
+    for name, fn, kw, size in panels:
         fig = Figure(figsize=size, layout="constrained")
         ax = fig.add_subplot()
         fn(result, ax=ax, **kw)
