@@ -75,6 +75,9 @@ def test_study_table_defaults_and_overrides():
     assert c.trials == 7 and isinstance(c.initial, GaussianInitial) and c.initial.sigma == 0.5
     c = parse_study({"tolerances": {"speed": 2e-3, "window": 0.5}})
     assert c.tol == fl.Tolerances(distance=1e-2, speed=2e-3, window=0.5)
+    assert c.settle.model_dump() == {"enabled": False, "duration": 5.0, "dt": 0.01}
+    c = parse_study({"settle": {"enabled": True, "dt": 0.02}})
+    assert c.settle.model_dump() == {"enabled": True, "duration": 5.0, "dt": 0.02}
 
 
 @pytest.mark.parametrize(
@@ -87,6 +90,13 @@ def test_study_table_defaults_and_overrides():
         ({"laws": ["distance", "distance"]}, ["listed twice"]),
         ({"chunk_size": 0}, ["study.chunk_size"]),
         ({"tolerances": {"window": 0.0}}, ["study.tolerances.window"]),
+        ({"settle": {"enabled": "maybe"}}, ["study.settle.enabled", "boolean"]),
+        ({"settle": {"durration": 5.0}}, ["study.settle.durration", "unknown key", "duration"]),
+        ({"settle": {"duration": 0.0}}, ["study.settle.duration", "greater than 0"]),
+        ({"settle": {"duration": 1e4}}, ["study.settle.duration", "less than or equal"]),
+        ({"settle": {"dt": -0.01}}, ["study.settle.dt"]),
+        ({"settle": {"dt": 1.0, "duration": 0.5}}, ["study.settle", "longer than duration"]),
+        ({"settle": {"dt": 1e-9}}, ["study.settle", "at most 1e6"]),
     ],
 )
 def test_bad_study_tables_name_the_key(table, words):
@@ -350,6 +360,8 @@ def test_study_command_writes_trials_summary_and_figures(tmp_path, capsys, refer
     assert summary["scenario"] == "tiny-study" and summary["seed"] == 5
     assert [g["law"] for g in summary["groups"]] == ["distance", *["angle-restricted"] * 2]
     assert summary["trial_steps"] == int(trials["steps"].sum()) and summary["wall_time_s"] > 0
+    assert summary["settle"] == {"enabled": False, "duration": 5.0, "dt": 0.01}
+    assert trials["settled"].dtype == bool and not trials["settled"].any()
     for stem in ("fractions", "desired"):
         assert (out / f"{stem}.png").stat().st_size > 0
     # a second run refuses the folder, and --resume finds every chunk done
@@ -416,3 +428,84 @@ def test_example_study_tables_are_valid(name, n_groups):
     sc = load_scenario(Path(__file__).resolve().parents[1] / "examples" / f"{name}.toml")
     groups = study_groups(sc.formation, sc.law, parse_study(sc.study, source=sc.source))
     assert len(groups) == n_groups
+
+
+# ----------------------------------------------------------------------------- settling
+
+SLIDING_TRIAL = 5  # of the square study (seed 1, k_a = 1): docs/studies.md, tests/test_batch.py
+
+
+def test_settling_labels_the_square_sliding_equilibrium_incorrect():
+    """Trial 5 (seed 1, k_a = 1) of the square ends at a sliding-mode equilibrium.
+
+    Explicit Euler chatters there and the kernel says ``not-converged``; implicit
+    Euler lands on the two switching surfaces and stops, far from the square:
+    ``incorrect`` (tests/test_batch.py shows with the Filippov integrator that the
+    state is at rest). Same table whatever the chunks and workers.
+    """
+    from formationlab.io.scenario import load_scenario
+
+    sc = load_scenario("examples/study-square.toml")
+    table = {
+        "trials": SLIDING_TRIAL + 1,
+        "laws": ["distance", "angle-restricted"],
+        "sweep": {"k_a": [1.0]},
+        "backend": "numpy",
+    }
+    on = {"enabled": True, "duration": 5.0, "dt": 0.01}
+    run = {"seed": 1, "dt": 1e-3, "duration": 5.0}
+    whole = run_study(sc.formation, sc.law, parse_study({**table, "settle": on}), **run)
+    t = whole.trials
+    ar = t[(t["law"] == "angle-restricted") & (t["trial"] == SLIDING_TRIAL)].iloc[0]
+    assert ar["outcome"] == "not-converged" and ar["max_distance_error"] > 0.9
+    assert ar["settled"] and ar["settled_outcome"] == "incorrect"
+    rest = t.drop(index=ar.name)
+    assert not rest["settled"].any() and (rest["settled_outcome"] == rest["outcome"]).all()
+    # the summary keeps the kernel's counts and adds those after settling
+    g = whole.summary["groups"][1]
+    assert g["counts"]["not-converged"] == 1 and g["counts"]["incorrect"] == 0
+    assert g["settled"] == 1 and whole.summary["settled_trials"] == 1
+    assert g["settled_counts"]["not-converged"] == 0 and g["settled_counts"]["incorrect"] == 1
+    assert g["settled_fractions"]["incorrect"] == 1 / (SLIDING_TRIAL + 1)
+    # Wilson interval of 1 in 6 by hand: (p + z^2/2n -+ z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n)
+    n, z = SLIDING_TRIAL + 1, math.sqrt(Z2)
+    half = z * math.sqrt(5 / n**3 + Z2 / (4 * n * n))
+    want = [(1 / n + Z2 / (2 * n) + s * half) / (1 + Z2 / n) for s in (-1, 1)]
+    np.testing.assert_allclose(g["settled_ci95"]["incorrect"], want, rtol=1e-12)
+    # chunks of 2 in two processes: the same table, byte for byte
+    chunked = run_study(
+        sc.formation, sc.law, parse_study({**table, "settle": on, "chunk_size": 2}),
+        workers=2, **run,
+    )  # fmt: skip
+    pd.testing.assert_frame_equal(chunked.trials, t, check_exact=True)
+    # settling off (the default): nothing settled, the kernel's columns unchanged
+    off = run_study(sc.formation, sc.law, parse_study(table), **run).trials
+    assert not off["settled"].any() and (off["settled_outcome"] == off["outcome"]).all()
+    kernel = [c for c in t.columns if c not in ("settled", "settled_outcome")]
+    pd.testing.assert_frame_equal(off[kernel], t[kernel], check_exact=True)
+
+
+def test_smooth_laws_are_never_settled(tmp_path, capsys):
+    """After 0.05 s every trial is still moving: only the switching law's are settled."""
+    import json
+
+    path = tmp_path / "settle.toml"
+    settle = "[study.settle]\nduration = 0.2\ndt = 0.01\n"  # enabled by --settle
+    path.write_text(SCENARIO.replace("trials = 24", "trials = 6") + settle, encoding="utf-8")
+    out = tmp_path / "out"
+    capsys.readouterr()
+    args = ["--out", str(out), "--duration", "0.05", "--seed", "5", "--settle"]
+    assert cli("study", str(path), *args) == 0
+    printed = capsys.readouterr().out
+    t = read_trials(out / "trials.parquet")
+    assert (t["outcome"] == "not-converged").all()
+    smooth = t["law"] == "distance"
+    assert smooth.sum() == 6 and not t.loc[smooth, "settled"].any()
+    assert (t.loc[smooth, "settled_outcome"] == "not-converged").all()
+    assert t.loc[~smooth, "settled"].all() and t["settled"].dtype == bool
+    assert set(t["settled_outcome"]) <= set(OUTCOMES)
+    summary = json.loads((out / "summary.json").read_text())
+    assert [g["settled"] for g in summary["groups"]] == [0, 6, 6]
+    assert summary["settled_trials"] == 12
+    assert summary["settle"] == {"enabled": True, "duration": 0.2, "dt": 0.01}
+    assert printed.count("settled 6") == 2 and "12 not-converged trials" in printed

@@ -50,6 +50,14 @@ def study(
         float | None,
         typer.Option("--duration", help="Simulated seconds per trial (overrides study.duration)."),
     ] = None,
+    settle: Annotated[
+        bool | None,
+        typer.Option(
+            "--settle/--no-settle",
+            help="Settle the not-converged trials of switching laws with implicit Euler "
+            "(overrides study.settle.enabled; default off: it can cost many times the study).",
+        ),
+    ] = None,
     resume: Annotated[
         bool, typer.Option("--resume", help="Finish an interrupted study in OUT.")
     ] = False,
@@ -64,7 +72,8 @@ def study(
         formationlab study examples/study-triangle.toml --trials 2000 --seed 1 --out out/tri
 
     Writes OUT/trials.parquet (one row per trial), OUT/summary.json (outcome counts,
-    fractions and 95% Wilson intervals per law and sweep point), figures
+    fractions and 95% Wilson intervals per law and sweep point; with study.settle
+    enabled, also after settling not-converged trials with implicit Euler), figures
     (fractions*.png, desired*.png, shapes_<law>.png) and OUT/chunks/ (finished chunks,
     for --resume). The same --seed gives the same trials whatever --workers,
     --scheduler or the chunk size.
@@ -76,7 +85,13 @@ def study(
 
     sc = load_scenario(scenario)
     config = parse_study(
-        sc.study, trials=trials, chunk_size=chunk_size, dt=dt, duration=duration, source=sc.source
+        sc.study,
+        trials=trials,
+        chunk_size=chunk_size,
+        dt=dt,
+        duration=duration,
+        settle=settle,
+        source=sc.source,
     )
     dt = float(config.dt or getattr(sc.integrator, "dt", None) or 1e-3)
     duration = float(config.duration or sc.duration)
@@ -173,6 +188,14 @@ def _write_outputs(out: Path, sc: Any, result: Any, identity: dict[str, Any]) ->
     err_console.print(f"wrote trials.parquet, summary.json and figures to {out}", highlight=False)
 
 
+def _cells(g: dict[str, Any], outs: list[str]) -> list[str]:
+    cells = []
+    for o in outs:
+        lo, hi = g["ci95"][o]
+        cells.append(f"{g['fractions'][o]:.3f} [{lo:.3f}, {hi:.3f}]")
+    return cells
+
+
 def _print_table(summary: dict[str, Any]) -> None:
     from rich.console import Console
     from rich.table import Table
@@ -186,12 +209,17 @@ def _print_table(summary: dict[str, Any]) -> None:
         table.add_column(o, justify="right")
     for g in summary["groups"]:
         params = ", ".join(f"{k}={v:g}" for k, v in g["parameters"].items())
-        cells = []
-        for o in outs:
-            lo, hi = g["ci95"][o]
-            cells.append(f"{g['fractions'][o]:.3f} [{lo:.3f}, {hi:.3f}]")
-        table.add_row(g["law"], params, str(g["trials"]), *cells)
+        table.add_row(g["law"], params, str(g["trials"]), *_cells(g, outs))
+        if g.get("settled"):  # a second line: the outcomes after implicit-Euler settling
+            after = {"fractions": g["settled_fractions"], "ci95": g["settled_ci95"]}
+            table.add_row("", f"  settled {g['settled']}", "", *_cells(after, outs), style="dim")
     Console(width=200).print(table)
+    if summary.get("settle", {}).get("enabled"):
+        Console().print(
+            f"settled with implicit Euler: {summary.get('settled_trials', 0):,} not-converged "
+            "trials (rows 'settled N')",
+            highlight=False,
+        )
     steps, wall = summary["trial_steps"], summary["wall_time_s"]
     rate = summary.get("trial_steps_per_s")
     Console().print(

@@ -9,7 +9,10 @@
                           (:func:`formationlab.studies.sampling.trial_initial_states`)
 ``law``                   the law's name
 one per swept parameter   its value; NaN for a law the parameter does not apply to
-``outcome``               one of :data:`formationlab.OUTCOMES`
+``outcome``               one of :data:`formationlab.OUTCOMES` (the batched kernel's)
+``settled``               whether the trial was settled with implicit Euler
+                          (``[study.settle]``: not-converged under a switching law)
+``settled_outcome``       its outcome after settling; ``outcome`` if not settled
 ``max_distance_error``    largest ``|r_ij - d_ij|`` over the edges at the end
 ``converged_time``        time of the first passed convergence test (instantaneous or
                           net speed <= the tolerance); NaN if never
@@ -43,15 +46,18 @@ from .files import atomic_path, atomic_write_json
 __all__ = ["ChunkFolder", "read_trials", "trials_schema", "write_trials"]
 
 _INTS = ("group", "trial", "seed", "steps")
-_STRINGS = ("law", "outcome")
+_STRINGS = ("law", "outcome", "settled_outcome")
+_BOOLS = ("settled",)
 
 
 def trials_schema(columns: list[str]) -> pa.Schema:
-    """The Arrow schema of a trials table with these columns (ints, strings, floats)."""
+    """The Arrow schema of a trials table with these columns (ints, strings, bools, floats)."""
     fields = []
     for c in columns:
         if c in _INTS:
             fields.append(pa.field(c, pa.int64()))
+        elif c in _BOOLS:
+            fields.append(pa.field(c, pa.bool_()))
         elif c in _STRINGS:
             fields.append(pa.field(c, pa.string()))
         else:

@@ -295,6 +295,8 @@ _FIXED = {
     "seed",
     "law",
     "outcome",
+    "settled",
+    "settled_outcome",
     "max_distance_error",
     "converged_time",
     "net_speed",

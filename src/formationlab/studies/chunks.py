@@ -3,14 +3,16 @@
 A :class:`ChunkTask` is picklable (it is sent to worker processes and dask
 workers); :func:`run_chunk` draws the chunk's initial states
 (:mod:`formationlab.studies.sampling`), runs the batched kernel
-:func:`formationlab.studies.batch.run_batch` on them and returns one row per
-trial (the columns of ``trials.parquet``, see :mod:`formationlab.io.trials`).
+:func:`formationlab.studies.batch.run_batch` on them, settles the trials the
+kernel leaves ``not-converged`` under a switching law if ``[study.settle]`` asks
+for it (:func:`settle_trials`), and returns one row per trial (the columns of
+``trials.parquet``, see :mod:`formationlab.io.trials`).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
@@ -18,11 +20,13 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from ..analysis import Tolerances
-from .config import BoxInitial, GaussianInitial, StudyConfig
+from ..controllers import Law
+from ..spec import Formation
+from .config import BoxInitial, GaussianInitial, SettleModel, StudyConfig
 from .groups import Group
 from .sampling import trial_initial_states
 
-__all__ = ["ChunkTask", "plan_chunks", "run_chunk"]
+__all__ = ["ChunkTask", "plan_chunks", "run_chunk", "settle_trials"]
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -41,6 +45,7 @@ class ChunkTask:
     tolerances: Tolerances
     backend: Literal["numba", "numpy"]
     sweep_keys: tuple[str, ...] = ()
+    settle: SettleModel = field(default_factory=SettleModel)
 
     @property
     def id(self) -> str:
@@ -81,6 +86,7 @@ def plan_chunks(
                     tolerances=config.tol,
                     backend=config.backend,
                     sweep_keys=tuple(config.sweep),
+                    settle=config.settle,
                 )
             )
     return tasks
@@ -103,6 +109,10 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
         tolerances=task.tolerances,
         backend=task.backend,
     )
+    outcome = np.asarray(res.outcome, dtype=object)
+    settled, settled_outcome = settle_trials(
+        f, g.law, res.q_final, outcome, settle=task.settle, tolerances=task.tolerances
+    )
     cols: dict[str, Any] = {
         "group": np.full(trials.size, g.index, dtype=np.int64),
         "trial": trials,
@@ -112,7 +122,9 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
     for key in task.sweep_keys:
         cols[key] = np.full(trials.size, g.parameters.get(key, np.nan), dtype=float)
     cols.update(
-        outcome=np.asarray(res.outcome, dtype=object),
+        outcome=outcome,
+        settled=settled,
+        settled_outcome=settled_outcome,
         max_distance_error=np.asarray(res.max_distance_error, dtype=float),
         converged_time=np.asarray(res.converged_time, dtype=float),
         net_speed=np.asarray(res.net_speed, dtype=float),
@@ -127,3 +139,69 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
         cols[f"x{i + 1}"] = qf[:, i, 0]
         cols[f"y{i + 1}"] = qf[:, i, 1]
     return pd.DataFrame(cols)
+
+
+def settle_trials(
+    formation: Formation,
+    law: Law,
+    q_final: NDArray[np.float64],
+    outcome: NDArray[Any],
+    *,
+    settle: SettleModel,
+    tolerances: Tolerances,
+) -> tuple[NDArray[np.bool_], NDArray[np.object_]]:
+    """Settle the kernel's ``not-converged`` trials of a switching law with implicit Euler.
+
+    Explicit Euler chatters across an attractive switching surface, so a trial
+    at rest at a sliding-mode (Filippov) equilibrium never passes the kernel's
+    convergence test. Implicit Euler in the switching weights lands on the
+    surfaces and slides (:mod:`formationlab.integrators.implicit`): each such
+    trial is continued from its final state with ``ImplicitEuler(dt=settle.dt)``
+    until its robots move slower than ``tolerances.speed`` (displacement per
+    step over ``dt``) or for ``settle.duration`` seconds, and classified again
+    (:func:`formationlab.equilibria.settle`). Every trial is stepped on its own,
+    so its label does not depend on the other trials of its chunk.
+
+    Parameters
+    ----------
+    formation : Formation
+    law : Law
+        A smooth law (``law.smooth``) has no switching surface: its trials are
+        never settled.
+    q_final : ndarray, shape (B, n, 2)
+        The kernel's final positions.
+    outcome : ndarray of str, shape (B,)
+        The kernel's outcomes.
+    settle : SettleModel
+        ``[study.settle]``; nothing is settled unless ``settle.enabled``.
+    tolerances : Tolerances
+        Of the classification; ``speed`` also ends the settling.
+
+    Returns
+    -------
+    settled : ndarray of bool, shape (B,)
+        The trials that were settled.
+    settled_outcome : ndarray of str (object), shape (B,)
+        Their outcome after settling; ``outcome`` for the others.
+    """
+    from ..equilibria.search import settle as settle_batch
+    from ..integrators import ImplicitEuler
+
+    outcome = np.asarray(outcome, dtype=object)
+    settled = outcome == "not-converged"
+    if not settle.enabled or law.smooth:
+        settled[:] = False
+    new = outcome.copy()
+    integ = ImplicitEuler(dt=settle.dt)
+    for b in np.flatnonzero(settled):
+        res = settle_batch(
+            formation,
+            law,
+            q_final[b : b + 1],
+            duration=settle.duration,
+            integrator=integ,
+            speed=tolerances.speed,
+            tolerances=tolerances,
+        )
+        new[b] = str(res.outcome[0])
+    return settled, new

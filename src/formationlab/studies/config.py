@@ -31,6 +31,13 @@ Every key, its default and its meaning (``docs/studies.md`` shows examples):
     Step of the batched explicit Euler kernel and simulated time per trial.
 ``backend`` (``"numba"`` or ``"numpy"``, default ``"numba"``)
     The batched kernel's implementation; both give the same results.
+``settle`` (table, default ``{ enabled = false, duration = 5.0, dt = 0.01 }``)
+    Settling of the trials that the explicit Euler kernel leaves ``not-converged``
+    under a law with switching surfaces (``not law.smooth``): each is continued from
+    its final state with implicit Euler (:class:`formationlab.integrators.ImplicitEuler`,
+    step ``dt``) for at most ``duration`` seconds, until its robots move slower than
+    ``tolerances.speed``, and classified again (:func:`formationlab.equilibria.settle`).
+    Off by default: it multiplies the cost of a study with many such trials.
 
 This module reads no files; the command line passes it the parsed table.
 """
@@ -40,12 +47,19 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from ..analysis import Tolerances
 from ..errors import ScenarioError
 
-__all__ = ["BoxInitial", "GaussianInitial", "StudyConfig", "parse_study"]
+__all__ = ["BoxInitial", "GaussianInitial", "SettleModel", "StudyConfig", "parse_study"]
 
 _STRICT = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True)
 
@@ -78,6 +92,29 @@ class TolerancesModel(BaseModel):
     window: float = Field(default=1e-2, gt=0)
 
 
+class SettleModel(BaseModel):
+    """``[study.settle]``: implicit-Euler settling of not-converged trials of switching laws."""
+
+    model_config = _STRICT
+    enabled: bool = False
+    duration: float = Field(default=5.0, gt=0, le=1000.0)
+    dt: float = Field(default=0.01, gt=0)
+
+    @model_validator(mode="after")
+    def _steps(self) -> SettleModel:
+        if self.dt > self.duration:
+            raise ValueError(
+                f"dt = {self.dt:g} is longer than duration = {self.duration:g}; "
+                "give a step shorter than the duration"
+            )
+        if self.duration / self.dt > 1e6:
+            raise ValueError(
+                f"duration / dt = {self.duration / self.dt:.3g} steps per trial; "
+                "at most 1e6: shorten the duration or lengthen the step"
+            )
+        return self
+
+
 class StudyConfig(BaseModel):
     """A validated ``[study]`` table (module docstring lists the keys)."""
 
@@ -91,6 +128,7 @@ class StudyConfig(BaseModel):
     dt: float | None = Field(default=None, gt=0)
     duration: float | None = Field(default=None, gt=0)
     backend: Literal["numba", "numpy"] = "numba"
+    settle: SettleModel = SettleModel()
 
     @field_validator("laws")
     @classmethod
@@ -134,11 +172,13 @@ def parse_study(
     chunk_size: int | None = None,
     dt: float | None = None,
     duration: float | None = None,
+    settle: bool | None = None,
     source: str = "scenario",
 ) -> StudyConfig:
     """Validate a ``[study]`` table (``None``: all defaults), with command-line overrides.
 
-    ``trials``, ``chunk_size``, ``dt`` and ``duration``, when given, replace the table's.
+    ``trials``, ``chunk_size``, ``dt`` and ``duration``, when given, replace the table's;
+    ``settle``, when given, replaces ``settle.enabled`` (keeping its ``duration`` and ``dt``).
 
     Raises
     ------
@@ -154,6 +194,12 @@ def parse_study(
     ):
         if value is not None:
             data[key] = value
+    if settle is not None:
+        table_settle = data.get("settle")
+        data["settle"] = {
+            **(table_settle if isinstance(table_settle, dict) else {}),
+            "enabled": settle,
+        }
     try:
         return StudyConfig.model_validate(data)
     except ValidationError as exc:
@@ -179,6 +225,7 @@ def _known_keys(path: list[str]) -> list[str]:
         "": StudyConfig,
         "initial": BoxInitial,
         "tolerances": TolerancesModel,
+        "settle": SettleModel,
     }
     model = models.get(".".join(path), StudyConfig)
     keys = list(model.model_fields)

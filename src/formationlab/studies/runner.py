@@ -14,7 +14,10 @@ machine; otherwise the scheduler's address).
 Determinism: trial ``t``'s initial state depends on ``(seed, t)`` only
 (:mod:`formationlab.studies.sampling`) and every trial is simulated on its own,
 so the table of trials is the same whatever the number of workers, the chunk
-size or the order in which chunks finish.
+size or the order in which chunks finish. With ``[study.settle]`` enabled, the
+kernel's ``not-converged`` trials of switching laws are settled with implicit
+Euler inside their chunk, trial by trial
+(:func:`~formationlab.studies.chunks.settle_trials`), which keeps that property.
 
 Resume: every finished chunk is handed to ``store.save`` as soon as it arrives
 (the command line's store writes it atomically under ``DIR/chunks/``); with
@@ -122,6 +125,7 @@ def study_identity(
         "initial": config.initial.model_dump(mode="json"),
         "tolerances": config.tolerances.model_dump(mode="json"),
         "backend": config.backend,
+        "settle": config.settle.model_dump(mode="json"),
         "dt": float(dt),
         "duration": float(duration),
         "groups": [g.describe() for g in groups],
@@ -230,6 +234,7 @@ def run_study(
     trials = pd.concat([frames[t.id] for t in tasks], ignore_index=True)
     trials = trials.sort_values(["group", "trial"], kind="stable", ignore_index=True)
     steps = int(trials["steps"].sum())
+    settled = int(trials["settled"].sum()) if "settled" in trials else 0
     summary = {
         "seed": int(seed),
         "trials_per_group": config.trials,
@@ -240,11 +245,13 @@ def run_study(
         "initial": config.initial.model_dump(mode="json"),
         "tolerances": config.tolerances.model_dump(mode="json"),
         "backend": config.backend,
+        "settle": config.settle.model_dump(mode="json"),
         "laws": list(config.laws or (law.name,)),
         "sweep": {k: list(v) for k, v in config.sweep.items()},
         "outcomes": list(OUTCOMES),
         "groups": summarize_groups(trials, [g.describe() for g in groups]),
         "trial_steps": steps,
+        "settled_trials": settled,
         "wall_time_s": wall,
         "trial_steps_per_s": steps / wall if wall > 0 and resumed == 0 else None,
         "scheduler": scheduler,

@@ -75,35 +75,50 @@ def summarize_groups(trials: pd.DataFrame, groups: list[dict[str, Any]]) -> list
         ``law``, ``parameters``, ..., ``trials``, ``counts``, ``fractions`` and
         ``ci95`` (``[low, high]``) keyed by every outcome in :data:`OUTCOMES`,
         ``median_converged_time`` (of the trials that converged, or None) and
-        ``trial_steps``.
+        ``trial_steps``; then ``settled`` (how many trials were settled with
+        implicit Euler) and ``settled_counts``, ``settled_fractions`` and
+        ``settled_ci95`` of the outcomes after settling (column
+        ``settled_outcome``; ``outcome`` where the table has no such column).
     """
     out = []
+    after = "settled_outcome" if "settled_outcome" in trials else "outcome"
     by_group = dict(tuple(trials.groupby("group", sort=True)))
     for g, meta in enumerate(groups):
         rows = by_group.get(g)
         n = 0 if rows is None else len(rows)
-        counts: dict[str, int] = {o: 0 for o in OUTCOMES}
-        if rows is not None:
-            for o, c in rows["outcome"].value_counts().items():
-                counts[str(o)] = int(c)
         entry = dict(meta)
         entry["trials"] = n
-        entry["counts"] = counts
+        entry.update(_fractions(rows, "outcome", n))
         if rows is not None and n:
-            k = np.array([counts[o] for o in OUTCOMES])
-            lo, hi = wilson_interval(k, n)
-            entry["fractions"] = {o: counts[o] / n for o in OUTCOMES}
-            entry["ci95"] = {
-                o: [float(a), float(b)] for o, a, b in zip(OUTCOMES, lo, hi, strict=True)
-            }
             ct = rows["converged_time"].to_numpy(dtype=float)
             ct = ct[np.isfinite(ct)]
             entry["median_converged_time"] = float(np.median(ct)) if ct.size else None
             entry["trial_steps"] = int(rows["steps"].sum())
         else:
-            entry["fractions"] = {o: math.nan for o in OUTCOMES}
-            entry["ci95"] = {o: [math.nan, math.nan] for o in OUTCOMES}
             entry["median_converged_time"] = None
             entry["trial_steps"] = 0
+        settled = 0 if rows is None or "settled" not in rows else int(rows["settled"].sum())
+        entry["settled"] = settled
+        entry.update({f"settled_{k}": v for k, v in _fractions(rows, after, n).items()})
         out.append(entry)
     return out
+
+
+def _fractions(rows: pd.DataFrame | None, column: str, n: int) -> dict[str, Any]:
+    """``counts``, ``fractions`` and Wilson ``ci95`` of the outcomes in ``column``."""
+    counts: dict[str, int] = {o: 0 for o in OUTCOMES}
+    if rows is not None:
+        for o, c in rows[column].value_counts().items():
+            counts[str(o)] = int(c)
+    if not n:
+        return {
+            "counts": counts,
+            "fractions": {o: math.nan for o in OUTCOMES},
+            "ci95": {o: [math.nan, math.nan] for o in OUTCOMES},
+        }
+    lo, hi = wilson_interval(np.array([counts[o] for o in OUTCOMES]), n)
+    return {
+        "counts": counts,
+        "fractions": {o: counts[o] / n for o in OUTCOMES},
+        "ci95": {o: [float(a), float(b)] for o, a, b in zip(OUTCOMES, lo, hi, strict=True)},
+    }
