@@ -159,8 +159,10 @@ def settle_trials(
     trial is continued from its final state with ``ImplicitEuler(dt=settle.dt)``
     until its robots move slower than ``tolerances.speed`` (displacement per
     step over ``dt``) or for ``settle.duration`` seconds, and classified again
-    (:func:`formationlab.equilibria.settle`). Every trial is stepped on its own,
-    so its label does not depend on the other trials of its chunk.
+    (:func:`formationlab.equilibria.settle`). The chunk's trials are stepped as
+    one batch; every trial stops on its own, and the batched implicit-Euler step
+    equals stepping each member alone (``tests/test_integrators.py``), so a
+    label does not depend on the other trials of its chunk.
 
     Parameters
     ----------
@@ -192,16 +194,16 @@ def settle_trials(
     if not settle.enabled or law.smooth:
         settled[:] = False
     new = outcome.copy()
-    integ = ImplicitEuler(dt=settle.dt)
-    for b in np.flatnonzero(settled):
+    which = np.flatnonzero(settled)
+    if which.size:
         res = settle_batch(
             formation,
             law,
-            q_final[b : b + 1],
+            q_final[which],
             duration=settle.duration,
-            integrator=integ,
+            integrator=ImplicitEuler(dt=settle.dt),
             speed=tolerances.speed,
             tolerances=tolerances,
         )
-        new[b] = str(res.outcome[0])
+        new[which] = [str(x) for x in res.outcome]
     return settled, new
