@@ -300,15 +300,28 @@ def test_input_errors():
 
 def test_other_laws_run_on_the_numpy_backend_only():
     class Scaled(fl.DistanceLaw):
+        """A law of its own: its control is not the one its inherited kernel terms describe."""
+
         name = "scaled-distance-for-test"
+
+        def control(self, formation, q):
+            return 0.5 * super().control(formation, q)
+
+    class Renamed(fl.DistanceLaw):
+        name = "renamed-distance-for-test"
 
     f = paper_triangle()
     q0 = np.array([[[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]])
     with pytest.raises(ParameterError, match='backend="numpy"'):
         run_batch(f, Scaled(), q0, dt=DT, duration=0.1)
     res = run_batch(f, Scaled(), q0, dt=DT, duration=0.1, backend="numpy")
-    ref = run_batch(f, fl.DistanceLaw(), q0, dt=DT, duration=0.1)
+    ref = run_batch(f, fl.DistanceLaw(k_c=1.0), q0, dt=DT, duration=0.1)
     np.testing.assert_allclose(res.q_final, ref.q_final, atol=1e-12)
+    # a subclass that keeps the control keeps the kernel
+    same = run_batch(f, Renamed(), q0, dt=DT, duration=0.1)
+    np.testing.assert_array_equal(
+        same.q_final, run_batch(f, fl.DistanceLaw(), q0, dt=DT, duration=0.1).q_final
+    )
 
 
 @pytest.mark.parametrize(

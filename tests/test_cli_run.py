@@ -269,7 +269,7 @@ def test_missing_scenario_file(tmp_path: Path) -> None:
 
 
 def test_a_run_that_stops_early_writes_its_results_and_exits_1(tmp_path: Path) -> None:
-    # dt = 1 s: an Euler step brings two robots closer than a_ij, a step the integrator
+    # dt = 1 s: an Euler step carries two robots through each other, a step the integrator
     # refuses (the exact flow cannot touch: phi_ij is infinite at contact)
     path = tmp_path / "coarse.toml"
     path.write_text(
@@ -280,9 +280,10 @@ def test_a_run_that_stops_early_writes_its_results_and_exits_1(tmp_path: Path) -
     assert res.exit_code == 1
     assert "stopped early" in res.stderr and "reduce dt" in res.stderr
     s = json.loads((out / "summary.json").read_text())
-    assert s["status"] == "step-collision" and s["outcome"] == "collision"
+    assert s["status"] == "step-too-large" and s["outcome"] == "collision"
+    assert "pass through each other" in s["message"]
     with xr.open_dataset(out / "trajectory.nc", engine="h5netcdf") as ds:
-        assert ds.attrs["status"] == "step-collision"
+        assert ds.attrs["status"] == "step-too-large"
 
 
 def test_output_folder_that_is_a_file_is_refused(tmp_path: Path) -> None:

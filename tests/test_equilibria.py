@@ -162,7 +162,7 @@ def test_catalogue_merges_random_ends_of_the_distance_law(triangle):
     rng = np.random.default_rng(7)
     starts = random_starts(triangle, 24, rng, collinear=0.25)
     ends = settle(triangle, law, starts, duration=30.0)
-    cat = catalogue(triangle, law, ends.q, outcomes=ends.outcome)
+    cat = catalogue(triangle, law, ends.q_final, outcomes=ends.outcome)
     kinds = [(e.desired, e.stability) for e in cat.equilibria]
     assert kinds == [(True, "stable"), (False, "saddle")]  # desired first
     assert sum(cat.counts) + sum(cat.skipped.values()) == 24

@@ -29,15 +29,16 @@ def test_distance_law_conserves_centroid():
     assert np.abs(drift).max() < 1e-12
 
 
-def test_too_large_step_stops_with_contact_status():
+def test_a_step_through_each_other_stops_with_the_step_too_large_status():
     f = fl.Formation.from_distances(2, distances=1.0, diameters=0.2)
     # each Euler step of 0.05 s would carry the robots 4.5 units towards each other,
     # through each other: the swept clearance catches it
     res = fl.simulate(
         f, fl.DistanceLaw(k_c=50.0), [[0, 0], [3.0, 0]], duration=1.0, integrator=fl.Euler(dt=0.05)
     )
-    assert res.status == "step-collision"
-    assert "robots 1 and 2" in res.message and "reduce dt" in res.message
+    # both ends of the rejected step are clear: the robots jumped through each other
+    assert res.status == "step-too-large"
+    assert "robots 1 and 2 pass through each other" in res.message and "reduce dt" in res.message
     assert res.outcome() == "collision"
     assert np.all(np.linalg.norm(res.q[:, 1] - res.q[:, 0], axis=-1) > 0.2)  # never stored
     ok = fl.simulate(

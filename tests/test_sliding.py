@@ -45,10 +45,12 @@ class Relay:
         return np.asarray(q, dtype=float)[..., 0, :1]
 
     def clearance(self, q):
-        return np.inf
+        return np.full(np.shape(q)[:-2], np.inf)
 
-    def swept_clearance(self, q, q_new):
-        return np.inf
+    def step_verdict(self, q, q_new):
+        """Every step is acceptable (no robots to collide); the clearance is infinite."""
+        shape = np.shape(q)[:-2]
+        return np.zeros(shape, np.int8), np.full(shape, np.inf)
 
 
 def relay_hitting_time(x0: float, a: float) -> float:

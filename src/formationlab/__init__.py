@@ -8,7 +8,7 @@ repulsion, and the angle-restricted sliding-mode law) and goes beyond it.
 >>> f = fl.Formation.from_template([[0, 0], [1, 0], [0.5, 0.8]], diameters=0.2)
 >>> law = fl.AngleRestrictedLaw(k_c=2.0, k_a=3.0, theta=0.5)
 >>> res = fl.simulate(f, law, [[-3, -3], [3, -3], [0, 3]], duration=15.0)
->>> res.outcome(), res.status
+>>> res.outcome(), str(res.status)
 ('desired', 'success')
 """
 

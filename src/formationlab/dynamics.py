@@ -1,76 +1,148 @@
-"""Robot motion models: how a control becomes a velocity.
+"""The closed loop: a formation, a law and a robot model; and the one rule for a step.
 
-The paper's robots are omnidirectional single integrators, ``q_dot_i = u_i``
-(eq. 1). The model is kept separate from the laws so that other models (the
-paper's "future work": robot dynamics) plug in without touching them.
+:class:`System` is what every integrator steps. Its state ``x`` has shape
+``(..., n, k)`` with the robot model's ``k`` numbers per robot, positions
+first (:mod:`formationlab.models.base`); for the paper's single integrators
+``x`` is the positions ``q`` themselves. The law sees ``model.points(x)``.
+
+:meth:`System.step_verdict` is the contact rule of the package, used by the
+stepping driver, the settling of equilibria and (in compiled form) the batch
+kernel: a step from ``x0`` to ``x1`` is rejected when it is not finite, when it
+ends with two robots in contact (``r_ij <= a_ij``: :attr:`Status.COLLISION`)
+or when the straight path of the step passes through contact while both ends
+are clear (:attr:`Status.STEP_TOO_LARGE`: robots jumped through each other).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import ClassVar
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .controllers import Law
+from .models import RobotModel, SingleIntegrator
 from .spec import Formation
+from .status import Status
 
-__all__ = ["SingleIntegrator", "System"]
-
-
-@dataclass(frozen=True, kw_only=True)
-class SingleIntegrator:
-    """``q_dot_i = u_i`` (eq. 1): the state is the positions, shape ``(..., n, 2)``."""
-
-    name: ClassVar[str] = "single-integrator"
-
-    def velocity(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
-        return u  # eq. (1)
+__all__ = ["System"]
 
 
 @dataclass(frozen=True, kw_only=True)
 class System:
-    """A closed loop: a formation, a law and a motion model.
+    """A closed loop: a formation, a law and a robot model.
 
-    ``rhs(q)`` is the vector field the integrators step; ``rhs_with(q, w)`` the
+    ``rhs(x)`` is the vector field the integrators step; ``rhs_with(x, w)`` the
     same with the law's steps replaced by Filippov weights ``w`` (shape of
-    ``law.switching``); ``sigma(q)`` the switching functions.
+    ``law.switching``); ``sigma(x)`` the switching functions.
     """
 
     formation: Formation
     law: Law
-    model: SingleIntegrator = SingleIntegrator()
+    model: RobotModel = field(default_factory=SingleIntegrator)
 
-    def rhs(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
-        return self.model.velocity(self.law.control(self.formation, q))
+    def rhs(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        u = self.law.control(self.formation, self.model.points(x))
+        return self.model.derivative(x, u)
 
-    def rhs_with(self, q: NDArray[np.float64], weights: NDArray[np.float64]) -> NDArray[np.float64]:
-        return self.model.velocity(self.law.control_with(self.formation, q, weights))
+    def rhs_with(self, x: NDArray[np.float64], weights: NDArray[np.float64]) -> NDArray[np.float64]:
+        u = self.law.control_with(self.formation, self.model.points(x), weights)
+        return self.model.derivative(x, u)
 
-    def sigma(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
-        return self.law.switching(self.formation, q)
+    def sigma(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        return self.law.switching(self.formation, self.model.points(x))
 
-    def clearance(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+    def positions(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Robot centres ``(..., n, 2)``."""
+        return self.model.positions(np.asarray(x, dtype=float))
+
+    @cached_property
+    def _pairs(self) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
+        iu, ju = np.triu_indices(self.formation.n, k=1)
+        return iu, ju, self.formation.contact_matrix[iu, ju]
+
+    def pair_clearances(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``r_ij - a_ij`` of every pair ``i < j``; ``(..., n, k) -> (..., n (n - 1) / 2)``."""
+        iu, ju, a = self._pairs
+        q = self.positions(x)
+        d = q[..., ju, :] - q[..., iu, :]
+        return np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) - a
+
+    def clearance(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Least ``r_ij - a_ij`` over all pairs; shape ``(...)``."""
-        q = np.asarray(q, dtype=float)
-        iu, ju = np.triu_indices(self.formation.n, k=1)
-        r = np.linalg.norm(q[..., ju, :] - q[..., iu, :], axis=-1)
-        return np.min(r - self.formation.contact_matrix[iu, ju], axis=-1)
+        return np.min(self.pair_clearances(x), axis=-1)
 
-    def swept_clearance(
-        self, q0: NDArray[np.float64], q1: NDArray[np.float64]
+    def pair_swept_clearances(
+        self, x0: NDArray[np.float64], x1: NDArray[np.float64]
     ) -> NDArray[np.float64]:
-        """Least ``r_ij - a_ij`` over the straight step from ``q0`` to ``q1``; shape ``(...)``.
-
-        Catches a step that carries two robots through each other, which the
-        clearance at the end of the step alone would miss.
-        """
-        q0, q1 = np.asarray(q0, dtype=float), np.asarray(q1, dtype=float)
-        iu, ju = np.triu_indices(self.formation.n, k=1)
+        """Least ``r_ij - a_ij`` of each pair along the straight step ``x0 -> x1``; ``(..., P)``."""
+        iu, ju, a = self._pairs
+        q0, q1 = self.positions(x0), self.positions(x1)
         r0 = q0[..., ju, :] - q0[..., iu, :]
         dr = (q1[..., ju, :] - q1[..., iu, :]) - r0
         dd = np.sum(dr * dr, axis=-1)
         s = np.clip(-np.sum(r0 * dr, axis=-1) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
-        r = np.linalg.norm(r0 + s[..., None] * dr, axis=-1)
-        return np.min(r - self.formation.contact_matrix[iu, ju], axis=-1)
+        m = r0 + s[..., None] * dr
+        return np.sqrt(m[..., 0] * m[..., 0] + m[..., 1] * m[..., 1]) - a
+
+    def swept_clearance(
+        self, x0: NDArray[np.float64], x1: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """Least ``r_ij - a_ij`` over the straight step from ``x0`` to ``x1``; shape ``(...)``.
+
+        Catches a step that carries two robots through each other, which the
+        clearance at the end of the step alone would miss.
+        """
+        return np.min(self.pair_swept_clearances(x0, x1), axis=-1)
+
+    def step_verdict(
+        self, x0: NDArray[np.float64], x1: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int8], NDArray[np.float64]]:
+        """Judge the steps ``x0 -> x1`` (``(..., n, k)``): the contact rule of the package.
+
+        Returns the verdict, 0 for an acceptable step and otherwise the rejecting
+        ``Status.code`` (module docstring), and the least clearance at ``x1``; both ``(...)``.
+        """
+        with np.errstate(invalid="ignore", over="ignore"):
+            finite = np.all(np.isfinite(x1), axis=(-2, -1))
+            safe = np.where(finite[..., None, None], x1, x0)
+            end = self.clearance(safe)
+            swept = self.swept_clearance(x0, safe)
+        verdict = np.select(
+            [~finite, ~(end > 0), ~(swept > 0)],
+            [Status.NON_FINITE.code, Status.COLLISION.code, Status.STEP_TOO_LARGE.code],
+            default=0,
+        ).astype(np.int8)
+        return verdict, end
+
+    def step_message(
+        self, x0: NDArray[np.float64], x1: NDArray[np.float64], status: Status, t: float, dt: float
+    ) -> str:
+        """Why the step from ``x0`` (one state ``(n, k)``) to ``x1``, ending at ``t``, failed."""
+        if status is Status.NON_FINITE:
+            return (
+                f"the step to t = {t:g} s produced NaN or infinite positions; reduce dt "
+                f"(now {dt:g} s), e.g. to {dt / 10:g} s"
+            )
+        iu, ju, a = self._pairs
+        q0, q1 = self.positions(x0), self.positions(x1)
+        jump = float(np.max(np.linalg.norm(q1 - q0, axis=-1)))
+        if status is Status.COLLISION:
+            clr = self.pair_clearances(x1)
+            p = int(np.argmin(clr))
+            i, j = iu[p] + 1, ju[p] + 1
+            r = clr[p] + a[p]
+            return (
+                f"the step to t = {t:g} s would bring robots {i} and {j} to r = {r:.4g} <= "
+                f"a_{i}{j} = {a[p]:g}; the exact flow of a barrier law cannot touch, so the "
+                f"step is too large: reduce dt (now {dt:g} s), e.g. to {dt / 10:g} s"
+            )
+        p = int(np.argmin(self.pair_swept_clearances(x0, x1)))
+        i, j = iu[p] + 1, ju[p] + 1
+        return (
+            f"robots {i} and {j} pass through each other during the step to t = {t:g} s "
+            f"(the largest move in that step is {jump:.3g}, against a contact distance "
+            f"a_{i}{j} = {a[p]:g}); the step is too large for the field: reduce dt "
+            f"(now {dt:g} s), e.g. to {dt / 10:g} s"
+        )

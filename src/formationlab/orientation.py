@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import FormationError
+from .geometry import cross, parity
 
 __all__ = ["BETA_RTOL", "COLLINEAR_SIN", "alpha_from_shape", "signed_angle", "switching_surfaces"]
 
@@ -22,9 +23,8 @@ BETA_RTOL = 1e-9
 
 def signed_angle(u: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
     """Counter-clockwise angle from ``u`` to ``v`` in ``(-pi, pi]``."""
-    cross = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
     dot = u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1]
-    return np.arctan2(cross, dot)
+    return np.arctan2(cross(u, v), dot)
 
 
 def alpha_from_shape(
@@ -67,9 +67,7 @@ def switching_surfaces(
     for i, j, k in np.argwhere(restricted):
         tri = (int(i), int(j), int(k))
         srt = tuple(sorted(tri))
-        perm = [srt.index(x) for x in tri]
-        parity = 1.0 if perm in ([0, 1, 2], [1, 2, 0], [2, 0, 1]) else -1.0
-        beta = float(alpha[i, j, k]) * parity
+        beta = float(alpha[i, j, k]) * float(parity(i, j, k))
         # the same surface when beta agrees to round-off (angles of a template carry it)
         for s, (t, b) in enumerate(zip(tris, betas, strict=True)):
             if t == srt and abs(b - beta) <= BETA_RTOL * max(1.0, abs(b)):

@@ -13,15 +13,19 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .geometry import cross, parity, perp
+
 __all__ = [
     "cross",
     "dkhatib_ds",
     "dphi_dr",
     "khatib",
     "pair_vectors",
+    "parity",
     "perp",
     "phi",
     "psi",
+    "triangle_products",
     "triple_products",
     "upsilon",
 ]
@@ -74,18 +78,6 @@ def pair_vectors(q: ArrayLike) -> NDArray[np.float64]:
     return q[..., None, :, :] - q[..., :, None, :]
 
 
-def cross(u: ArrayLike, v: ArrayLike) -> NDArray[np.float64]:
-    """Scalar triple product ``(u x v) . k`` of planar vectors ``(..., 2)``."""
-    u, v = np.asarray(u, dtype=float), np.asarray(v, dtype=float)
-    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
-
-
-def perp(v: ArrayLike) -> NDArray[np.float64]:
-    """``k x v``: planar vectors ``(..., 2)`` turned by +90 degrees."""
-    v = np.asarray(v, dtype=float)
-    return np.stack([-v[..., 1], v[..., 0]], axis=-1)
-
-
 def triple_products(q: ArrayLike) -> NDArray[np.float64]:
     """``c_ijk = (r_ij x r_ik) . k`` for all triples; ``(..., n, 2) -> (..., n, n, n)``.
 
@@ -94,6 +86,19 @@ def triple_products(q: ArrayLike) -> NDArray[np.float64]:
     """
     r = pair_vectors(q)
     return cross(r[..., :, :, None, :], r[..., :, None, :, :])
+
+
+def triangle_products(q: ArrayLike, triangles: ArrayLike) -> NDArray[np.float64]:
+    """``c_abc = (r_ab x r_ac) . k`` of listed triangles; ``(..., n, 2), (t, 3) -> (..., t)``.
+
+    The one place the switching functions of eq. (14) take their triple products
+    from (``Formation.surfaces`` lists the triangles), so every path that decides
+    whether a restriction is on computes the same number, bit for bit.
+    """
+    q = np.asarray(q, dtype=float)
+    t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    a, b, c = (q[..., t[:, m], :] for m in range(3))
+    return cross(b - a, c - a)
 
 
 def upsilon(x: ArrayLike) -> NDArray[np.float64]:

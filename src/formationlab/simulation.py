@@ -31,6 +31,7 @@ from .dynamics import System
 from .errors import ParameterError
 from .integrators import Euler, Integrator, RawSolution
 from .spec import Formation
+from .status import Status
 
 __all__ = ["SimulationResult", "simulate"]
 
@@ -48,15 +49,22 @@ class SimulationResult:
     q : ndarray, shape (T, n, 2)
         Positions at those times.
     u : ndarray, shape (T, n, 2)
-        Controls (= velocities) at those positions.
+        The velocity each saved state was left with: the step the integrator
+        took (for ``implicit-euler`` and ``filippov`` on a switching surface, the
+        sliding motion, not the field of one side); equal to the control of the
+        law for single integrators away from the surfaces.
     V : ndarray, shape (T,)
         The law's Lyapunov function: eq. (9) for the distance law, eq. (15) for
         the angle-restricted law.
     sigma : ndarray, shape (T, s)
         Switching functions of the law's distinct surfaces (``s = 0`` for a
         smooth law); a restriction is active where ``sigma >= 0``.
-    status, message : str
-        ``"success"``, ``"step-collision"`` or ``"non-finite"``, and why.
+    status : Status
+        How the run ended (:class:`formationlab.status.Status`, a string
+        enumeration: ``"success"``, ``"step-collision"``, ``"step-too-large"``,
+        ``"non-finite"``, ``"interrupted"``, ...).
+    message : str
+        Why, in words.
     stats : dict
         Integrator diagnostics (steps, cost, switches, ...).
     """
@@ -69,7 +77,7 @@ class SimulationResult:
     u: NDArray[np.float64]
     V: NDArray[np.float64]
     sigma: NDArray[np.float64]
-    status: str
+    status: Status
     message: str
     stats: dict[str, Any] = field(default_factory=dict)
 
@@ -80,7 +88,12 @@ class SimulationResult:
 
     @property
     def restriction_labels(self) -> list[str]:
-        """1-based label of each surface, e.g. ``"alpha_123"`` (its first triple)."""
+        """1-based label of each surface of the law, e.g. ``"alpha_123"`` (its first triple).
+
+        Empty for a law without switching surfaces, whatever the formation's orientation.
+        """
+        if self.sigma.shape[-1] == 0:
+            return []
         tris, _, index = self.formation.surfaces
         labels = []
         for s in range(len(tris)):
@@ -125,7 +138,7 @@ class SimulationResult:
             self.q[-1],
             self.u[-1],
             tolerances,
-            contact=self.status == "step-collision",
+            contact=Status(self.status).contact,
             net_speed=self.net_speed(tolerances),
         )
 
@@ -187,6 +200,7 @@ def simulate(
     integrator: Integrator | None = None,
     save_every: int = 1,
     progress: Callable[[float], None] | None = None,
+    interruptible: bool = False,
 ) -> SimulationResult:
     """Simulate ``q_dot_i = u_i`` (eq. 1) under ``law`` from ``q0``.
 
@@ -206,6 +220,9 @@ def simulate(
         Keep every K-th step (thins what is stored, not what is computed).
     progress : callable, optional
         Called with the simulated time now and then.
+    interruptible : bool
+        On Ctrl-C, return the run so far with status ``"interrupted"`` instead of
+        raising ``KeyboardInterrupt`` (fixed-step integrators).
 
     Returns
     -------
@@ -228,20 +245,19 @@ def simulate(
     integrator = integrator or Euler(dt=1e-3)
     system = System(formation=formation, law=law)
     raw: RawSolution = integrator.run(
-        system, q0, float(duration), save_every=int(save_every), progress=progress
-    )
-    u = law.control(formation, raw.q)
-    V = law.potential(formation, raw.q)
-    sigma = law.switching(formation, raw.q)
+        system, q0, float(duration), save_every=int(save_every), progress=progress,
+        interruptible=interruptible,
+    )  # fmt: skip
+    points = system.model.points(raw.x)
     return SimulationResult(
         formation=formation,
         law=law,
         integrator=integrator,
         t=raw.t,
         q=raw.q,
-        u=u,
-        V=V,
-        sigma=sigma,
+        u=raw.v[..., :2],
+        V=law.potential(formation, points),
+        sigma=law.switching(formation, points),
         status=raw.status,
         message=raw.message,
         stats=dict(raw.stats),

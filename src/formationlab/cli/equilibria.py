@@ -161,7 +161,7 @@ def equilibria(
         rng = np.random.default_rng(seed_value)
         q0 = random_starts(sc.formation, n_starts, rng, collinear=collinear)
         settled = settle(sc.formation, sc.law, q0, duration=duration, integrator=settler)
-        cands.append(settled.q)
+        cands.append(settled.q_final)
         outs.append(settled.outcome)
         source["random_starts"] = {
             "count": n_starts,

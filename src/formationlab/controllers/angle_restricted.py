@@ -14,12 +14,21 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from ..potentials import perp, psi, triple_products, upsilon
+from ..geometry import perp
+from ..potentials import triangle_products, triple_products, upsilon
 from ..spec import Formation
 from .base import Law, Repulsion, register
 from .distance import _positive, grad_phi, pair_geometry, phi_sum
+from .terms import LOG_BARRIER, KernelTerms, build_terms
 
-__all__ = ["AngleRestrictedLaw", "active_restrictions", "grad_psi", "psi_sum"]
+__all__ = [
+    "AngleRestrictedLaw",
+    "active_restrictions",
+    "grad_psi",
+    "psi_sum",
+    "switching_functions",
+    "triple_steps",
+]
 
 
 def _alpha(formation: Formation) -> NDArray[np.float64]:
@@ -28,12 +37,40 @@ def _alpha(formation: Formation) -> NDArray[np.float64]:
     return formation.alpha
 
 
+def switching_functions(
+    formation: Formation, q: NDArray[np.float64], theta: float
+) -> NDArray[np.float64]:
+    """``sigma_s = beta_s c_abc + theta`` of each distinct surface; ``(..., n, 2) -> (..., s)``.
+
+    ``alpha_ijk c_ijk = beta_s c_abc`` for every triple of surface ``s``
+    (``Formation.surfaces``), so the step ``Upsilon(alpha_ijk c_ijk + theta)``
+    of eq. (14) is ``Upsilon(sigma_s)``. This is the one place where a
+    restriction is decided on or off: the control, ``psi``, the integrators'
+    switching diagnostics and the compiled kernels all use these numbers.
+    """
+    tris, beta, _ = formation.surfaces
+    return beta * triangle_products(q, tris) + theta  # eq. (14)
+
+
+def triple_steps(formation: Formation, weights: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Per-surface weights ``(..., s)`` spread to the restricted triples, ``(..., n, n, n)``."""
+    _, _, index = formation.surfaces
+    w = np.asarray(weights, dtype=float)
+    if w.shape[-1] == 0:
+        return np.zeros((*w.shape[:-1], *index.shape))
+    return np.where(index >= 0, np.take(w, np.maximum(index, 0), axis=-1), 0.0)
+
+
+def _steps(formation: Formation, q: NDArray[np.float64], theta: float) -> NDArray[np.float64]:
+    """``Upsilon(sigma_s(q))`` spread to the triples (Upsilon(0) = 1)."""
+    return triple_steps(formation, upsilon(switching_functions(formation, q, theta)))
+
+
 def active_restrictions(
     formation: Formation, q: NDArray[np.float64], theta: float
 ) -> NDArray[np.bool_]:
     """Restricted triples whose step is on: ``alpha_ijk c_ijk + theta >= 0``; ``(..., n, n, n)``."""
-    c = triple_products(q)
-    return formation.restricted & (_alpha(formation) * c + theta >= 0)
+    return _steps(formation, q, theta) > 0
 
 
 def grad_psi(
@@ -52,14 +89,15 @@ def grad_psi(
     alpha = _alpha(formation)
     r, _, _ = pair_geometry(q)
     if steps is None:
-        steps = upsilon(alpha * triple_products(q) + theta)
+        steps = _steps(formation, q, theta)
     w = alpha * steps  # (..., n, n, n)
     return np.einsum("...ijk,...jkd->...id", w, perp(r))  # eq. (23), summed as eq. (13)
 
 
 def psi_sum(formation: Formation, q: NDArray[np.float64], theta: float) -> NDArray[np.float64]:
     """``sum_i psi_i`` over ordered pairs (eq. 13); shape ``(...)``."""
-    values = psi(_alpha(formation), triple_products(q), theta)  # eq. (14)
+    ac = _alpha(formation) * triple_products(q)
+    values = ac * _steps(formation, q, theta)  # eq. (14): alpha c Upsilon(alpha c + theta)
     return np.sum(values * formation.restricted, axis=(-3, -2, -1))
 
 
@@ -101,9 +139,10 @@ class AngleRestrictedLaw(Law):
         return 2.0 * self.k_a / (formation.kappa * self.k_c)  # eq. (25)
 
     def control(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
-        return self._control(formation, q, None)
+        """``u`` of eq. (11): :meth:`control_with` the steps ``Upsilon(sigma(q))``."""
+        return self.control_with(formation, q, upsilon(self.switching(formation, q)))
 
-    def _control(self, formation: Formation, q: NDArray, steps: NDArray | None) -> NDArray:
+    def _control(self, formation: Formation, q: NDArray, steps: NDArray) -> NDArray:
         u = -self.k_c * grad_phi(formation, q, self.repulsion)
         if formation.alpha is not None and self.k_a > 0:
             u = u - self.k_a * grad_psi(formation, q, self.theta, steps)  # eq. (11)
@@ -119,21 +158,17 @@ class AngleRestrictedLaw(Law):
         return active_restrictions(formation, q, self.theta)
 
     def switching(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
-        """``sigma_s = beta_s c_abc + theta`` per distinct surface (``Formation.surfaces``)."""
-        tris, beta, _ = formation.surfaces
-        q = np.asarray(q, dtype=float)
-        a, b, c = (q[..., tris[:, m], :] for m in range(3))
-        cab = (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (
-            c[..., 0] - a[..., 0]
-        )
-        return beta * cab + self.theta
+        """``sigma_s = beta_s c_abc + theta`` per distinct surface (:func:`switching_functions`)."""
+        return switching_functions(formation, q, self.theta)
 
     def control_with(
         self, formation: Formation, q: NDArray[np.float64], weights: NDArray[np.float64]
     ) -> NDArray[np.float64]:
-        _, _, index = formation.surfaces
-        w = np.asarray(weights, dtype=float)
-        if w.shape[-1] == 0:
-            return self._control(formation, q, np.zeros(index.shape))
-        steps = np.where(index >= 0, np.take(w, np.maximum(index, 0), axis=-1), 0.0)
-        return self._control(formation, q, steps)
+        return self._control(formation, q, triple_steps(formation, weights))
+
+    def kernel_terms(self, formation: Formation) -> KernelTerms:
+        rep = self.repulsion
+        return build_terms(
+            formation, kind=LOG_BARRIER, edge_gain=self.k_c, repulsion_gain=self.k_c,
+            eta=rep.eta, influence=rep.influence, k_a=self.k_a, theta=self.theta,
+        )  # fmt: skip

@@ -11,7 +11,10 @@ Subclass :class:`Law`, set ``name``, implement :meth:`Law.control` and
 :meth:`Law.potential`, decorate with :func:`register`. A discontinuous law
 (one with switching surfaces ``sigma(q) = 0``) also implements
 :meth:`Law.switching` and :meth:`Law.control_with`, which the sliding-mode
-integrators use to build Filippov convex combinations.
+integrators use to build Filippov convex combinations; its :meth:`Law.control`
+must be ``control_with(q, Upsilon(switching(q)))``, so that the on/off decision
+of every restriction is made in one place, the switching functions. A law the
+compiled kernels can evaluate returns its data from :meth:`Law.kernel_terms`.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from numpy.typing import NDArray
 
 from ..errors import ParameterError
 from ..spec import Formation
+from .terms import KernelTerms
 
 __all__ = ["LAWS", "Law", "Repulsion", "get_law", "register"]
 
@@ -82,6 +86,34 @@ class Law:
         ``weights`` has the shape of :meth:`switching`. For a smooth law it is ignored.
         """
         return self.control(formation, q)
+
+    def kernel_terms(self, formation: Formation) -> KernelTerms:
+        """The law as the arrays the compiled kernels step (:mod:`.terms`).
+
+        Laws the kernels cannot evaluate keep this default, which says so; they
+        run on the numpy path (``run_batch(..., backend="numpy")``).
+        """
+        raise ParameterError(
+            f"the compiled kernel cannot run the law {self.name!r} ({type(self).__name__}); "
+            'use backend="numpy"'
+        )
+
+    def compiled_terms(self, formation: Formation) -> KernelTerms:
+        """:meth:`kernel_terms`, refused when they cannot describe this law's control.
+
+        A subclass that overrides :meth:`control` without overriding
+        :meth:`kernel_terms` would otherwise inherit terms of another law.
+        """
+
+        def owner(name: str) -> type:
+            return next(c for c in type(self).__mro__ if name in c.__dict__)
+
+        if owner("kernel_terms") is not owner("control") and owner("kernel_terms") is not Law:
+            raise ParameterError(
+                f"the law {self.name!r} ({type(self).__name__}) overrides control() but not "
+                'kernel_terms(), so the compiled kernel cannot run it; use backend="numpy"'
+            )
+        return self.kernel_terms(formation)
 
     def with_params(self, **params: float) -> Law:
         """A copy with some parameters changed (validated again)."""

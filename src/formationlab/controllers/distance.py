@@ -16,6 +16,7 @@ from ..errors import ParameterError
 from ..potentials import dkhatib_ds, dphi_dr, khatib, pair_vectors, phi
 from ..spec import Formation
 from .base import Law, Repulsion, register
+from .terms import LOG_BARRIER, KernelTerms, build_terms
 
 __all__ = ["DistanceLaw", "grad_phi", "pair_geometry", "phi_sum"]
 
@@ -121,6 +122,13 @@ class DistanceLaw(Law):
 
     def potential(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
         return phi_sum(formation, q, self.repulsion)  # eq. (9)
+
+    def kernel_terms(self, formation: Formation) -> KernelTerms:
+        rep = self.repulsion
+        return build_terms(
+            formation, kind=LOG_BARRIER, edge_gain=self.k_c, repulsion_gain=self.k_c,
+            eta=rep.eta, influence=rep.influence,
+        )  # fmt: skip
 
 
 def _positive(obj: object, name: str, *, allow_zero: bool = False) -> None:

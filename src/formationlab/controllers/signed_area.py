@@ -38,7 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import FormationError
-from ..potentials import cross, perp
+from ..geometry import cross, parity, perp
 from ..spec import Formation
 from .base import Law, Repulsion, register
 from .distance import _positive
@@ -48,10 +48,9 @@ from .squared_distance import (
     repulsion_sum,
     squared_distance_sum,
 )
+from .terms import SQUARED, KernelTerms, build_terms
 
 __all__ = ["SignedAreaLaw", "desired_areas", "grad_area_penalty", "signed_areas"]
-
-_EVEN = ((0, 1, 2), (1, 2, 0), (2, 0, 1))
 
 
 def desired_areas(formation: Formation) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
@@ -81,8 +80,7 @@ def _desired_areas_cached(formation: Formation) -> tuple[NDArray[np.int64], NDAr
         tri = (int(i), int(j), int(k))
         lo, mid, hi = sorted(tri)
         srt = (lo, mid, hi)
-        parity = 1.0 if tuple(srt.index(x) for x in tri) in _EVEN else -1.0
-        s = float(formation.desired_sign[tri]) * parity  # desired sign of c_abc
+        s = float(formation.desired_sign[tri]) * float(parity(*tri))  # desired sign of c_abc
         if srt in signs and signs[srt] != s:
             a, b, c = (x + 1 for x in first[srt])
             x, y, z = (v + 1 for v in tri)
@@ -201,3 +199,11 @@ class SignedAreaLaw(Law):
         if self.k_r > 0:
             v = v + (self.k_r / self.k) * repulsion_sum(formation, q, self.repulsion)
         return v
+
+    def kernel_terms(self, formation: Formation) -> KernelTerms:
+        rep = self.repulsion
+        areas = desired_areas(formation) if self.k_s > 0 else None
+        return build_terms(
+            formation, kind=SQUARED, edge_gain=self.k, repulsion_gain=self.k_r,
+            eta=rep.eta, influence=rep.influence, areas=areas, area_gain=self.k * self.k_s,
+        )  # fmt: skip

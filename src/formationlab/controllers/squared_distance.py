@@ -30,6 +30,7 @@ from ..potentials import dkhatib_ds, khatib
 from ..spec import Formation
 from .base import Law, Repulsion, register
 from .distance import _positive, pair_geometry
+from .terms import SQUARED, KernelTerms, build_terms
 
 __all__ = [
     "SquaredDistanceLaw",
@@ -140,3 +141,10 @@ class SquaredDistanceLaw(Law):
         if self.k_r > 0:
             v = v + (self.k_r / self.k) * repulsion_sum(formation, q, self.repulsion)
         return v
+
+    def kernel_terms(self, formation: Formation) -> KernelTerms:
+        rep = self.repulsion
+        return build_terms(
+            formation, kind=SQUARED, edge_gain=self.k, repulsion_gain=self.k_r,
+            eta=rep.eta, influence=rep.influence,
+        )  # fmt: skip

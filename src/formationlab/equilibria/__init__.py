@@ -16,14 +16,13 @@ from .continuation import Branch, follow
 from .dedup import canonical_pose, group_equilibria, same_equilibrium
 from .jacobian import jacobian, reduced_eigenvalues, rigid_modes
 from .refine import Refined, refine
-from .search import Settled, random_starts, settle
+from .search import random_starts, settle
 
 __all__ = [
     "Branch",
     "Catalogue",
     "Equilibrium",
     "Refined",
-    "Settled",
     "Stability",
     "canonical_pose",
     "catalogue",

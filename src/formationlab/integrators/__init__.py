@@ -9,6 +9,7 @@ from .base import (
     register_integrator,
 )
 from .diagnostics import SwitchMonitor, switching_diagnostics
+from .driver import Stepped, StopRule, drive
 from .explicit import RK4, Euler
 from .filippov import Filippov
 from .implicit import ImplicitEuler
@@ -22,7 +23,10 @@ __all__ = [
     "ImplicitEuler",
     "Integrator",
     "RawSolution",
+    "Stepped",
+    "StopRule",
     "SwitchMonitor",
+    "drive",
     "get_integrator",
     "register_integrator",
     "switching_diagnostics",

@@ -1,58 +1,61 @@
-"""The integrator contract, the fixed-step loop, and the registry.
+"""The integrator contract, the fixed-step schemes' base class, and the registry.
 
 An integrator is a frozen, keyword-only dataclass (its step and tolerances)
 with one method, :meth:`Integrator.run`, which integrates a closed loop
-(:class:`formationlab.dynamics.System`) from ``q0`` over ``[0, duration]`` and
+(:class:`formationlab.dynamics.System`) from ``x0`` over ``[0, duration]`` and
 returns a :class:`RawSolution`. Fixed-step schemes only implement
-:meth:`FixedStepIntegrator.step`; event-driven ones override ``run``.
+:meth:`FixedStepIntegrator.advance` (one step of a batch of states and the
+velocity it followed); the one time loop that runs them, for a single run or a
+batch of trials, is :func:`formationlab.integrators.driver.drive`.
+Event-driven schemes (Filippov) override ``run`` and return the same types.
 
-A step that would bring two robots to ``r_ij <= a_ij`` is never accepted: the
-exact flow of the paper's laws cannot do that (``phi_ij`` and Khatib's
-``gamma_ij`` are infinite at contact), so it is the step that is too large.
-The run stops with status ``"step-collision"`` and a message that says so.
+A step is judged by :meth:`System.step_verdict`, the contact rule of the
+package: a step that ends in contact or carries two robots through each other
+is never accepted (the exact flow of the paper's laws cannot touch: ``phi_ij``
+and Khatib's ``gamma_ij`` are infinite at contact, so it is the step that is
+too large); the run stops with that status and a message that says so.
 """
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import ClassVar, Literal, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..dynamics import System
 from ..errors import ParameterError
-from .diagnostics import SwitchMonitor
+from ..status import Status
+from .driver import Progress, drive
 
 __all__ = [
     "INTEGRATORS",
     "FixedStepIntegrator",
     "Integrator",
     "RawSolution",
-    "Status",
     "get_integrator",
     "register_integrator",
+    "steps_for",
 ]
 
-Status = Literal["success", "step-collision", "non-finite", "event-limit"]
-Progress = Callable[[float], None]
 
-
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class RawSolution:
-    """What an integrator returns: saved times and states, status and diagnostics.
+    """What an integrator returns: saved times, states and velocities, status and diagnostics.
 
     Attributes
     ----------
     t : ndarray, shape (T,)
         Saved times, seconds.
-    q : ndarray, shape (T, n, 2)
-        Saved positions.
-    status : str
-        ``"success"``, ``"step-collision"``, ``"non-finite"`` or ``"event-limit"``
-        (an event-driven integrator met more switching events than it allows).
+    x : ndarray, shape (T, n, k)
+        Saved states (positions first).
+    v : ndarray, shape (T, n, k)
+        The velocity the run followed from each saved state: the step's
+        increment over ``dt`` for a fixed-step scheme (for implicit Euler on a
+        surface, the Filippov velocity), the Filippov field for ``filippov``.
+    status : Status
+        How the run ended.
     message : str
         What happened, in words; says what to change when the run failed.
     stats : dict
@@ -60,14 +63,20 @@ class RawSolution:
         ``step_cost_s``, the switching diagnostics of
         :mod:`formationlab.integrators.diagnostics` (``switch_count``,
         ``sliding_time``, ``sliding_start``, ``sliding_end``, ``max_excursion``)
-        and whatever the integrator adds.
+        and whatever the integrator adds. Counts are integers.
     """
 
     t: NDArray[np.float64]
-    q: NDArray[np.float64]
-    status: Status = "success"
+    x: NDArray[np.float64]
+    v: NDArray[np.float64]
+    status: Status = Status.SUCCESS
     message: str = ""
-    stats: dict[str, float] = field(default_factory=dict)
+    stats: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def q(self) -> NDArray[np.float64]:
+        """Saved positions ``(T, n, 2)``."""
+        return self.x[..., :2]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -79,19 +88,20 @@ class Integrator:
     def run(
         self,
         system: System,
-        q0: NDArray[np.float64],
+        x0: NDArray[np.float64],
         duration: float,
         *,
         save_every: int = 1,
         progress: Progress | None = None,
+        interruptible: bool = False,
     ) -> RawSolution:
-        """Integrate ``system`` from ``q0`` (shape ``(n, 2)``) over ``[0, duration]``."""
+        """Integrate ``system`` from ``x0`` (shape ``(n, k)``) over ``[0, duration]``."""
         raise NotImplementedError
 
 
 @dataclass(frozen=True, kw_only=True)
 class FixedStepIntegrator(Integrator):
-    """A one-step scheme with constant step ``dt``; subclasses implement :meth:`step`."""
+    """A one-step scheme with constant step ``dt``; subclasses implement :meth:`advance`."""
 
     dt: float = 1e-3
 
@@ -104,75 +114,39 @@ class FixedStepIntegrator(Integrator):
     #: right-hand-side evaluations per step (for the cost statistics)
     evaluations_per_step: ClassVar[int] = 1
 
-    def step(self, system: System, q: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
-        """One step from ``q`` (shape ``(n, 2)``) of length ``dt``."""
+    def advance(
+        self, system: System, x: NDArray[np.float64], dt: float, counters: dict[str, float]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """One step of length ``dt`` from each state of ``x`` ``(..., n, k)``.
+
+        Returns the next states and the velocity each step followed, both of the
+        shape of ``x``. A scheme may add its own counts to ``counters``
+        (``extra_rhs_evaluations`` is added to ``rhs_evaluations``).
+        """
         raise NotImplementedError
 
-    def _advance(
-        self, system: System, q: NDArray[np.float64], dt: float, counters: dict[str, float]
-    ) -> NDArray[np.float64]:
-        """The step the run loop takes; a scheme may add to ``counters`` (its own stats;
-        ``extra_rhs_evaluations`` is added to ``rhs_evaluations``)."""
-        return self.step(system, q, dt)
+    def step(self, system: System, x: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
+        """The state after one step of ``dt`` from ``x`` (shape ``(..., n, k)``)."""
+        return self.advance(system, np.asarray(x, dtype=float), dt, {})[0]
 
     def run(
         self,
         system: System,
-        q0: NDArray[np.float64],
+        x0: NDArray[np.float64],
         duration: float,
         *,
         save_every: int = 1,
         progress: Progress | None = None,
+        interruptible: bool = False,
     ) -> RawSolution:
-        n_steps = steps_for(duration, self.dt)
-        q = np.array(q0, dtype=float)
-        ts, qs = [0.0], [q.copy()]
-        status: Status = "success"
-        message = f"integrated {n_steps} steps of dt = {self.dt:g} s"
-        start = time.perf_counter()
-        report = max(1, n_steps // 100)
-        monitor = SwitchMonitor(sigma0=system.sigma(q), t0=0.0)
-        counters: dict[str, float] = {}
-        k = 0
-        for k in range(1, n_steps + 1):
-            q_new = self._advance(system, q, self.dt, counters)
-            if not np.all(np.isfinite(q_new)):
-                status = "non-finite"
-                message = (
-                    f"the step to t = {k * self.dt:g} s produced NaN or infinite positions; "
-                    f"reduce dt (now {self.dt:g} s)"
-                )
-                break
-            gap = system.swept_clearance(q, q_new)
-            if gap <= 0:
-                status = "step-collision"
-                message = contact_message(system, q_new, k * self.dt, self.dt)
-                break
-            q = q_new
-            monitor.record(k * self.dt, system.sigma(q))
-            if k % save_every == 0 or k == n_steps:
-                ts.append(k * self.dt)
-                qs.append(q.copy())
-            if progress is not None and k % report == 0:
-                progress(k * self.dt)
-        else:
-            k = n_steps + 1
-        if status != "success" and (not ts or ts[-1] != (k - 1) * self.dt):
-            ts.append((k - 1) * self.dt)  # keep the last accepted state
-            qs.append(q.copy())
-        wall = time.perf_counter() - start
-        done = k - 1
-        stats = {
-            "steps": float(done),
-            "rhs_evaluations": float(done * self.evaluations_per_step)
-            + counters.pop("extra_rhs_evaluations", 0.0),
-            "wall_time_s": wall,
-            "step_cost_s": wall / max(done, 1),
-            **monitor.stats(),
-            **counters,
-        }
+        out = drive(
+            system, self, np.asarray(x0, dtype=float)[None],
+            n_steps=steps_for(duration, self.dt), save_every=save_every, diagnostics=True,
+            progress=progress, interruptible=interruptible,
+        )  # fmt: skip
+        t, x, v = out.trajectory(0)
         return RawSolution(
-            t=np.asarray(ts), q=np.asarray(qs), status=status, message=message, stats=stats
+            t=t, x=x, v=v, status=out.statuses()[0], message=out.message[0], stats=out.stats
         )
 
 
@@ -181,20 +155,6 @@ def steps_for(duration: float, dt: float) -> int:
     if not (np.isfinite(duration) and duration > 0):
         raise ParameterError(f"duration must be a finite number > 0, got {duration!r}")
     return max(1, int(np.ceil(duration / dt - 1e-9)))
-
-
-def contact_message(system: System, q: NDArray[np.float64], t: float, dt: float) -> str:
-    """Name the pair that a rejected step brought to contact, and what to do."""
-    f = system.formation
-    iu, ju = np.triu_indices(f.n, k=1)
-    r = np.linalg.norm(q[ju] - q[iu], axis=-1)
-    p = int(np.argmin(r - f.contact_matrix[iu, ju]))
-    i, j = iu[p] + 1, ju[p] + 1
-    return (
-        f"the step to t = {t:g} s would bring robots {i} and {j} to r = {r[p]:.4g} <= "
-        f"a_{i}{j} = {f.contact_matrix[iu[p], ju[p]]:g}; the exact flow cannot touch, so the "
-        f"step is too large: reduce dt (now {dt:g} s), e.g. to {dt / 10:g} s"
-    )
 
 
 INTEGRATORS: dict[str, type[Integrator]] = {}

@@ -25,8 +25,11 @@ class Euler(FixedStepIntegrator):
 
     name = "euler"
 
-    def step(self, system: System, q: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
-        return q + dt * system.rhs(q)
+    def advance(
+        self, system: System, x: NDArray[np.float64], dt: float, counters: dict[str, float]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        v = system.rhs(x)
+        return x + dt * v, v
 
 
 @register_integrator
@@ -37,9 +40,12 @@ class RK4(FixedStepIntegrator):
     name = "rk4"
     evaluations_per_step = 4
 
-    def step(self, system: System, q: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
-        k1 = system.rhs(q)
-        k2 = system.rhs(q + 0.5 * dt * k1)
-        k3 = system.rhs(q + 0.5 * dt * k2)
-        k4 = system.rhs(q + dt * k3)
-        return q + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    def advance(
+        self, system: System, x: NDArray[np.float64], dt: float, counters: dict[str, float]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        k1 = system.rhs(x)
+        k2 = system.rhs(x + 0.5 * dt * k1)
+        k3 = system.rhs(x + 0.5 * dt * k2)
+        k4 = system.rhs(x + dt * k3)
+        total = k1 + 2 * k2 + 2 * k3 + k4
+        return x + dt / 6.0 * total, total / 6.0

@@ -45,7 +45,9 @@ from scipy.integrate import solve_ivp
 
 from ..dynamics import System
 from ..errors import ParameterError
-from .base import Integrator, Progress, RawSolution, Status, register_integrator, steps_for
+from ..status import Status
+from .base import Integrator, RawSolution, register_integrator, steps_for
+from .driver import Progress
 
 __all__ = ["OFF", "ON", "SLIDE", "Filippov"]
 
@@ -233,6 +235,7 @@ class Filippov(Integrator):
         *,
         save_every: int = 1,
         progress: Progress | None = None,
+        interruptible: bool = False,
     ) -> RawSolution:
         steps_for(duration, self.save_dt)  # validates duration
         start_clock = time.perf_counter()
@@ -250,8 +253,9 @@ class Filippov(Integrator):
         save = self.save_dt * save_every
         ts: list[float] = [0.0]
         qs: list[NDArray] = [q0.copy()]
+        vs: list[NDArray] = [field.at(q0.ravel())[0].reshape(shape).copy()]
         t, y = 0.0, q0.ravel().copy()
-        status: Status = "success"
+        status = Status.SUCCESS
         message = ""
         n_events = switches = steps = 0
         excursion = 0.0
@@ -278,6 +282,7 @@ class Filippov(Integrator):
                 qk = sol.sol(tk).reshape(shape)
                 ts.append(float(tk))
                 qs.append(qk)
+                vs.append(field.at(qk.ravel())[0].reshape(shape).copy())
                 if np.any(modes == SLIDE):
                     sig = system.sigma(qk)[modes == SLIDE]
                     excursion = max(excursion, float(np.max(np.abs(sig))))
@@ -285,7 +290,7 @@ class Filippov(Integrator):
             y = sol.y[:, -1].copy()
             q = y.reshape(shape)
             if not np.all(np.isfinite(y)) or sol.status < 0:
-                status = "non-finite"
+                status = Status.NON_FINITE
                 message = f"the smooth solver failed at t = {t_end:g} s: {sol.message}"
                 t = t_end
                 break
@@ -297,7 +302,7 @@ class Filippov(Integrator):
             # an event: decide the new modes of the touched surfaces
             n_events += 1
             if n_events > self.max_events:
-                status = "event-limit"
+                status = Status.EVENT_LIMIT
                 message = (
                     f"more than {self.max_events} switching events by t = {t_end:g} s "
                     "(Zeno-like switching?); raise max_events or use implicit-euler"
@@ -331,30 +336,37 @@ class Filippov(Integrator):
             if ts[-1] < t_end:
                 ts.append(t_end)
                 qs.append(q.copy())
+                vs.append(field.at(q.ravel())[0].reshape(shape).copy())
             t = t_end
         if sliding_from is not None:
             intervals.append((sliding_from, t))
         if ts[-1] < t:
             ts.append(t)
             qs.append(y.reshape(shape).copy())
+            vs.append(field.at(y)[0].reshape(shape).copy())
         if not message:
             message = f"integrated to t = {t:g} s with {n_events} switching events"
         wall = time.perf_counter() - start_clock
         stats: dict[str, Any] = {
-            "steps": float(steps),
-            "rhs_evaluations": float(field.rhs_evaluations),
+            "steps": int(steps),
+            "rhs_evaluations": int(field.rhs_evaluations),
             "wall_time_s": wall,
             "step_cost_s": wall / max(steps, 1),
-            "events": float(n_events),
-            "unresolved_events": float(unresolved),
-            "switch_count": float(switches),
+            "events": int(n_events),
+            "unresolved_events": int(unresolved),
+            "switch_count": int(switches),
             "sliding_time": float(sum(b - a for a, b in intervals)),
             "sliding_start": float(intervals[0][0]) if intervals else float("nan"),
             "sliding_end": float(intervals[-1][1]) if intervals else float("nan"),
             "max_excursion": excursion,
         }
         return RawSolution(
-            t=np.asarray(ts), q=np.asarray(qs), status=status, message=message, stats=stats
+            t=np.asarray(ts),
+            x=np.asarray(qs),
+            v=np.asarray(vs),
+            status=status,
+            message=message,
+            stats=stats,
         )
 
     def _events(self, field: _Field, modes: NDArray) -> tuple[list, list[tuple[str, int]]]:

@@ -96,37 +96,38 @@ class ImplicitEuler(BatchCorrection, FixedStepIntegrator):
                 f"ImplicitEuler.max_surfaces must be an integer >= 1, got {self.max_surfaces!r}"
             )
 
-    def step(self, system: System, q: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
-        """One step from ``q`` (shape ``(n, 2)`` or a batch ``(..., n, 2)``) of length ``dt``."""
-        return self._advance(system, q, dt, {})
+    def advance(
+        self, system: System, x: NDArray[np.float64], dt: float, counters: dict[str, float]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """One step of each state of ``x`` (``(n, k)`` or a batch ``(..., n, k)``).
 
-    def _advance(
-        self, system: System, q: NDArray[np.float64], dt: float, counters: dict[str, float]
-    ) -> NDArray[np.float64]:
-        q = np.asarray(q, dtype=float)
-        flat = q if q.ndim == 2 else q.reshape(-1, *q.shape[-2:])
+        The velocity returned is the field with the weights the step settled on
+        (the Filippov velocity of a sliding step).
+        """
+        q = np.asarray(x, dtype=float)
+        flat = q.reshape(-1, *q.shape[-2:])
         sigma0 = system.sigma(flat)
-        # explicit Euler predictor with the weights Upsilon(sigma(q)) of the surfaces; the
-        # same numbers as System.rhs, except on a surface, where the law's steps of the
-        # triples that share it could disagree in the last bit of c_ijk
+        # explicit Euler predictor with the weights Upsilon(sigma(q)) of the surfaces, the
+        # numbers of System.rhs (the law's control is control_with these weights)
         w0 = (sigma0 >= 0).astype(float)
         base = system.rhs_with(flat, w0)
         q_pred = flat + dt * base
         bad = self._inconsistent(sigma0, system.sigma(q_pred))
-        if q.ndim == 2:
-            if not bad.any():
-                return q_pred  # no surface crossed: explicit Euler exactly
-            return self._correct(system, q, sigma0, base, q_pred, bad, dt, counters)
         rows = np.flatnonzero(np.any(bad, axis=-1))
+        if rows.size == 0:  # no surface crossed: explicit Euler exactly
+            return q_pred.reshape(q.shape), base.reshape(q.shape)
+        todo = rows
         if rows.size >= _VECTORISE_FROM:
-            rows = self._correct_vectorised(
+            todo = self._correct_vectorised(
                 system, flat, sigma0, base, q_pred, bad, rows, dt, counters
             )
-        for b in rows:  # the rest, one by one
+        for b in todo:  # the rest, one by one
             q_pred[b] = self._correct(
                 system, flat[b], sigma0[b], base[b], q_pred[b], bad[b], dt, counters
             )
-        return q_pred.reshape(q.shape)
+        v = base.copy()
+        v[rows] = (q_pred[rows] - flat[rows]) / dt
+        return q_pred.reshape(q.shape), v.reshape(q.shape)
 
     def _inconsistent(
         self, sigma_start: NDArray[np.float64], sigma_end: NDArray[np.float64]

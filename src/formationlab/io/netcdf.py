@@ -87,7 +87,7 @@ def trajectory_dataset(result: Any, *, attrs: dict[str, Any] | None = None) -> A
         "formationlab_version": __version__,
         "law": json.dumps(to_jsonable(_params(result.law))),
         "integrator": json.dumps(to_jsonable(_params(result.integrator))),
-        "status": result.status,
+        "status": str(result.status),
         "message": result.message,
         "Conventions": "CF-1.8",
     }

@@ -1,4 +1,4 @@
-"""Numba kernels of the batched Euler stepping (the numpy specification is ``reference``).
+"""Numba kernels of the batched Euler stepping (the numpy specification is the stepping driver).
 
 Layout: every chunk of trials keeps its positions as ``(n, 2, C)`` with the
 trials on the innermost, contiguous axis, so that each loop over trials is a
@@ -6,24 +6,22 @@ plain SIMD loop. Chunks run in parallel (``prange``); inside a chunk, trials
 that stop are swapped out of the live range (compaction), so that early
 stopping saves work instead of masking it.
 
-The law enters as plain arrays and numbers (built from the formation and the
-law object by :mod:`formationlab.studies.batch`), so one compiled kernel serves
-every law and formation:
+The law enters as a :class:`~formationlab.controllers.terms.KernelTerms`, the
+named arrays and numbers each law builds (``Law.kernel_terms``), so one
+compiled kernel serves every law and formation. Each pair contributes
+``u_i += g (q_j - q_i)``, ``u_j -= g (q_j - q_i)``: ``g = k_c phi'(r) / r``
+(eq. 8), ``g = k (r^2 - d^2)`` (squared distance) or ``g = k_r gamma'(r - a) / r``
+(repulsion). Each switching surface is decided with the arithmetic of
+:func:`formationlab.potentials.triangle_products` and
+``beta_s c_abc + theta``, so the kernel switches exactly where the numpy law
+does; elsewhere trajectories agree with :func:`formationlab.simulate` to rounding.
 
-* every pair ``i < j``: edge (``d_ij``, ``a_ij``) or not (Khatib's repulsion);
-  on an edge either the paper's ``phi_ij`` (``kind = LOG_BARRIER``, eqs. 5, 7)
-  or ``1/4 (r^2 - d^2)^2`` (``kind = SQUARED``, Krick et al. 2009);
-* the restricted triangles ``(a, b, c)`` of eq. (14) and, per triangle, the terms
-  ``(i, j, k)``, ``j < k``, with ``alpha_ijk``, the parity of ``c_ijk = par c_abc``
-  and the weight ``2 k_a alpha_ijk`` (``psi_ikj = psi_ijk``), and ``theta``;
-* the triangles ``(a, b, c, A*)`` of the signed-area penalty with its gain.
-
-Each pair contributes ``u_i += g (q_j - q_i)``, ``u_j -= g (q_j - q_i)``:
-``g = k_c phi'(r) / r`` (eq. 8), ``g = k (r^2 - d^2)`` (squared distance) or
-``g = k_r gamma'(r - a) / r`` (repulsion). The arithmetic follows the numpy
-laws operation by operation where it decides a branch (``alpha c + theta``,
-``r - a``), so that trajectories agree with :func:`formationlab.simulate` to
-rounding.
+The step rule is the one of :meth:`formationlab.dynamics.System.step_verdict`:
+a step is rejected when it is not finite, when it ends with a pair in contact
+(``Status.COLLISION``) or when the straight path of the step passes through
+contact (``Status.STEP_TOO_LARGE``). The swept test is computed only for pairs
+whose end clearance is below twice the largest displacement of the step
+(farther pairs cannot have met during it).
 """
 
 from __future__ import annotations
@@ -33,20 +31,43 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .reference import STATUS_COLLISION, STATUS_CONVERGED, STATUS_END, STATUS_NON_FINITE
+from ..controllers.terms import LOG_BARRIER
+from ..status import Status
 
-__all__ = ["LOG_BARRIER", "SQUARED", "run_chunks"]
+__all__ = ["run_chunks"]
 
-#: Edge potential of the law: the paper's phi (eq. 5) or Krick et al.'s squared distance.
-LOG_BARRIER, SQUARED = 0, 1
+_END = Status.SUCCESS.code
+_CONVERGED = Status.CONVERGED.code
+_COLLISION = Status.COLLISION.code
+_TOO_LARGE = Status.STEP_TOO_LARGE.code
+_NON_FINITE = Status.NON_FINITE.code
+#: pairs closer than this many times the largest displacement of a step get the swept test
+_SWEPT_MARGIN = 2.01
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
+def _swept(q, qp, i, j, b, a):
+    """Least ``r_ij - a_ij`` along the straight step ``qp -> q`` (``System.swept_clearance``)."""
+    x0 = qp[j, 0, b] - qp[i, 0, b]
+    y0 = qp[j, 1, b] - qp[i, 1, b]
+    ex = (q[j, 0, b] - q[i, 0, b]) - x0
+    ey = (q[j, 1, b] - q[i, 1, b]) - y0
+    dd = ex * ex + ey * ey
+    s = min(max(-(x0 * ex + y0 * ey) / (dd if dd > 0 else 1.0), 0.0), 1.0)
+    mx = x0 + s * ex
+    my = y0 + s * ey
+    return math.sqrt(mx * mx + my * my) - a
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _controls(
-    q, u, gap, cbuf, nact, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
-    ra, rb, rc, roff, vi, vj, vk, valpha, vpar, vw, theta, sa, sb, sc, starget, k_area,
-):  # fmt: skip
-    """``u = f(q)`` for the first ``nact`` trials of a chunk; ``gap``: least ``r_ij - a_ij``."""
+def _controls(q, qp, disp, u, gap, swept, sigma, nact, terms):
+    """``u = f(q)`` for the first ``nact`` trials of a chunk.
+
+    ``gap``: least ``r_ij - a_ij`` at ``q``; ``swept``: least clearance along the
+    straight step from ``qp`` to ``q`` (pairs within ``_SWEPT_MARGIN disp`` only;
+    ``disp`` is each trial's largest displacement, 0 before the first step).
+    """
+    t = terms
     n = q.shape[0]
     for i in range(n):
         for b in range(nact):
@@ -54,33 +75,41 @@ def _controls(
             u[i, 1, b] = 0.0
     for b in range(nact):
         gap[b] = np.inf
-    rep = -gain_rep * eta / s0
-    # (arrays are indexed directly, without views: a view costs reference counting)
-    for p in range(pi.shape[0]):
-        i = pi[p]
-        j = pj[p]
-        a = pa[p]
-        if pedge[p] and kind == LOG_BARRIER:
-            inv_da = 1.0 / (pd[p] - a)
+        swept[b] = np.inf
+    s0 = t.repulsion_influence
+    rep = -t.repulsion_gain * t.repulsion_eta / s0
+    # (arrays are indexed directly, without views: a view costs reference counting; one
+    # loop over trials per kind of pair, so that each is a plain loop)
+    for p in range(t.pair_i.shape[0]):
+        i = t.pair_i[p]
+        j = t.pair_j[p]
+        a = t.pair_contact[p]
+        if t.pair_is_edge[p] and t.kind == LOG_BARRIER:
+            inv_da = 1.0 / (t.pair_distance[p] - a)
             for b in range(nact):
                 dx = q[j, 0, b] - q[i, 0, b]
                 dy = q[j, 1, b] - q[i, 1, b]
                 r = math.sqrt(dx * dx + dy * dy)
                 clr = r - a
                 gap[b] = min(gap[b], clr)
-                g = gain_edge * (clr * inv_da - 1.0) / (clr * r)  # k_c phi'(r) / r, eqs. (7), (8)
+                if clr <= _SWEPT_MARGIN * disp[b]:
+                    swept[b] = min(swept[b], _swept(q, qp, i, j, b, a))
+                g = t.edge_gain * (clr * inv_da - 1.0) / (clr * r)  # k_c phi'(r) / r, eqs. (7), (8)
                 u[i, 0, b] += g * dx
                 u[i, 1, b] += g * dy
                 u[j, 0, b] -= g * dx
                 u[j, 1, b] -= g * dy
-        elif pedge[p]:
-            d2 = pd[p] * pd[p]
+        elif t.pair_is_edge[p]:
+            d2 = t.pair_distance[p] * t.pair_distance[p]
             for b in range(nact):
                 dx = q[j, 0, b] - q[i, 0, b]
                 dy = q[j, 1, b] - q[i, 1, b]
                 r2 = dx * dx + dy * dy
-                gap[b] = min(gap[b], math.sqrt(r2) - a)
-                g = gain_edge * (r2 - d2)  # Krick et al. 2009
+                clr = math.sqrt(r2) - a
+                gap[b] = min(gap[b], clr)
+                if clr <= _SWEPT_MARGIN * disp[b]:
+                    swept[b] = min(swept[b], _swept(q, qp, i, j, b, a))
+                g = t.edge_gain * (r2 - d2)  # Krick et al. 2009
                 u[i, 0, b] += g * dx
                 u[i, 1, b] += g * dy
                 u[j, 0, b] -= g * dx
@@ -90,47 +119,49 @@ def _controls(
                 dx = q[j, 0, b] - q[i, 0, b]
                 dy = q[j, 1, b] - q[i, 1, b]
                 r = math.sqrt(dx * dx + dy * dy)
-                s = r - a
-                gap[b] = min(gap[b], s)
+                clr = r - a
+                gap[b] = min(gap[b], clr)
+                if clr <= _SWEPT_MARGIN * disp[b]:
+                    swept[b] = min(swept[b], _swept(q, qp, i, j, b, a))
                 # k_r gamma'(s) / r with gamma'(s) = -eta (1/s - 1/s0) / s^2 (Khatib)
-                g = rep * (s0 - s) / (s * s * s * r) if s < s0 else 0.0
+                g = rep * (s0 - clr) / (clr * clr * clr * r) if clr < s0 else 0.0
                 u[i, 0, b] += g * dx
                 u[i, 1, b] += g * dy
                 u[j, 0, b] -= g * dx
                 u[j, 1, b] -= g * dy
-    # eqs. (11), (13), (14), (23): per restricted triangle (a, b, c), c_abc once; a term
-    # (i, j, k) with c_ijk = par c_abc adds -w Upsilon(alpha_ijk c_ijk + theta) k x r_jk
-    # to u_i, w = 2 k_a alpha_ijk (the ordered pairs (j, k), (k, j) of eq. 13 are equal).
-    for t in range(ra.shape[0]):
-        ia = ra[t]
-        ib = rb[t]
-        ic = rc[t]
+    # eqs. (11), (13), (14), (23): per switching surface sigma = beta c_abc + theta, decided
+    # as triangle_products does; each term (i, j, k) of the surface adds
+    # -w Upsilon(sigma) k x r_jk to u_i, w = 2 k_a alpha_ijk (eq. 13's pairs (j, k), (k, j))
+    for sf in range(t.surface_a.shape[0]):
+        ia = t.surface_a[sf]
+        ib = t.surface_b[sf]
+        ic = t.surface_c[sf]
+        beta = t.surface_beta[sf]
         for b in range(nact):
-            cbuf[b] = (q[ib, 0, b] - q[ia, 0, b]) * (q[ic, 1, b] - q[ia, 1, b]) - (
+            cab = (q[ib, 0, b] - q[ia, 0, b]) * (q[ic, 1, b] - q[ia, 1, b]) - (
                 q[ib, 1, b] - q[ia, 1, b]
             ) * (q[ic, 0, b] - q[ia, 0, b])
-        for v in range(roff[t], roff[t + 1]):
-            i = vi[v]
-            j = vj[v]
-            k = vk[v]
-            al = valpha[v]
-            par = vpar[v]
-            w0 = vw[v]
+            sigma[b] = beta * cab + t.theta
+        for v in range(t.term_start[sf], t.term_start[sf + 1]):
+            i = t.term_i[v]
+            j = t.term_j[v]
+            k = t.term_k[v]
+            w0 = t.term_weight[v]
             for b in range(nact):
-                w = w0 if al * (par * cbuf[b]) + theta >= 0.0 else 0.0  # Upsilon(0) = 1
+                w = w0 if sigma[b] >= 0.0 else 0.0  # Upsilon(0) = 1
                 u[i, 0, b] += w * (q[k, 1, b] - q[j, 1, b])
                 u[i, 1, b] -= w * (q[k, 0, b] - q[j, 0, b])
-    for t in range(sa.shape[0]):  # signed-area penalty, grad_a A_abc = 1/2 k x r_bc
-        ia = sa[t]
-        ib = sb[t]
-        ic = sc[t]
-        target = starget[t]
+    for m in range(t.area_a.shape[0]):  # signed-area penalty, grad_a A_abc = 1/2 k x r_bc
+        ia = t.area_a[m]
+        ib = t.area_b[m]
+        ic = t.area_c[m]
+        target = t.area_target[m]
         for b in range(nact):
             xa, ya = q[ia, 0, b], q[ia, 1, b]
             xb, yb = q[ib, 0, b], q[ib, 1, b]
             xc, yc = q[ic, 0, b], q[ic, 1, b]
             area = 0.5 * ((xb - xa) * (yc - ya) - (yb - ya) * (xc - xa))
-            g = k_area * 0.5 * (area - target)
+            g = t.area_gain * 0.5 * (area - target)
             u[ia, 0, b] += g * (yc - yb)
             u[ia, 1, b] -= g * (xc - xb)
             u[ib, 0, b] += g * (ya - yc)
@@ -141,9 +172,7 @@ def _controls(
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
 def _run_chunk(
-    q0, start, stop, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
-    ra, rb, rc, roff, vi, vj, vk, valpha, vpar, vw, theta, sa, sb, sc, starget, k_area,
-    dt, n_steps, check_every, speed,
+    q0, start, stop, terms, dt, n_steps, check_every, speed,
     q_out, u_out, steps_out, status_out, mc_out, ns_out,
 ):  # fmt: skip
     n = q0.shape[1]
@@ -156,7 +185,9 @@ def _run_chunk(
     ids = np.arange(start, stop)
     mc = np.full(m, np.inf)  # least clearance over accepted states
     gap = np.empty(m)  # clearance of the current state
-    cbuf = np.empty(m)  # c_abc of one triangle
+    swept = np.empty(m)  # least clearance along the step to the current state
+    disp = np.zeros(m)  # largest displacement of the step to the current state
+    sigma = np.empty(m)  # switching function of one surface
     fin = np.zeros(m)  # 0 while the last Euler step was finite
     code = np.full(m, -1, dtype=np.int8)  # -1: still running
     qc = np.empty((n, 2, m))  # positions at the previous convergence check
@@ -166,22 +197,24 @@ def _run_chunk(
         for i in range(n):
             q[i, 0, b] = q0[start + b, i, 0]
             q[i, 1, b] = q0[start + b, i, 1]
+            qp[i, 0, b] = q[i, 0, b]
+            qp[i, 1, b] = q[i, 1, b]
     nact = m
     k = 0
     kc = -1  # step of the previous check (the same for every live trial)
     while nact > 0:
-        _controls(
-            q, u, gap, cbuf, nact, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
-            ra, rb, rc, roff, vi, vj, vk, valpha, vpar, vw, theta, sa, sb, sc, starget, k_area,
-        )  # fmt: skip
+        _controls(q, qp, disp, u, gap, swept, sigma, nact, terms)
         stopping = 0
-        if k > 0:  # reject the step that led here if it is not finite or reached contact
+        if k > 0:  # reject the step that led here (System.step_verdict)
             for b in range(nact):
                 if fin[b] != 0.0:
-                    code[b] = STATUS_NON_FINITE
+                    code[b] = _NON_FINITE
                     stopping += 1
                 elif not gap[b] > 0.0:
-                    code[b] = STATUS_COLLISION
+                    code[b] = _COLLISION
+                    stopping += 1
+                elif not swept[b] > 0.0:
+                    code[b] = _TOO_LARGE
                     stopping += 1
         for b in range(nact):
             mc[b] = min(mc[b], gap[b]) if code[b] < 0 else mc[b]
@@ -206,7 +239,7 @@ def _run_chunk(
                 net = math.sqrt(dbuf[b]) / elapsed if kc >= 0 else np.nan
                 ns[b] = net
                 if math.sqrt(top) <= speed or net <= speed:
-                    code[b] = STATUS_CONVERGED
+                    code[b] = _CONVERGED
                     stopping += 1
             for i in range(n):
                 for d in range(2):
@@ -216,7 +249,7 @@ def _run_chunk(
         if k == n_steps:
             for b in range(nact):
                 if code[b] < 0:
-                    code[b] = STATUS_END
+                    code[b] = _END
             stopping = nact
         if stopping:
             # write out the stopped trials, then compact the live range
@@ -224,7 +257,7 @@ def _run_chunk(
                 if code[b] < 0:
                     continue
                 g = ids[b]
-                rejected = code[b] == STATUS_COLLISION or code[b] == STATUS_NON_FINITE
+                rejected = code[b] == _COLLISION or code[b] == _TOO_LARGE or code[b] == _NON_FINITE
                 for i in range(n):
                     for d in range(2):
                         # a rejected step ends the trial at the previous, accepted state
@@ -251,12 +284,19 @@ def _run_chunk(
             break
         for b in range(nact):
             fin[b] = 0.0
+            disp[b] = 0.0
         for i in range(n):
-            for d in range(2):
-                for b in range(nact):
-                    x = q[i, d, b] + dt * u[i, d, b]  # explicit Euler
-                    qp[i, d, b] = x  # the next state, written over the older one
-                    fin[b] += x * 0.0  # NaN unless x is finite
+            for b in range(nact):
+                x = q[i, 0, b] + dt * u[i, 0, b]  # explicit Euler
+                y = q[i, 1, b] + dt * u[i, 1, b]
+                ex = x - q[i, 0, b]
+                ey = y - q[i, 1, b]
+                disp[b] = max(disp[b], ex * ex + ey * ey)
+                qp[i, 0, b] = x  # the next state, written over the older one
+                qp[i, 1, b] = y
+                fin[b] += (x + y) * 0.0  # NaN unless x and y are finite
+        for b in range(nact):
+            disp[b] = math.sqrt(disp[b])
         q, qp = qp, q
         u, up = up, u
         k += 1
@@ -264,17 +304,15 @@ def _run_chunk(
 
 @njit(cache=True, fastmath=False, error_model="numpy", parallel=True)
 def run_chunks(
-    q0, chunk, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
-    ra, rb, rc, roff, vi, vj, vk, valpha, vpar, vw, theta, sa, sb, sc, starget, k_area,
-    dt, n_steps, check_every, speed,
+    q0, chunk, terms, dt, n_steps, check_every, speed,
     q_out, u_out, steps_out, status_out, mc_out, ns_out,
 ):  # fmt: skip
     """Step every trial of ``q0`` ``(B, n, 2)``; chunks of ``chunk`` trials run in parallel.
 
+    ``terms`` is the law's :class:`~formationlab.controllers.terms.KernelTerms`.
     Fills ``q_out``, ``u_out`` ``(B, n, 2)``, ``steps_out`` (int64), ``status_out``
-    (int8, the ``STATUS_*`` codes of :mod:`formationlab.studies.reference`),
-    ``mc_out`` (least clearance) and ``ns_out`` (net speed over the last check
-    interval), all of length ``B``.
+    (int8, :attr:`formationlab.status.Status.code`), ``mc_out`` (least clearance)
+    and ``ns_out`` (net speed over the last check interval), all of length ``B``.
     """
     n_trials = q0.shape[0]
     n_chunks = (n_trials + chunk - 1) // chunk
@@ -282,8 +320,6 @@ def run_chunks(
         start = c * chunk
         stop = min(n_trials, start + chunk)
         _run_chunk(
-            q0, start, stop, kind, pi, pj, pedge, pd, pa, gain_edge, gain_rep, eta, s0,
-            ra, rb, rc, roff, vi, vj, vk, valpha, vpar, vw, theta, sa, sb, sc, starget, k_area,
-            dt, n_steps, check_every, speed,
+            q0, start, stop, terms, dt, n_steps, check_every, speed,
             q_out, u_out, steps_out, status_out, mc_out, ns_out,
         )  # fmt: skip

@@ -1,0 +1,170 @@
+"""Outcomes of a batch of trials: :class:`BatchResult` and :func:`classify_batch`.
+
+Every path that ends many trials at once (the studies' kernel and driver, the
+settling of equilibria) returns a :class:`BatchResult`, classified by
+:func:`classify_batch`, the vectorised twin of
+:func:`formationlab.analysis.classify` (same outcomes, same tolerances).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .analysis import OUTCOMES, Tolerances
+from .spec import Formation
+from .status import Status
+
+__all__ = ["BatchResult", "classify_batch", "max_distance_errors"]
+
+#: Trials classified at a time by :func:`classify_batch` (bounds its memory).
+CLASSIFY_BLOCK = 1 << 16
+
+
+@dataclass(frozen=True, kw_only=True)
+class BatchResult:
+    """Final states and outcomes of a batch of ``B`` trials.
+
+    Attributes
+    ----------
+    q_final : ndarray, shape (B, n, 2)
+        Last accepted positions of each trial.
+    u_final : ndarray, shape (B, n, 2)
+        Controls at ``q_final``.
+    outcome : ndarray of str, shape (B,)
+        One of :data:`formationlab.analysis.OUTCOMES` per trial.
+    max_distance_error : ndarray, shape (B,)
+        Largest ``|r_ij - d_ij|`` over the edges at ``q_final``.
+    converged_time : ndarray, shape (B,)
+        Time the trial was first seen converged, seconds; NaN when it was not.
+    min_clearance : ndarray, shape (B,)
+        Least ``r_ij - a_ij`` over every accepted state of the run (the step
+        rejected for reaching contact is not part of the run).
+    steps : ndarray of int64, shape (B,)
+        Steps actually simulated (accepted). A trial ends early when it has
+        converged, when its next step would reach contact (``"collision"``) or
+        when its next step is not finite (like the simulator's ``"non-finite"``
+        status: it keeps its last finite state and is classified from there).
+    net_speed : ndarray, shape (B,)
+        Net speed over the trial's last check interval,
+        ``max_i |q_i(k) - q_i(k')| / ((k - k') dt)`` between its last two
+        convergence tests ``k' < k``; NaN when it ended before its second test.
+    status : ndarray of int8, shape (B,)
+        :attr:`formationlab.status.Status.code` of how each trial ended
+        (:meth:`statuses` gives the members).
+    x_final : ndarray, shape (B, n, k)
+        Last accepted states (positions first; ``q_final`` for single integrators).
+    """
+
+    q_final: NDArray[np.float64]
+    u_final: NDArray[np.float64]
+    outcome: NDArray[np.str_]
+    max_distance_error: NDArray[np.float64]
+    converged_time: NDArray[np.float64]
+    min_clearance: NDArray[np.float64]
+    steps: NDArray[np.int64]
+    net_speed: NDArray[np.float64]
+    status: NDArray[np.int8]
+    x_final: NDArray[np.float64]
+
+    def statuses(self) -> list[Status]:
+        """The :class:`~formationlab.status.Status` of every trial."""
+        return [Status.from_code(c) for c in self.status]
+
+    @classmethod
+    def from_final(
+        cls,
+        formation: Formation,
+        *,
+        x: NDArray[np.float64],
+        v: NDArray[np.float64],
+        status: NDArray[np.int8],
+        steps: NDArray[np.int64],
+        min_clearance: NDArray[np.float64],
+        net_speed: NDArray[np.float64],
+        dt: float,
+        tolerances: Tolerances | None = None,
+    ) -> BatchResult:
+        """Classify final states ``x`` / velocities ``v`` ``(B, n, k)`` (positions first)."""
+        tol = tolerances or Tolerances()
+        q, u = x[..., :2], v[..., :2]
+        contact = np.isin(status, [s.code for s in Status if s.contact])
+        outcome = classify_batch(formation, q, u, tol, contact=contact, net_speed=net_speed)
+        converged = status == Status.CONVERGED.code
+        return cls(
+            q_final=q, u_final=u, outcome=outcome,
+            max_distance_error=max_distance_errors(formation, q),
+            converged_time=np.where(converged, steps * float(dt), np.nan),
+            min_clearance=min_clearance, steps=steps, net_speed=net_speed,
+            status=status, x_final=x,
+        )  # fmt: skip
+
+
+def _norm(v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``sqrt(x^2 + y^2)`` of ``(..., 2)``, rounded as ``numpy.linalg.norm(v, axis=-1)``."""
+    return np.sqrt(v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1])
+
+
+def max_distance_errors(formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Largest ``|r_ij - d_ij|`` over the edges: ``(B, n, 2) -> (B,)``."""
+    e = formation.edges
+    out = np.zeros(q.shape[0])
+    for (i, j), d in zip(e, formation.distances, strict=True):
+        r = _norm(q[:, j, :] - q[:, i, :])
+        np.maximum(out, np.abs(r - d), out=out)
+    return out
+
+
+def classify_batch(
+    formation: Formation,
+    q: NDArray[np.float64],
+    u: NDArray[np.float64],
+    tolerances: Tolerances | None = None,
+    *,
+    contact: NDArray[np.bool_] | None = None,
+    net_speed: NDArray[np.float64] | None = None,
+) -> NDArray[np.str_]:
+    """:func:`formationlab.analysis.classify` of every trial: ``(B, n, 2) -> (B,)`` str.
+
+    ``contact`` ``(B,)`` marks trials stopped at a step rejected for reaching contact;
+    ``net_speed`` ``(B,)`` is each trial's net speed over its last check interval (NaN
+    where unknown), which counts the trial as stopped when ``<= tolerances.speed``,
+    as the instantaneous speed does.
+    """
+    tol = tolerances or Tolerances()
+    q = np.asarray(q, dtype=float)
+    u = np.asarray(u, dtype=float)
+    n_trials = q.shape[0]
+    contact = np.zeros(n_trials, bool) if contact is None else np.asarray(contact, bool)
+    net = np.full(n_trials, np.nan) if net_speed is None else np.asarray(net_speed, float)
+    labels = np.array(OUTCOMES)
+    code = {name: m for m, name in enumerate(OUTCOMES)}
+    iu, ju = np.triu_indices(formation.n, k=1)
+    tri = np.argwhere(formation.restricted)  # (T, 3)
+    want = formation.desired_sign[tuple(tri.T)]
+    out = np.empty(n_trials, dtype=labels.dtype)
+    for lo in range(0, n_trials, CLASSIFY_BLOCK):
+        sl = slice(lo, min(n_trials, lo + CLASSIFY_BLOCK))
+        qb = q[sl]
+        r = np.linalg.norm(qb[:, ju, :] - qb[:, iu, :], axis=-1)
+        collided = contact[sl] | np.any(r <= formation.contact_matrix[iu, ju], axis=-1)
+        met = max_distance_errors(formation, qb) <= tol.distance
+        if len(tri):
+            rij = qb[:, tri[:, 1], :] - qb[:, tri[:, 0], :]
+            rik = qb[:, tri[:, 2], :] - qb[:, tri[:, 0], :]
+            c = rij[..., 0] * rik[..., 1] - rij[..., 1] * rik[..., 0]
+            s = np.sign(c) * want
+            agree, disagree = np.sum(s > 0, axis=-1), np.sum(s <= 0, axis=-1)
+        else:
+            agree = disagree = np.zeros(len(qb), dtype=np.int64)
+        stopped = np.max(np.linalg.norm(u[sl], axis=-1), axis=-1) <= tol.speed
+        stopped |= net[sl] <= tol.speed
+        result = np.select(
+            [collided, met & (disagree == 0), met & (agree == 0), met, stopped],
+            [code[x] for x in ("collision", "desired", "mirror", "incorrect", "incorrect")],
+            default=code["not-converged"],
+        )
+        out[sl] = labels[result]
+    return out

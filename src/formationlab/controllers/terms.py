@@ -1,0 +1,131 @@
+"""A law as plain arrays: the data the compiled kernels step, built by each law.
+
+:meth:`Law.kernel_terms` returns a :class:`KernelTerms`, a named tuple of
+arrays and numbers that one compiled kernel
+(:mod:`formationlab.studies.kernels`) evaluates for every law it supports:
+
+* **pairs** ``i < j`` (every pair): on an edge the edge potential (the paper's
+  ``phi_ij`` of eqs. 5, 7 for ``kind = LOG_BARRIER``, or Krick et al.'s
+  ``1/4 (r^2 - d^2)^2`` for ``kind = SQUARED``), elsewhere Khatib's repulsion;
+* **switching surfaces** ``sigma_s = beta_s c_abc + theta`` of eq. (14)
+  (``Formation.surfaces``), each with the terms ``(i, j, k)``, ``j < k``, whose
+  restriction it switches and their weight ``2 k_a alpha_ijk``
+  (``psi_ikj = psi_ijk``: the ordered pairs ``(j, k)`` and ``(k, j)`` of eq. 13
+  contribute alike). The kernel decides each surface with the arithmetic of
+  :func:`formationlab.potentials.triangle_products`, so that it switches
+  exactly where the numpy law does;
+* **area triangles** ``(a, b, c, A*)`` of the signed-area penalty.
+
+A law whose terms are not of these kinds does not override
+:meth:`Law.kernel_terms` and runs on the numpy path.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..spec import Formation
+
+__all__ = ["LOG_BARRIER", "SQUARED", "KernelTerms", "build_terms"]
+
+#: Edge potential: the paper's phi (eq. 5) or Krick et al.'s squared distance.
+LOG_BARRIER, SQUARED = 0, 1
+
+
+class KernelTerms(NamedTuple):
+    """The arrays and numbers a compiled kernel evaluates ``u = f(q)`` from.
+
+    Pair arrays have length ``n (n - 1) / 2``; surface arrays length ``s``; term
+    arrays length ``m`` (terms of surface ``s`` are ``term_start[s]:term_start[s + 1]``);
+    area arrays length ``t``.
+    """
+
+    kind: int  #: LOG_BARRIER or SQUARED
+    pair_i: NDArray[np.int64]
+    pair_j: NDArray[np.int64]
+    pair_is_edge: NDArray[np.bool_]
+    pair_distance: NDArray[np.float64]  #: d_ij on edges, 0 elsewhere
+    pair_contact: NDArray[np.float64]  #: a_ij
+    edge_gain: float  #: k_c (log barrier) or k (squared distance)
+    repulsion_gain: float  #: gain of Khatib's repulsion between non-neighbours
+    repulsion_eta: float
+    repulsion_influence: float  #: s0
+    surface_a: NDArray[np.int64]
+    surface_b: NDArray[np.int64]
+    surface_c: NDArray[np.int64]
+    surface_beta: NDArray[np.float64]
+    theta: float
+    term_start: NDArray[np.int64]  #: length s + 1
+    term_i: NDArray[np.int64]
+    term_j: NDArray[np.int64]
+    term_k: NDArray[np.int64]
+    term_weight: NDArray[np.float64]  #: 2 k_a alpha_ijk
+    area_a: NDArray[np.int64]
+    area_b: NDArray[np.int64]
+    area_c: NDArray[np.int64]
+    area_target: NDArray[np.float64]
+    area_gain: float  #: k k_s
+
+
+def build_terms(
+    formation: Formation,
+    *,
+    kind: int,
+    edge_gain: float,
+    repulsion_gain: float,
+    eta: float,
+    influence: float,
+    k_a: float = 0.0,
+    theta: float = 0.0,
+    areas: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None,
+    area_gain: float = 0.0,
+) -> KernelTerms:
+    """Assemble :class:`KernelTerms`; the angular terms when ``k_a > 0`` and alpha is set."""
+    n = formation.n
+    pi, pj = (np.ascontiguousarray(x, dtype=np.int64) for x in np.triu_indices(n, k=1))
+    is_edge = formation.adjacency[pi, pj].copy()
+    dist = np.where(is_edge, np.nan_to_num(formation.distance_matrix[pi, pj]), 0.0)
+    tris, beta, index = formation.surfaces
+    if formation.alpha is None or k_a <= 0:
+        tris, beta = np.zeros((0, 3), np.int64), np.zeros(0)
+        terms = np.zeros((0, 3), np.int64)
+    else:
+        terms = np.argwhere(index >= 0).astype(np.int64)
+        terms = terms[terms[:, 1] < terms[:, 2]]  # (i, k, j) is the same term as (i, j, k)
+    surface = index[tuple(terms.T)] if len(terms) else np.zeros(0, np.int64)
+    order = np.argsort(surface, kind="stable")
+    terms, surface = terms[order], surface[order]
+    start = np.searchsorted(surface, np.arange(len(tris) + 1)).astype(np.int64)
+    i, j, k = (np.ascontiguousarray(terms[:, m]) for m in range(3))
+    alpha = formation.alpha[i, j, k] if len(terms) else np.zeros(0)  # type: ignore[index]
+    area_tris, target = areas if areas is not None else (np.zeros((0, 3), np.int64), np.zeros(0))
+    return KernelTerms(
+        kind=int(kind),
+        pair_i=pi,
+        pair_j=pj,
+        pair_is_edge=is_edge,
+        pair_distance=dist,
+        pair_contact=formation.contact_matrix[pi, pj].copy(),
+        edge_gain=float(edge_gain),
+        repulsion_gain=float(repulsion_gain),
+        repulsion_eta=float(eta),
+        repulsion_influence=float(influence),
+        surface_a=np.ascontiguousarray(tris[:, 0], dtype=np.int64),
+        surface_b=np.ascontiguousarray(tris[:, 1], dtype=np.int64),
+        surface_c=np.ascontiguousarray(tris[:, 2], dtype=np.int64),
+        surface_beta=np.array(beta, dtype=float),
+        theta=float(theta),
+        term_start=start,
+        term_i=i,
+        term_j=j,
+        term_k=k,
+        term_weight=2.0 * float(k_a) * np.asarray(alpha, dtype=float),
+        area_a=np.ascontiguousarray(area_tris[:, 0], dtype=np.int64),
+        area_b=np.ascontiguousarray(area_tris[:, 1], dtype=np.int64),
+        area_c=np.ascontiguousarray(area_tris[:, 2], dtype=np.int64),
+        area_target=np.array(target, dtype=float),
+        area_gain=float(area_gain),
+    )

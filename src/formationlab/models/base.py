@@ -1,0 +1,74 @@
+"""The robot-model contract: what a motion model provides to the closed loop.
+
+A robot model turns the control ``u_i`` of a law (a single-integrator
+velocity, eq. 1 of the paper) into the motion of a robot whose state may be
+more than its position. The state of ``n`` robots is an array ``(..., n, k)``
+with ``k = state_size`` numbers per robot, **positions first**
+(``x[..., :2]``), then whatever the model adds (a heading, a velocity).
+
+Extension contract
+------------------
+Subclass :class:`RobotModel` as a frozen, keyword-only dataclass holding the
+model's parameters (validated in ``__post_init__``), set ``name``,
+``state_names`` (which fixes ``state_size``) and ``initial_keys`` (the keys of a
+scenario's ``[robots]`` table that build the extra state), implement
+:meth:`derivative`, and where needed :meth:`points` (the points the law acts
+on, e.g. a unicycle's hand point) and :meth:`initial_state`. Register it with
+:func:`formationlab.models.register_model`. Nothing else in the package
+changes: the integrators step ``System.rhs``, contact is tested on
+:meth:`positions`, the law sees :meth:`points`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["RobotModel"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class RobotModel:
+    """Base class of robot motion models (module docstring)."""
+
+    name: ClassVar[str] = ""
+    #: names of the per-robot state columns; the first two are the position
+    state_names: ClassVar[tuple[str, ...]] = ("x", "y")
+    #: keys of a scenario's ``[robots]`` table that :meth:`initial_state` takes
+    initial_keys: ClassVar[tuple[str, ...]] = ()
+
+    @classmethod
+    def state_size(cls) -> int:
+        """Numbers per robot in the state (``len(state_names)``)."""
+        return len(cls.state_names)
+
+    @classmethod
+    def parameter_names(cls) -> tuple[str, ...]:
+        """The model's parameters (its dataclass fields), as scenario keys."""
+        return tuple(f.name for f in fields(cls))
+
+    def positions(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Robot centres ``(..., n, 2)`` of states ``(..., n, k)`` (contact is tested on them)."""
+        return x[..., :2]
+
+    def points(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Points the law acts on, ``(..., n, 2)``; the centres unless the model says otherwise."""
+        return self.positions(x)
+
+    def derivative(self, x: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``x_dot`` ``(..., n, k)`` given the law's control ``u`` ``(..., n, 2)`` at the points."""
+        raise NotImplementedError
+
+    def initial_state(self, q0: ArrayLike, **initial: Any) -> NDArray[np.float64]:
+        """The state ``(..., n, k)`` whose positions are ``q0`` ``(..., n, 2)``.
+
+        ``initial`` holds the values of :attr:`initial_keys` given in the
+        scenario (e.g. headings); a model with no extra state takes none.
+        """
+        q0 = np.asarray(q0, dtype=float)
+        if self.state_size() == 2:
+            return q0.copy()
+        raise NotImplementedError
