@@ -176,7 +176,7 @@ def test_sliding_figure_has_one_panel_per_run_with_its_diagnostics():
 
 @pytest.mark.parametrize("max_surfaces", [6, 1])
 def test_implicit_euler_vectorised_batch_equals_one_by_one_at_two_surfaces(max_surfaces):
-    """The batched step (vectorised for one or two surfaces) == the per-member step.
+    """The batched step == the step of each member alone (a batch of one).
 
     The square with both diagonals near its sliding equilibrium on two surfaces
     (docs/equilibria.md), perturbed from 1e-3 to 0.3, plus states far from any
@@ -184,7 +184,7 @@ def test_implicit_euler_vectorised_batch_equals_one_by_one_at_two_surfaces(max_s
     member alone (the scalar solver). The walk must meet every case: no surface
     crossed, one and two inconsistent surfaces, and steps ending on two surfaces.
     With ``max_surfaces = 1`` the widening to a second surface is not allowed,
-    which leaves those members to the scalar solver's fallback.
+    which leaves those members to the least-violation fallback.
     """
     square = fl.Formation.from_template([[0, 0], [1, 0], [1, 1], [0, 1]], diameters=0.2)
     system = fl.System(formation=square, law=LAW)

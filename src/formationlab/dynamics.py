@@ -116,6 +116,12 @@ class System:
         ).astype(np.int8)
         return verdict, end
 
+    def closest_pair(self, x: NDArray[np.float64]) -> tuple[int, int, float]:
+        """The 1-based robots ``i < j`` of least clearance in one state ``(n, k)``, and ``a_ij``."""
+        iu, ju, a = self._pairs
+        p = int(np.argmin(self.pair_clearances(x)))
+        return int(iu[p]) + 1, int(ju[p]) + 1, float(a[p])
+
     def step_message(
         self, x0: NDArray[np.float64], x1: NDArray[np.float64], status: Status, t: float, dt: float
     ) -> str:
@@ -129,14 +135,13 @@ class System:
         q0, q1 = self.positions(x0), self.positions(x1)
         jump = float(np.max(np.linalg.norm(q1 - q0, axis=-1)))
         if status is Status.COLLISION:
-            clr = self.pair_clearances(x1)
-            p = int(np.argmin(clr))
-            i, j = iu[p] + 1, ju[p] + 1
-            r = clr[p] + a[p]
+            i, j, a_ij = self.closest_pair(x1)
+            r = self.clearance(x1) + a_ij
             return (
                 f"the step to t = {t:g} s would bring robots {i} and {j} to r = {r:.4g} <= "
-                f"a_{i}{j} = {a[p]:g}; the exact flow of a barrier law cannot touch, so the "
-                f"step is too large: reduce dt (now {dt:g} s), e.g. to {dt / 10:g} s"
+                f"a_{i}{j} = {a_ij:g}; under a law with a barrier at contact (the paper's phi) "
+                f"the exact flow cannot touch, so the step is too large: reduce dt (now "
+                f"{dt:g} s), e.g. to {dt / 10:g} s"
             )
         p = int(np.argmin(self.pair_swept_clearances(x0, x1)))
         i, j = iu[p] + 1, ju[p] + 1

@@ -179,10 +179,11 @@ def drive(
         ids = live[which]
         x_out[ids], v_out[ids], steps[ids], status[ids] = xk[which], vk[which], k, code.code
 
-    k: int = 0
+    now = 0  # the step of the states x of the live trials
     try:
         for k in range(n_steps + 1):
-            x_new, v = stepper.advance(system, x, dt, counters)
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                x_new, v = stepper.advance(system, x, dt, counters)  # judged by step_verdict
             evaluations += live.size
             ending = np.zeros(live.size, dtype=bool)
             if stop is not None and (k % stop.check_every == 0 or k == n_steps):
@@ -218,7 +219,7 @@ def drive(
             keep = ~ending
             if not keep.any():
                 break
-            live, x, xc = live[keep], x_new[keep], xc[keep]
+            live, x, xc, now = live[keep], x_new[keep], xc[keep], k + 1
             min_clear[live] = np.minimum(min_clear[live], clear[keep])
             if monitor is not None and live.size and live[0] == 0:
                 monitor.record((k + 1) * dt, system.sigma(x[0]))
@@ -230,14 +231,13 @@ def drive(
     except KeyboardInterrupt:
         if not interruptible:
             raise
-        k += 1
         ids = live
         if ids.size:
             v_now = system.rhs(x)
             x_out[ids], v_out[ids], status[ids] = x, v_now, Status.INTERRUPTED.code
-            steps[ids] = k - 1
-            if save_every is not None:
-                saved.append((k - 1, ids, x.copy(), v_now))
+            steps[ids] = now
+            if save_every is not None and (not saved or saved[-1][0] != now):
+                saved.append((now, ids, x.copy(), v_now))
     wall = time.perf_counter() - start
     done = int(steps.sum())
     for b in range(B):

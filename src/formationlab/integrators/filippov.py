@@ -262,82 +262,105 @@ class Filippov(Integrator):
         sliding_from: float | None = 0.0 if np.any(modes == SLIDE) else None
         intervals: list[tuple[float, float]] = []
         next_save = 1
-        while t < duration:
-            events, kinds = self._events(field, modes)
-            sol = solve_ivp(
-                lambda _t, yy: field.at(yy)[0].ravel(),
-                (t, duration),
-                y,
-                method=self.method,
-                rtol=self.rtol,
-                atol=self.atol,
-                events=events or None,
-                dense_output=True,
-            )
-            steps += len(sol.t) - 1
-            t_end = float(sol.t[-1])
-            grid = np.arange(next_save, int(np.floor(t_end / save + 1e-9)) + 1) * save
-            grid = grid[grid > t]
-            for tk in grid:
-                qk = sol.sol(tk).reshape(shape)
-                ts.append(float(tk))
-                qs.append(qk)
-                vs.append(field.at(qk.ravel())[0].reshape(shape).copy())
-                if np.any(modes == SLIDE):
-                    sig = system.sigma(qk)[modes == SLIDE]
-                    excursion = max(excursion, float(np.max(np.abs(sig))))
-            next_save += grid.size
-            y = sol.y[:, -1].copy()
-            q = y.reshape(shape)
-            if not np.all(np.isfinite(y)) or sol.status < 0:
-                status = Status.NON_FINITE
-                message = f"the smooth solver failed at t = {t_end:g} s: {sol.message}"
-                t = t_end
-                break
-            if progress is not None:
-                progress(t_end)
-            if sol.status != 1:
-                t = t_end
-                break
-            # an event: decide the new modes of the touched surfaces
-            n_events += 1
-            if n_events > self.max_events:
-                status = Status.EVENT_LIMIT
-                message = (
-                    f"more than {self.max_events} switching events by t = {t_end:g} s "
-                    "(Zeno-like switching?); raise max_events or use implicit-euler"
+        try:
+            while t < duration:
+                events, kinds = self._events(field, modes)
+                sol = solve_ivp(
+                    lambda _t, yy: field.at(yy)[0].ravel(),
+                    (t, duration),
+                    y,
+                    method=self.method,
+                    rtol=self.rtol,
+                    atol=self.atol,
+                    events=events or None,
+                    dense_output=True,
                 )
+                steps += len(sol.t) - 1
+                t_end = float(sol.t[-1])
+                grid = np.arange(next_save, int(np.floor(t_end / save + 1e-9)) + 1) * save
+                grid = grid[grid > t]
+                for tk in grid:
+                    qk = sol.sol(tk).reshape(shape)
+                    ts.append(float(tk))
+                    qs.append(qk)
+                    vs.append(field.at(qk.ravel())[0].reshape(shape).copy())
+                    if progress is not None:
+                        progress(float(tk))
+                    if np.any(modes == SLIDE):
+                        sig = system.sigma(qk)[modes == SLIDE]
+                        excursion = max(excursion, float(np.max(np.abs(sig))))
+                next_save += grid.size
+                y = sol.y[:, -1].copy()
+                q = y.reshape(shape)
+                if not np.all(np.isfinite(y)) or sol.status < 0:
+                    status = Status.NON_FINITE
+                    message = f"the smooth solver failed at t = {t_end:g} s: {sol.message}"
+                    t = t_end
+                    break
+                if progress is not None:
+                    progress(t_end)
+                if sol.status != 1:
+                    t = t_end
+                    break
+                fired = [m for m, te in enumerate(sol.t_events) if te.size]
+                if any(kinds[m][0] == "contact" for m in fired):
+                    status = Status.COLLISION
+                    i, j, a = system.closest_pair(q)
+                    message = (
+                        f"robots {i} and {j} touch (r = a_{i}{j} = {a:g}) at t = {t_end:g} s: "
+                        "the law lets them collide"
+                    )
+                    t = t_end
+                    break
+                # an event: decide the new modes of the touched surfaces
+                n_events += 1
+                if n_events > self.max_events:
+                    status = Status.EVENT_LIMIT
+                    message = (
+                        f"more than {self.max_events} switching events by t = {t_end:g} s "
+                        "(Zeno-like switching?); raise max_events or use implicit-euler"
+                    )
+                    t = t_end
+                    break
+                new = modes.copy()
+                exited = np.zeros(modes.shape, dtype=bool)
+                for m in fired:
+                    kind, surface = kinds[m]
+                    if kind in ("exit0", "exit1"):  # a sliding weight reached 0 or 1: the
+                        new[surface] = OFF if kind == "exit0" else ON  # trajectory leaves
+                        exited[surface] = True  # tangentially to that side
+                sigma = system.sigma(q)
+                touched = np.flatnonzero(
+                    (np.abs(sigma) <= self.touch_tol) & (new != SLIDE) & ~exited
+                )
+                crossing = {kinds[m][1] for m in fired if kinds[m][0] == "cross"}
+                touched = np.union1d(touched, np.fromiter(crossing, dtype=np.int64)).astype(
+                    np.int64
+                )
+                if touched.size:
+                    new, ok = _decide(system, field, q, new, touched)
+                    unresolved += not ok
+                new = _release(field, q, new)
+                switches += int(np.count_nonzero(new != modes))
+                if np.any(new == SLIDE) and sliding_from is None:
+                    sliding_from = t_end
+                if not np.any(new == SLIDE) and sliding_from is not None:
+                    intervals.append((sliding_from, t_end))
+                    sliding_from = None
+                modes = new
+                field.set_modes(modes)
+                if ts[-1] < t_end:
+                    ts.append(t_end)
+                    qs.append(q.copy())
+                    vs.append(field.at(q.ravel())[0].reshape(shape).copy())
                 t = t_end
-                break
-            fired = [m for m, te in enumerate(sol.t_events) if te.size]
-            new = modes.copy()
-            exited = np.zeros(modes.shape, dtype=bool)
-            for m in fired:
-                kind, surface = kinds[m]
-                if kind in ("exit0", "exit1"):  # a sliding weight reached 0 or 1: the
-                    new[surface] = OFF if kind == "exit0" else ON  # trajectory leaves
-                    exited[surface] = True  # tangentially to that side
-            sigma = system.sigma(q)
-            touched = np.flatnonzero((np.abs(sigma) <= self.touch_tol) & (new != SLIDE) & ~exited)
-            crossing = {kinds[m][1] for m in fired if kinds[m][0] == "cross"}
-            touched = np.union1d(touched, np.fromiter(crossing, dtype=np.int64)).astype(np.int64)
-            if touched.size:
-                new, ok = _decide(system, field, q, new, touched)
-                unresolved += not ok
-            new = _release(field, q, new)
-            switches += int(np.count_nonzero(new != modes))
-            if np.any(new == SLIDE) and sliding_from is None:
-                sliding_from = t_end
-            if not np.any(new == SLIDE) and sliding_from is not None:
-                intervals.append((sliding_from, t_end))
-                sliding_from = None
-            modes = new
-            field.set_modes(modes)
-            if ts[-1] < t_end:
-                ts.append(t_end)
-                qs.append(q.copy())
-                vs.append(field.at(q.ravel())[0].reshape(shape).copy())
-            t = t_end
+        except KeyboardInterrupt:
+            if not interruptible:
+                raise
+            status = Status.INTERRUPTED
+            t, y = ts[-1], qs[-1].ravel()  # keep what was saved, consistently
+            vs = vs[: len(ts)]
+            message = f"interrupted by the user at t = {t:g} s; the states so far are kept"
         if sliding_from is not None:
             intervals.append((sliding_from, t))
         if ts[-1] < t:
@@ -374,6 +397,14 @@ class Filippov(Integrator):
         system, shape = field.system, field.shape
         events: list = []
         kinds: list[tuple[str, int]] = []
+
+        def contact_event(_t, y):  # the contact rule of System.step_verdict, as an event
+            return float(system.clearance(y.reshape(shape)))
+
+        contact_event.terminal = True  # type: ignore[attr-defined]
+        contact_event.direction = -1  # type: ignore[attr-defined]
+        events.append(contact_event)
+        kinds.append(("contact", -1))
         for s, mode in enumerate(modes):
             if mode == SLIDE:
                 for target, kind, direction in ((0.0, "exit0", -1), (1.0, "exit1", 1)):
