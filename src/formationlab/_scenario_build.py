@@ -1,22 +1,21 @@
-"""Building a scenario's formation, law and integrator (private to :mod:`formationlab.scenario`).
+"""Building a scenario's formation (private to :mod:`formationlab.scenario`).
 
-The formation comes from :class:`~formationlab.Formation`'s builders; the law
-and the integrator from their registries, with the table's keys checked
-against the chosen class's dataclass fields. Problems are raised through the
-caller's ``fail(where, message)``, which adds the file and line.
+The formation comes from :class:`~formationlab.Formation`'s builders (the law
+and the integrator from :func:`formationlab._scenario_parts.build_entry`).
+Problems are raised through the caller's ``fail(where, message)``, which adds
+the file and line.
 """
 
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
 from typing import Any
 
-from ._scenario_parts import Fail, param_key, params, unknown
+from ._scenario_parts import Fail
 from .errors import UserInputError
 from .spec import AlphaValues, Formation
 
-__all__ = ["build_formation", "build_from_registry", "stem"]
+__all__ = ["FIXED", "build_formation", "stem"]
 
 #: The keys of ``[controller]`` and ``[simulation]`` that are not the class's parameters.
 FIXED = {"controller": ("law", "alpha_values"), "simulation": ("integrator", "duration")}
@@ -121,25 +120,6 @@ def build_formation(
             f"it rigid; {n} robots need at least {2 * n - 3} well-placed edges)"
         )
     return formation
-
-
-def build_from_registry(
-    registry: Mapping[str, Any],
-    kind: str,
-    name: str,
-    given: Mapping[str, Any] | None,
-    section: str,
-    fail: Fail,
-) -> Any:
-    """The ``kind`` (law, integrator) registered as ``name``, built from the table's other keys."""
-    if name not in registry:
-        raise fail(f"{section}.{kind}", unknown(kind, name, registry))
-    cls = registry[name]
-    kwargs = params(cls, dict(given or {}), section, FIXED[section], f"{kind} {name!r}", fail)
-    try:
-        return cls(**kwargs)
-    except UserInputError as exc:
-        raise fail(param_key(section, kwargs, str(exc)), str(exc)) from None
 
 
 def _formation_key(message: str, frm: Any) -> str:

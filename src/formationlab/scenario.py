@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import tomllib
+import warnings as _warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
@@ -31,12 +32,13 @@ import tomli_w
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from ._scenario_build import build_formation, build_from_registry, stem
-from ._scenario_parts import format_errors, line_of
+from ._scenario_build import FIXED, build_formation, stem
+from ._scenario_parts import build_entry
 from .controllers import LAWS, Law
-from .errors import ScenarioError, UserInputError
+from .errors import IgnoredKeyWarning, ScenarioError, UserInputError
 from .integrators import INTEGRATORS, Integrator
 from .spec import Formation
+from .validation import line_of, validation_error
 
 __all__ = ["SECTIONS", "Scenario", "ScenarioModel", "parse_scenario"]
 
@@ -226,10 +228,14 @@ class Scenario:
         Initial positions; robot 1 is row 0.
     raw : dict
         The parsed TOML.
+    controller : dict
+        The law parameters of ``[controller]`` as given, those of other laws included
+        (:meth:`law_named` builds any law from the ones it takes).
     study, equilibria : dict or None
         The raw ``[study]`` and ``[equilibria]`` tables (validated by their users).
     warnings : tuple of str
-        Things that are allowed but probably unintended (a non-rigid graph, ...).
+        Things that are allowed but probably unintended (a non-rigid graph, keys
+        that have no effect, ...).
     """
 
     name: str
@@ -242,6 +248,7 @@ class Scenario:
     duration: float
     q0: NDArray[np.float64]
     raw: dict[str, Any]
+    controller: dict[str, Any] = field(default_factory=dict)
     study: dict[str, Any] | None = None
     equilibria: dict[str, Any] | None = None
     warnings: tuple[str, ...] = field(default=())
@@ -259,6 +266,53 @@ class Scenario:
             "integrator": {"name": self.integrator.name, **dataclasses.asdict(self.integrator)},
             "duration": self.duration,
         }
+
+    def law_named(self, name: str) -> Law:
+        """The law ``name`` built from the ``[controller]`` keys it takes (its defaults else).
+
+        The scenario's own law for its own name. Used by studies (``[study] laws``) and
+        ``equilibria --law``, so every law gets the file's keys whatever the file's law.
+
+        Raises
+        ------
+        ScenarioError
+            An unknown law, or a value this law refuses (with the key and its line).
+        """
+        if name in LAWS and LAWS.canonical(name) == self.law.name:
+            return self.law
+        given = {
+            k: v for k, v in self.controller.items() if name not in LAWS or k in _fields(LAWS[name])
+        }
+        law, _ = build_entry(
+            LAWS,
+            INTEGRATORS,
+            name,
+            given,
+            section="controller",
+            other_section="simulation",
+            fixed=FIXED["controller"],
+            source=self.source,
+            text=self.text,
+            fail=self.error,
+        )
+        return law  # type: ignore[no-any-return]
+
+    def error(self, key: str, message: str) -> ScenarioError:
+        """A :class:`ScenarioError` about the dotted ``key``: ``source: key (line N): message``."""
+        line = line_of(self.text, key)
+        at = f" (line {line})" if line else ""
+        return ScenarioError(f"{self.source}: {key}{at}: {message}", key=key)
+
+    def locate(self, exc: UserInputError, table: str = "") -> ScenarioError:
+        """``exc`` placed in the file: its ``key`` (under ``table``) with the key's line."""
+        if isinstance(exc, ScenarioError) and exc.key and str(exc).startswith(self.source):
+            return exc
+        key = ".".join(p for p in (table, exc.key or "") if p) or table
+        return self.error(key, str(exc)) if key else ScenarioError(f"{self.source}: {exc}")
+
+
+def _fields(cls: type) -> set[str]:
+    return {f.name for f in dataclasses.fields(cls) if f.init}
 
 
 # --------------------------------------------------------------------------- parsing
@@ -302,7 +356,13 @@ def parse_scenario(text_or_dict: str | Mapping[str, Any], source: str = "<string
     try:
         model = ScenarioModel.model_validate(raw)
     except ValidationError as exc:
-        raise ScenarioError(format_errors(exc, source, text, SECTIONS)) from None
+        raise validation_error(
+            exc,
+            source=source,
+            text=text,
+            known=lambda table: SECTIONS.get(table, ()),
+            tables=[t for t in SECTIONS if t],
+        ) from None
     return _build(model, raw, text, source)
 
 
@@ -322,10 +382,9 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
     warnings: list[str] = []
 
     def fail(where: str, message: str) -> ScenarioError:
-        section, _, key = where.partition(".")
-        line = line_of(text, section, key)
+        line = line_of(text, where)
         at = f" (line {line})" if line else ""
-        return ScenarioError(f"{source}: {where}{at}: {message}")
+        return ScenarioError(f"{source}: {where}{at}: {message}", key=where)
 
     formation = build_formation(rob, frm, ctl.alpha_values, fail, warnings)
     try:
@@ -334,15 +393,46 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         raise fail("robots.positions", str(exc)) from None
     q0.setflags(write=False)  # the scenario is frozen, its arrays too
 
-    law = build_from_registry(LAWS, "law", ctl.law, ctl.model_extra, "controller", fail)
-    if formation.alpha is None and "k_a" in {f.name for f in dataclasses.fields(law)}:
+    study_laws = (model.study or {}).get("laws")
+    used_by = [str(x) for x in study_laws] if isinstance(study_laws, list) else []
+    common = {"source": source, "text": text, "fail": fail}
+    given = dict(ctl.model_extra or {})
+    law, ignored_law = build_entry(
+        LAWS,
+        INTEGRATORS,
+        ctl.law,
+        given,
+        section="controller",
+        other_section="simulation",
+        fixed=FIXED["controller"],
+        used_by=used_by,
+        **common,
+    )
+    if formation.alpha is None and "k_a" in _fields(type(law)):
         warnings.append(
             f"law {law.name!r} has an angular term but the orientation is free, so it acts as "
             'the distance law; set formation.orientation (e.g. "template") to use it'
         )
-    integrator = build_from_registry(
-        INTEGRATORS, "integrator", sim.integrator, sim.model_extra, "simulation", fail
+    integrator, ignored_integrator = build_entry(
+        INTEGRATORS,
+        LAWS,
+        sim.integrator,
+        dict(sim.model_extra or {}),
+        section="simulation",
+        other_section="controller",
+        fixed=FIXED["simulation"],
+        **common,
     )
+    for table, registry, name, ignored in (
+        ("controller", LAWS, law.name, ignored_law),
+        ("simulation", INTEGRATORS, integrator.name, ignored_integrator),
+    ):
+        if ignored:
+            line = line_of(text, f"{table}.{ignored[0]}")
+            at = f" (line {line})" if line else ""
+            message = f"{source}: [{table}]{at}: {registry.ignored_message(name, ignored)}"
+            warnings.append(message)
+            _warnings.warn(message, IgnoredKeyWarning, stacklevel=3)
     return Scenario(
         name=model.name or stem(source),
         text=text,
@@ -354,6 +444,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         duration=float(sim.duration),
         q0=q0,
         raw=raw,
+        controller=given,
         study=model.study,
         equilibria=model.equilibria,
         warnings=tuple(warnings),

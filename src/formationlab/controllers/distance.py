@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import ParameterError
 from ..potentials import dkhatib_ds, dphi_dr, khatib, pair_vectors, phi
 from ..spec import Formation
+from ..validation import check_fields
 from .base import Law, Repulsion, register
 
 __all__ = ["DistanceLaw", "grad_phi", "pair_geometry", "phi_sum"]
@@ -114,20 +114,10 @@ class DistanceLaw(Law):
     repulsion: Repulsion = field(default_factory=Repulsion)
 
     def __post_init__(self) -> None:
-        _positive(self, "k_c")
+        check_fields(self, positive=("k_c",))
 
     def control(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
         return -self.k_c * grad_phi(formation, q, self.repulsion)  # eq. (8)
 
     def potential(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
         return phi_sum(formation, q, self.repulsion)  # eq. (9)
-
-
-def _positive(obj: object, name: str, *, allow_zero: bool = False) -> None:
-    v = getattr(obj, name)
-    ok = isinstance(v, int | float) and np.isfinite(v) and (v >= 0 if allow_zero else v > 0)
-    if not ok:
-        bound = ">= 0" if allow_zero else "> 0"
-        raise ParameterError(
-            f"{type(obj).__name__}.{name} must be a finite number {bound}, got {v!r}"
-        )

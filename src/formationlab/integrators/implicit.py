@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 from scipy.optimize import brentq
 
 from ..dynamics import System
-from ..errors import ParameterError
+from ..validation import check_fields
 from ._implicit_batch import BatchCorrection
 from .base import FixedStepIntegrator, register_integrator
 
@@ -89,12 +89,7 @@ class ImplicitEuler(BatchCorrection, FixedStepIntegrator):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if not (isinstance(self.tol, int | float) and np.isfinite(self.tol) and self.tol > 0):
-            raise ParameterError(f"ImplicitEuler.tol must be a number > 0, got {self.tol!r}")
-        if not (isinstance(self.max_surfaces, int) and self.max_surfaces >= 1):
-            raise ParameterError(
-                f"ImplicitEuler.max_surfaces must be an integer >= 1, got {self.max_surfaces!r}"
-            )
+        check_fields(self, positive=("tol",), whole=("max_surfaces",))
 
     def step(self, system: System, q: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
         """One step from ``q`` (shape ``(n, 2)`` or a batch ``(..., n, 2)``) of length ``dt``."""
