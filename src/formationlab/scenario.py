@@ -307,8 +307,10 @@ class Scenario:
         """``exc`` placed in the file: its ``key`` (under ``table``) with the key's line."""
         if isinstance(exc, ScenarioError) and exc.key and str(exc).startswith(self.source):
             return exc
-        key = ".".join(p for p in (table, exc.key or "") if p) or table
-        return self.error(key, str(exc)) if key else ScenarioError(f"{self.source}: {exc}")
+        key = ".".join(p for p in (table, exc.key or "") if p)
+        if not key:
+            return ScenarioError(f"{self.source}: {exc}")
+        return self.error(key, str(exc).removeprefix(f"{key}: "))
 
 
 def _fields(cls: type) -> set[str]:

@@ -267,9 +267,9 @@ _EXPECTED = {
 }
 
 
-def _path(loc: Sequence[Any], prefix: str) -> tuple[str, str]:
+def _path(loc: Sequence[Any], prefix: str, tags: Sequence[str] = ()) -> tuple[str, str]:
     """``("study.initial.half_width", "item 3")`` from a pydantic location."""
-    keys = [str(p) for p in loc if isinstance(p, str)]
+    keys = [str(p) for i, p in enumerate(loc) if isinstance(p, str) and not (i and p in tags)]
     items = [f"item {p + 1}" for p in loc if isinstance(p, int)]
     return ".".join([prefix, *keys] if prefix else keys), ", ".join(items)
 
@@ -282,6 +282,7 @@ def validation_error(
     prefix: str = "",
     known: Known | None = None,
     tables: Iterable[str] = (),
+    tags: Sequence[str] = (),
 ) -> ScenarioError:
     """One :class:`ScenarioError` for every problem of a pydantic ``ValidationError``.
 
@@ -299,11 +300,13 @@ def validation_error(
         ``known(table)`` lists the keys a dotted table takes (for unknown keys).
     tables : iterable of str
         Dotted keys that are tables: a missing one is "the table [x] is required".
+    tags : sequence of str
+        Tags of tagged unions, which pydantic puts in locations (dropped from keys).
     """
     tables = set(tables)
     problems: list[tuple[bool, str, str]] = []
     for err in exc.errors(include_url=False):
-        where, items = _path(tuple(err["loc"]), prefix)
+        where, items = _path(tuple(err["loc"]), prefix, tags)
         kind = err["type"]
         given = err.get("input")
         if kind in ("extra_forbidden", "unexpected_keyword_argument"):
