@@ -397,7 +397,6 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
 
     study_laws = (model.study or {}).get("laws")
     used_by = [str(x) for x in study_laws] if isinstance(study_laws, list) else []
-    common = {"source": source, "text": text, "fail": fail}
     given = dict(ctl.model_extra or {})
     law, ignored_law = build_entry(
         LAWS,
@@ -408,7 +407,9 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         other_section="simulation",
         fixed=FIXED["controller"],
         used_by=used_by,
-        **common,
+        source=source,
+        text=text,
+        fail=fail,
     )
     if formation.alpha is None and "k_a" in _fields(type(law)):
         warnings.append(
@@ -423,7 +424,9 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         section="simulation",
         other_section="controller",
         fixed=FIXED["simulation"],
-        **common,
+        source=source,
+        text=text,
+        fail=fail,
     )
     for table, registry, name, ignored in (
         ("controller", LAWS, law.name, ignored_law),

@@ -283,6 +283,7 @@ def validation_error(
     known: Known | None = None,
     tables: Iterable[str] = (),
     tags: Sequence[str] = (),
+    options: bool = False,
 ) -> ScenarioError:
     """One :class:`ScenarioError` for every problem of a pydantic ``ValidationError``.
 
@@ -302,6 +303,8 @@ def validation_error(
         Dotted keys that are tables: a missing one is "the table [x] is required".
     tags : sequence of str
         Tags of tagged unions, which pydantic puts in locations (dropped from keys).
+    options : bool
+        The values came from command-line options: name them ``--key-name``.
     """
     tables = set(tables)
     problems: list[tuple[bool, str, str]] = []
@@ -328,7 +331,8 @@ def validation_error(
             msg = f"{err['msg'][0].lower()}{err['msg'][1:]}, got {given!r}"
         line = line_of(text, where)
         at = f" (line {line})" if line else ""
-        label = where + (f", {items}" if items else "")
+        label = f"--{where.replace('_', '-')}" if options else where
+        label += f", {items}" if items else ""
         # unknown keys first: they often explain the missing ones (a misspelt table)
         first = kind not in ("extra_forbidden", "unexpected_keyword_argument")
         problems.append((first, f"{label}{at}: {msg}", where))

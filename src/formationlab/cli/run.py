@@ -227,15 +227,25 @@ def validate(
 ) -> None:
     """Check scenario files and say what is wrong, without running them.
 
+    Checks every table the other commands read ([study] and [equilibria] too).
     Prints one line per file: what it describes, or the problem (key, line,
     what was expected and what was given). Exit status 2 if any file is bad.
     """
+    from ..equilibria.report import equilibria_scenario, parse_equilibria
     from ..io.scenario import load_scenario
+    from ..studies.runner import StudySetup
 
     bad = 0
     for path in scenarios:
         try:
             sc = load_scenario(path)
+            try:  # the tables other commands read
+                if sc.study is not None:
+                    StudySetup.from_scenario(sc)
+                if sc.equilibria is not None:
+                    equilibria_scenario(sc, parse_equilibria(sc))
+            except UserInputError as exc:
+                raise sc.locate(exc) from None
         except UserInputError as exc:
             bad += 1
             err_console.print(
