@@ -267,9 +267,7 @@ def test_resume_after_interruption_gives_the_uninterrupted_parquet(tmp_path, ref
             store=Interrupt(folder, after=4),
         )  # fmt: skip
     assert folder.check_resumable() == 4
-    res = study(
-        TRIANGLE, LAW, config, seed=5, dt=DT, duration=DURATION, store=folder, resume=True
-    )
+    res = study(TRIANGLE, LAW, config, seed=5, dt=DT, duration=DURATION, store=folder, resume=True)
     assert res.summary["chunks"] == {"total": 9, "resumed": 4}
     write_trials(res.trials, tmp_path / "resumed.parquet")
     write_trials(reference_run, tmp_path / "whole.parquet")

@@ -100,8 +100,12 @@ def build_entry(
                 f" {key!r} belongs to the {other.kind} {', '.join(repr(o) for o in owners)}: "
                 f"put it in [{other_section}]."
             )
-        else:
-            hint = f" Did you mean {near!r}?" if near else ""
+        elif near:
+            hint = f" Did you mean {near!r}?"
+        else:  # a misspelt key of another entry: "k_aa" -> "k_a" of 'angle-restricted'
+            others = {k: n for n in registry for k in parameters_of(registry[n])}
+            far = nearest(key, others)
+            hint = f" Did you mean {far!r} (of the {kind} {others[far]!r})?" if far else ""
         raise fail(
             f"{section}.{key}",
             f"{kind} {cls.name!r} takes no key {key!r}.{hint} It takes: {', '.join(takes)}",

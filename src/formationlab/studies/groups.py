@@ -18,7 +18,7 @@ from typing import Any
 from ..controllers import LAWS, Law
 from ..errors import ParameterError, UserInputError
 from ..spec import Formation
-from ..validation import choices
+from ..validation import choices, nearest
 from .config import StudyConfig
 
 __all__ = ["REPULSION_KEYS", "ROBOT_KEYS", "Group", "study_groups"]
@@ -122,9 +122,18 @@ def study_groups(
         if not any(_applies(key, LAWS[name]) for name in names):
             takes = sorted(set().union(*(_fields(LAWS[n]) for n in names)) - {"repulsion"})
             known = [*takes, *REPULSION_KEYS, *ROBOT_KEYS]
+            hint = choices(key, known, "Sweepable")
+            if hint.startswith("."):  # a parameter of a law the study does not run?
+                others = {k: n for n in LAWS for k in _fields(LAWS[n]) if n not in names}
+                far = nearest(key, others)
+                if far:
+                    hint = (
+                        f"; did you mean {far!r} (of the law {others[far]!r}: add it to "
+                        f"study.laws)?{hint.removeprefix('.')}"
+                    )
             raise ParameterError(
                 f"study.sweep.{key}: no law of the study ({', '.join(names)}) has a parameter "
-                f"{key!r}{choices(key, known, 'Sweepable')}",
+                f"{key!r}{hint}",
                 key=f"study.sweep.{key}",
             )
     groups: list[Group] = []
