@@ -105,7 +105,7 @@ def build_formation(
                 n, edges=frm.edges, distances=distances, diameters=rob.diameters
             )
     except UserInputError as exc:
-        raise fail(_formation_key(str(exc), frm), str(exc)) from None
+        raise fail(_formation_key(exc, frm), str(exc)) from None
     if frm.distances is None and frm.template is None:
         warnings.append("formation.distances not given: every d_ij = 1")
     if not formation.is_connected:
@@ -122,19 +122,24 @@ def build_formation(
     return formation
 
 
-def _formation_key(message: str, frm: Any) -> str:
-    """The key a formation builder's message is about (for the line number)."""
-    if "collinear" in message or "template" in message:
+#: Scenario keys of the formation builders' parameters (``FormationError.key``).
+SCENARIO_KEYS = {
+    "positions": "robots.positions",
+    "diameters": "robots.diameters",
+    "edges": "formation.edges",
+    "distances": "formation.distances",
+    "template": "formation.template",
+    "orientation": "formation.orientation",
+    "alpha": "formation.alpha",
+    "alpha_values": "controller.alpha_values",
+}
+
+
+def _formation_key(exc: UserInputError, frm: Any) -> str:
+    """The scenario key of a formation builder's error (distances from a template: the template)."""
+    if exc.key == "distances" and frm.distances is None and frm.template is not None:
         return "formation.template"
-    if "alpha" in message:
-        return "formation.alpha"
-    if "edge" in message and "desired distance" not in message:
-        return "formation.edges"
-    if "diameters" in message and "distance" not in message:
-        return "robots.diameters"
-    if frm.distances is None and frm.template is not None:
-        return "formation.template"
-    return "formation.distances"
+    return SCENARIO_KEYS.get(exc.key or "", "formation")
 
 
 def stem(source: str) -> str:
