@@ -119,6 +119,10 @@ def test_summary_has_the_issue_keys(finished_run: tuple[Path, Path]) -> None:
     assert s["scenario"] == "short-triangle"
     assert set(s["distance_errors"]) == {"1-2", "1-3", "2-3"}
     assert s["diagnostics"]["steps"] == 500  # all steps computed, 1 in 10 stored
+    text = (out / "summary.json").read_text()
+    assert '"steps": 500,' in text and '"rhs_evaluations": 500,' in text  # counts as integers
+    assert isinstance(s["diagnostics"]["switch_count"], int)
+    assert isinstance(s["diagnostics"]["wall_time_s"], float)
     q = np.array(s["final_positions"])
     r12 = np.linalg.norm(q[1] - q[0])
     assert s["distance_errors"]["1-2"] == pytest.approx(r12 - 1.0)
@@ -187,6 +191,11 @@ def test_validate_reports_each_file(tmp_path: Path) -> None:
     res = invoke("validate", good, bad)
     assert res.exit_code == 2
     assert "ok:" in res.stdout and "Did you mean 'k_c'" in res.stderr
+
+
+def test_version_is_printed() -> None:
+    res = invoke("--version")
+    assert res.exit_code == 0 and res.output == f"formationlab {fl.__version__}\n"
 
 
 @pytest.mark.parametrize("command", ["run", "validate", "animate"])

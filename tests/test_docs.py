@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 import formationlab
+import formationlab.registry
 import formationlab.simulation
 import formationlab.spec
 
@@ -24,7 +25,9 @@ def test_readme_python_example_runs(capsys):
     assert out[0] == "desired" and float(out[1]) < 1e-3
 
 
-@pytest.mark.parametrize("module", [formationlab, formationlab.simulation, formationlab.spec])
+@pytest.mark.parametrize(
+    "module", [formationlab, formationlab.registry, formationlab.simulation, formationlab.spec]
+)
 def test_docstring_examples(module):
     result = doctest.testmod(module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
     assert result.attempted > 0 and result.failed == 0

@@ -347,7 +347,7 @@ def test_relabelling_by_a_symmetry_of_the_square_is_the_same_equilibrium():
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--follow", "k_a=3"], "--follow takes PARAM=FROM:TO"),
+        (["--follow", "k_a=3"], "--follow: expected PARAM=FROM:TO"),
         (["--law", "no-such-law"], "unknown law"),
         (["--follow", "eta=0.1:1", "--law", "distance"], "has no parameter"),
         (["--integrator", "filippov"], "cannot settle a batch"),

@@ -230,7 +230,7 @@ BAD = {
         ["line 7", "did you mean 'distances'"],
     ),
     "unknown law key": (("k_c = 2.0", "kc = 2.0"), ["controller.kc", "Did you mean 'k_c'"]),
-    "key of another law": (("k_c = 2.0", "k_a = 3.0"), ["'k_a' belongs to 'angle-restricted'"]),
+    "key of another table": (("k_c = 2.0", "dt = 3.0"), ["'dt' belongs to the integrator"]),
     "unknown law": (('law = "distance"', 'law = "distanse"'), ["did you mean 'distance'"]),
     "unknown integrator": (('"euler"', '"eulr"'), ["unknown integrator", "did you mean 'euler'"]),
     "wrong type": (("k_c = 2.0", 'k_c = "two"'), ["controller.k_c", "expected a number", "'two'"]),

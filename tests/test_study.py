@@ -18,7 +18,7 @@ from formationlab.errors import ParameterError, ScenarioError
 from formationlab.io.trials import ChunkFolder, read_trials, write_trials
 from formationlab.studies import parse_study, run_study, study_groups, wilson_interval
 from formationlab.studies.config import BoxInitial, GaussianInitial
-from formationlab.studies.runner import study_identity
+from formationlab.studies.runner import StudySetup, study_identity
 from formationlab.studies.sampling import SEED_BLOCK, trial_initial_states
 
 Z2 = 1.959963984540054**2
@@ -39,6 +39,14 @@ def small(**over: object) -> fl.studies.StudyConfig:
     }
     table.update(over)
     return parse_study(table)
+
+
+def study(formation, law, config, *, dt=DT, duration=DURATION, center=None, **kw):
+    """run_study of a study given in Python (not from a scenario)."""
+    setup = StudySetup(
+        formation=formation, law=law, config=config, dt=dt, duration=duration, center=center
+    )
+    return run_study(setup, **kw)
 
 
 # ----------------------------------------------------------------------------- Wilson
@@ -180,7 +188,7 @@ def test_impossible_box_is_a_clear_error():
 def reference_run() -> pd.DataFrame:
     """One chunk per group, in this process: the table every other run must equal."""
     config = small(chunk_size=1000)
-    return run_study(TRIANGLE, LAW, config, seed=5, dt=DT, duration=DURATION).trials
+    return study(TRIANGLE, LAW, config, seed=5, dt=DT, duration=DURATION).trials
 
 
 def test_trials_table_rows_and_columns(reference_run):
@@ -220,14 +228,14 @@ def test_a_trial_reruns_with_the_one_by_one_simulator(reference_run):
 
 
 def test_same_seed_same_trials_whatever_chunks_and_workers(reference_run):
-    chunked = run_study(
+    chunked = study(
         TRIANGLE, LAW, small(chunk_size=7), seed=5, dt=DT, duration=DURATION, workers=2
     ).trials
     pd.testing.assert_frame_equal(chunked, reference_run, check_exact=True)
 
 
 def test_different_seed_different_trials(reference_run):
-    other = run_study(TRIANGLE, LAW, small(chunk_size=1000), seed=6, dt=DT, duration=DURATION)
+    other = study(TRIANGLE, LAW, small(chunk_size=1000), seed=6, dt=DT, duration=DURATION)
     assert not np.array_equal(other.trials["x1_init"], reference_run["x1_init"])
 
 
@@ -254,14 +262,12 @@ def test_resume_after_interruption_gives_the_uninterrupted_parquet(tmp_path, ref
     folder = ChunkFolder(tmp_path / "study", ident)
     folder.start()
     with pytest.raises(KeyboardInterrupt):
-        run_study(
+        study(
             TRIANGLE, LAW, config, seed=5, dt=DT, duration=DURATION,
             store=Interrupt(folder, after=4),
         )  # fmt: skip
     assert folder.check_resumable() == 4
-    res = run_study(
-        TRIANGLE, LAW, config, seed=5, dt=DT, duration=DURATION, store=folder, resume=True
-    )
+    res = study(TRIANGLE, LAW, config, seed=5, dt=DT, duration=DURATION, store=folder, resume=True)
     assert res.summary["chunks"] == {"total": 9, "resumed": 4}
     write_trials(res.trials, tmp_path / "resumed.parquet")
     write_trials(reference_run, tmp_path / "whole.parquet")
@@ -278,7 +284,7 @@ def test_resume_after_interruption_gives_the_uninterrupted_parquet(tmp_path, ref
 
 def test_study_on_a_dask_local_cluster_of_processes(reference_run):
     pytest.importorskip("distributed")
-    res = run_study(
+    res = study(
         TRIANGLE, LAW, small(chunk_size=12), seed=5, dt=DT, duration=DURATION,
         scheduler="local", workers=1,
     )  # fmt: skip
@@ -290,7 +296,7 @@ def test_study_on_a_dask_scheduler_given_by_its_address(reference_run):
     with distributed.LocalCluster(
         n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
     ) as cluster:
-        res = run_study(
+        res = study(
             TRIANGLE, LAW, small(chunk_size=5), seed=5, dt=DT, duration=DURATION,
             scheduler=cluster.scheduler_address,
         )  # fmt: skip
@@ -299,7 +305,7 @@ def test_study_on_a_dask_scheduler_given_by_its_address(reference_run):
 
 def test_summary_counts_fractions_and_intervals(reference_run):
     config = small(chunk_size=1000)
-    res = run_study(TRIANGLE, LAW, config, seed=5, dt=DT, duration=DURATION)
+    res = study(TRIANGLE, LAW, config, seed=5, dt=DT, duration=DURATION)
     assert res.summary["trial_steps"] == int(reference_run["steps"].sum())
     for g, entry in enumerate(res.summary["groups"]):
         rows = reference_run[reference_run["group"] == g]
@@ -392,12 +398,12 @@ def test_gaussian_starts_around_the_template_end_in_the_template():
     config = parse_study(
         {"trials": 16, "initial": {"kind": "gaussian", "sigma": 0.02}, "backend": "numpy"}
     )
-    res = run_study(square, LAW, config, seed=2, dt=DT, duration=DURATION)
+    res = study(square, LAW, config, seed=2, dt=DT, duration=DURATION)
     assert (res.trials["outcome"] == "desired").all()
     start = res.trials[[f"{c}{i}_init" for i in range(1, 5) for c in "xy"]].to_numpy()
     assert np.abs(start - square.template.reshape(-1)).max() < 5 * 0.02
     with pytest.raises(ParameterError, match="centre"):  # no template, no centre given
-        run_study(TRIANGLE, LAW, config, seed=2, dt=DT, duration=DURATION)
+        study(TRIANGLE, LAW, config, seed=2, dt=DT, duration=DURATION)
 
 
 def test_study_command_refuses_a_bad_study_table_before_writing(tmp_path, capsys):
@@ -454,7 +460,7 @@ def test_settling_labels_the_square_sliding_equilibrium_incorrect():
     }
     on = {"enabled": True, "duration": 5.0, "dt": 0.01}
     run = {"seed": 1, "dt": 1e-3, "duration": 5.0}
-    whole = run_study(sc.formation, sc.law, parse_study({**table, "settle": on}), **run)
+    whole = study(sc.formation, sc.law, parse_study({**table, "settle": on}), **run)
     t = whole.trials
     ar = t[(t["law"] == "angle-restricted") & (t["trial"] == SLIDING_TRIAL)].iloc[0]
     assert ar["outcome"] == "not-converged" and ar["max_distance_error"] > 0.9
@@ -473,13 +479,13 @@ def test_settling_labels_the_square_sliding_equilibrium_incorrect():
     want = [(1 / n + Z2 / (2 * n) + s * half) / (1 + Z2 / n) for s in (-1, 1)]
     np.testing.assert_allclose(g["settled_ci95"]["incorrect"], want, rtol=1e-12)
     # chunks of 2 in two processes: the same table, byte for byte
-    chunked = run_study(
+    chunked = study(
         sc.formation, sc.law, parse_study({**table, "settle": on, "chunk_size": 2}),
         workers=2, **run,
     )  # fmt: skip
     pd.testing.assert_frame_equal(chunked.trials, t, check_exact=True)
     # settling off (the default): nothing settled, the kernel's columns unchanged
-    off = run_study(sc.formation, sc.law, parse_study(table), **run).trials
+    off = study(sc.formation, sc.law, parse_study(table), **run).trials
     assert not off["settled"].any() and (off["settled_outcome"] == off["outcome"]).all()
     kernel = [c for c in t.columns if c not in ("settled", "settled_outcome")]
     pd.testing.assert_frame_equal(off[kernel], t[kernel], check_exact=True)

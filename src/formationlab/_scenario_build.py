@@ -1,22 +1,21 @@
-"""Building a scenario's formation, law and integrator (private to :mod:`formationlab.scenario`).
+"""Building a scenario's formation (private to :mod:`formationlab.scenario`).
 
-The formation comes from :class:`~formationlab.Formation`'s builders; the law
-and the integrator from their registries, with the table's keys checked
-against the chosen class's dataclass fields. Problems are raised through the
-caller's ``fail(where, message)``, which adds the file and line.
+The formation comes from :class:`~formationlab.Formation`'s builders (the law
+and the integrator from :func:`formationlab._scenario_parts.build_entry`).
+Problems are raised through the caller's ``fail(where, message)``, which adds
+the file and line.
 """
 
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
 from typing import Any
 
-from ._scenario_parts import Fail, param_key, params, unknown
+from ._scenario_parts import Fail
 from .errors import UserInputError
 from .spec import AlphaValues, Formation
 
-__all__ = ["build_formation", "build_from_registry", "stem"]
+__all__ = ["FIXED", "build_formation", "stem"]
 
 #: The keys of ``[controller]`` and ``[simulation]`` that are not the class's parameters.
 FIXED = {"controller": ("law", "alpha_values"), "simulation": ("integrator", "duration")}
@@ -106,7 +105,7 @@ def build_formation(
                 n, edges=frm.edges, distances=distances, diameters=rob.diameters
             )
     except UserInputError as exc:
-        raise fail(_formation_key(str(exc), frm), str(exc)) from None
+        raise fail(_formation_key(exc, frm), str(exc)) from None
     if frm.distances is None and frm.template is None:
         warnings.append("formation.distances not given: every d_ij = 1")
     if not formation.is_connected:
@@ -123,38 +122,24 @@ def build_formation(
     return formation
 
 
-def build_from_registry(
-    registry: Mapping[str, Any],
-    kind: str,
-    name: str,
-    given: Mapping[str, Any] | None,
-    section: str,
-    fail: Fail,
-) -> Any:
-    """The ``kind`` (law, integrator) registered as ``name``, built from the table's other keys."""
-    if name not in registry:
-        raise fail(f"{section}.{kind}", unknown(kind, name, registry))
-    cls = registry[name]
-    kwargs = params(cls, dict(given or {}), section, FIXED[section], f"{kind} {name!r}", fail)
-    try:
-        return cls(**kwargs)
-    except UserInputError as exc:
-        raise fail(param_key(section, kwargs, str(exc)), str(exc)) from None
+#: Scenario keys of the formation builders' parameters (``FormationError.key``).
+SCENARIO_KEYS = {
+    "positions": "robots.positions",
+    "diameters": "robots.diameters",
+    "edges": "formation.edges",
+    "distances": "formation.distances",
+    "template": "formation.template",
+    "orientation": "formation.orientation",
+    "alpha": "formation.alpha",
+    "alpha_values": "controller.alpha_values",
+}
 
 
-def _formation_key(message: str, frm: Any) -> str:
-    """The key a formation builder's message is about (for the line number)."""
-    if "collinear" in message or "template" in message:
+def _formation_key(exc: UserInputError, frm: Any) -> str:
+    """The scenario key of a formation builder's error (distances from a template: the template)."""
+    if exc.key == "distances" and frm.distances is None and frm.template is not None:
         return "formation.template"
-    if "alpha" in message:
-        return "formation.alpha"
-    if "edge" in message and "desired distance" not in message:
-        return "formation.edges"
-    if "diameters" in message and "distance" not in message:
-        return "robots.diameters"
-    if frm.distances is None and frm.template is not None:
-        return "formation.template"
-    return "formation.distances"
+    return SCENARIO_KEYS.get(exc.key or "", "formation")
 
 
 def stem(source: str) -> str:

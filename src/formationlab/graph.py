@@ -17,7 +17,7 @@ __all__ = ["as_edges", "complete_edges", "is_connected", "is_rigid"]
 def complete_edges(n: int) -> NDArray[np.int64]:
     """Edges ``(i, j)``, ``i < j``, of the complete graph on ``n`` robots, shape ``(m, 2)``."""
     if n < 2:
-        raise FormationError(f"a formation needs at least 2 robots, got {n}")
+        raise FormationError(f"a formation needs at least 2 robots, got {n}", key="positions")
     i, j = np.triu_indices(n, k=1)
     return np.stack([i, j], axis=1).astype(np.int64)
 
@@ -26,16 +26,21 @@ def as_edges(edges: str | ArrayLike, n: int, *, one_based: bool) -> NDArray[np.i
     if isinstance(edges, str):
         if edges != "complete":
             raise FormationError(
-                f'edges must be "complete" or a list of robot pairs, got the string {edges!r}'
+                f'edges must be "complete" or a list of robot pairs, got the string {edges!r}',
+                key="edges",
             )
         return complete_edges(n)
     arr = np.asarray(edges)
     if arr.size == 0:
-        raise FormationError("the edge list is empty: give at least one pair of robots")
+        raise FormationError(
+            "the edge list is empty: give at least one pair of robots", key="edges"
+        )
     if arr.ndim != 2 or arr.shape[1] != 2:
-        raise FormationError(f"edges must be pairs [i, j], got an array of shape {arr.shape}")
+        raise FormationError(
+            f"edges must be pairs [i, j], got an array of shape {arr.shape}", key="edges"
+        )
     if not np.all(np.isfinite(arr.astype(float))) or not np.all(arr == np.round(arr)):
-        raise FormationError("edges must hold whole robot numbers")
+        raise FormationError("edges must hold whole robot numbers", key="edges")
     arr = arr.astype(np.int64)
     base = 1 if one_based else 0
     seen: set[tuple[int, int]] = set()
@@ -45,13 +50,14 @@ def as_edges(edges: str | ArrayLike, n: int, *, one_based: bool) -> NDArray[np.i
             if not base <= x < n + base:
                 raise FormationError(
                     f"edge ({i}, {j}) names robot {x}, but robots are numbered "
-                    f"{base}..{n - 1 + base}"
+                    f"{base}..{n - 1 + base}",
+                    key="edges",
                 )
         if i == j:
-            raise FormationError(f"edge ({i}, {j}) joins robot {i} to itself")
+            raise FormationError(f"edge ({i}, {j}) joins robot {i} to itself", key="edges")
         key = (min(i, j) - base, max(i, j) - base)
         if key in seen:
-            raise FormationError(f"edge ({i}, {j}) is given twice")
+            raise FormationError(f"edge ({i}, {j}) is given twice", key="edges")
         seen.add(key)
         out.append(key)
     return np.asarray(sorted(out), dtype=np.int64)

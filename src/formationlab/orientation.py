@@ -50,7 +50,8 @@ def alpha_from_shape(
         i, j, k = np.argwhere(collinear)[0] + 1
         raise FormationError(
             f"robots {i}, {j} and {k} are collinear in the template, so the triple has no "
-            'orientation; move one of them off the line or use orientation = "free"'
+            'orientation; move one of them off the line or use orientation = "free"',
+            key="template",
         )
     alpha = np.where(mask, -ang, 0.0)  # paper's sign: opposite to the ccw angle
     return np.sign(alpha) if alpha_values == "sign" else alpha

@@ -12,7 +12,11 @@ Laws and integrators are looked up by name in the registries
 :data:`formationlab.controllers.LAWS` and :data:`formationlab.integrators.INTEGRATORS`
 when a scenario is parsed, so laws and integrators registered later are
 accepted without changing this module; the keys of ``[controller]`` and
-``[simulation]`` are checked against the chosen class's dataclass fields.
+``[simulation]`` are validated by pydantic against the chosen class's dataclass
+fields. A key of another law or integrator is ignored with an
+:class:`~formationlab.errors.IgnoredKeyWarning` (unless a law of ``[study] laws``
+takes it); a key none has is an error with a suggestion. The tables' pydantic
+models are in :mod:`formationlab._scenario_models`.
 
 This module reads no files: :func:`formationlab.io.scenario.load_scenario` does.
 """
@@ -20,184 +24,27 @@ This module reads no files: :func:`formationlab.io.scenario.load_scenario` does.
 from __future__ import annotations
 
 import dataclasses
-import math
 import tomllib
+import warnings as _warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import tomli_w
 from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import ValidationError
 
-from ._scenario_build import build_formation, build_from_registry, stem
-from ._scenario_parts import format_errors, line_of
+from ._scenario_build import FIXED, build_formation, stem
+from ._scenario_models import SECTIONS, ScenarioModel
+from ._scenario_parts import build_entry
 from .controllers import LAWS, Law
-from .errors import ScenarioError, UserInputError
+from .errors import IgnoredKeyWarning, ScenarioError, UserInputError
 from .integrators import INTEGRATORS, Integrator
 from .spec import Formation
+from .validation import line_of, validation_error
 
 __all__ = ["SECTIONS", "Scenario", "ScenarioModel", "parse_scenario"]
-
-_STRICT = ConfigDict(strict=True, extra="forbid", allow_inf_nan=False, frozen=True)
-
-
-def _finite(v: Any, what: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, int | float):
-        raise ValueError(f"{what} must be a number, got {v!r}")
-    if not math.isfinite(v):
-        raise ValueError(f"{what} must be a finite number, got {v!r}")
-    return float(v)
-
-
-def _one_or_list(v: Any, what: str) -> float | list[float]:
-    """One finite number, or a non-empty list of finite numbers."""
-    if isinstance(v, list):
-        if not v:
-            raise ValueError(f"{what} must be one number or a non-empty list, got []")
-        return [_finite(x, f"{what}, item {t + 1},") for t, x in enumerate(v)]
-    return _finite(v, what)
-
-
-def _points(v: Any, what: str) -> list[list[float]]:
-    """A list of ``[x, y]`` pairs of finite numbers."""
-    if not isinstance(v, list) or not v:
-        raise ValueError(f"{what} must be a list of [x, y] pairs, got {v!r}")
-    out = []
-    for t, row in enumerate(v):
-        if not isinstance(row, list) or len(row) != 2:
-            raise ValueError(f"{what}, row {t + 1}, must be a pair [x, y], got {row!r}")
-        out.append([_finite(x, f"{what}, row {t + 1},") for x in row])
-    return out
-
-
-class RobotsModel(BaseModel):
-    """``[robots]``: initial positions and diameters."""
-
-    model_config = _STRICT
-    positions: list[list[float]]
-    diameters: float | list[float] = 0.2
-
-    @field_validator("positions", mode="before")
-    @classmethod
-    def _positions(cls, v: Any) -> list[list[float]]:
-        pts = _points(v, "positions")
-        if len(pts) < 2:
-            raise ValueError(f"a formation needs at least 2 robots, got {len(pts)} position")
-        return pts
-
-    @field_validator("diameters", mode="before")
-    @classmethod
-    def _diameters(cls, v: Any) -> float | list[float]:
-        d = _one_or_list(v, "diameters")
-        if any(x < 0 for x in np.atleast_1d(d)):
-            raise ValueError(f"diameters must be >= 0, got {v!r}")
-        return d
-
-
-class FormationModel(BaseModel):
-    """``[formation]``: graph, desired distances, desired orientation."""
-
-    model_config = _STRICT
-    edges: Literal["complete"] | list[list[int]] = "complete"
-    distances: float | list[float] | None = None
-    template: list[list[float]] | None = None
-    orientation: Literal["free", "template", "mirror", "table"] | None = None
-    alpha: list[list[float]] | None = None
-
-    @field_validator("edges", mode="before")
-    @classmethod
-    def _edges(cls, v: Any) -> str | list[list[int]]:
-        if isinstance(v, str):
-            if v != "complete":
-                raise ValueError(f'edges must be "complete" or a list of pairs [i, j], got {v!r}')
-            return v
-        if not isinstance(v, list) or not v:
-            raise ValueError(f'edges must be "complete" or a list of pairs [i, j], got {v!r}')
-        for t, row in enumerate(v):
-            ok = isinstance(row, list) and len(row) == 2
-            ok = ok and all(isinstance(x, int) and not isinstance(x, bool) for x in row)
-            if not ok:
-                raise ValueError(
-                    f"edges, item {t + 1}, must be a pair of robot numbers [i, j], got {row!r}"
-                )
-        return v
-
-    @field_validator("distances", mode="before")
-    @classmethod
-    def _distances(cls, v: Any) -> float | list[float] | None:
-        return None if v is None else _one_or_list(v, "distances")
-
-    @field_validator("template", mode="before")
-    @classmethod
-    def _template(cls, v: Any) -> list[list[float]] | None:
-        return None if v is None else _points(v, "template")
-
-    @field_validator("alpha", mode="before")
-    @classmethod
-    def _alpha(cls, v: Any) -> list[list[float]]:
-        if not isinstance(v, list) or not v:
-            raise ValueError(f"alpha must be a list of rows [i, j, k, value], got {v!r}")
-        for t, row in enumerate(v):
-            ok = isinstance(row, list) and len(row) == 4
-            ok = ok and all(isinstance(x, int) and not isinstance(x, bool) for x in row[:3])
-            if not ok:
-                raise ValueError(
-                    f"alpha, row {t + 1}, must be [i, j, k, value] with robot numbers i, j, k, "
-                    f"got {row!r}"
-                )
-            _finite(row[3], f"alpha, row {t + 1}, value")
-        return [[float(x) for x in row] for row in v]
-
-
-class ControllerModel(BaseModel):
-    """``[controller]``: the law's name, how alpha is valued, and the law's parameters.
-
-    Parameters other than ``law`` and ``alpha_values`` are kept as given and
-    checked against the chosen law's dataclass fields by :func:`parse_scenario`.
-    """
-
-    model_config = ConfigDict(strict=True, extra="allow", allow_inf_nan=False, frozen=True)
-    law: str = "angle-restricted"
-    alpha_values: Literal["sign", "angle"] = "sign"
-
-
-class SimulationModel(BaseModel):
-    """``[simulation]``: integrator, its parameters (``dt``, ...), and the duration."""
-
-    model_config = ConfigDict(strict=True, extra="allow", allow_inf_nan=False, frozen=True)
-    integrator: str = "euler"
-    duration: float = Field(gt=0)
-
-    @field_validator("duration", mode="before")
-    @classmethod
-    def _duration(cls, v: Any) -> float:
-        return _finite(v, "duration")
-
-
-class ScenarioModel(BaseModel):
-    """The whole file. ``[study]`` and ``[equilibria]`` are passed through unvalidated."""
-
-    model_config = _STRICT
-    name: str | None = None
-    description: str = ""
-    robots: RobotsModel
-    formation: FormationModel = FormationModel()
-    controller: ControllerModel = ControllerModel()
-    simulation: SimulationModel
-    study: dict[str, Any] | None = None
-    equilibria: dict[str, Any] | None = None
-
-
-#: The keys each table accepts (the fixed ones; laws and integrators add theirs).
-SECTIONS: dict[str, tuple[str, ...]] = {
-    "": tuple(ScenarioModel.model_fields),
-    "robots": tuple(RobotsModel.model_fields),
-    "formation": tuple(FormationModel.model_fields),
-    "controller": tuple(ControllerModel.model_fields),
-    "simulation": tuple(SimulationModel.model_fields),
-}
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -226,10 +73,14 @@ class Scenario:
         Initial positions; robot 1 is row 0.
     raw : dict
         The parsed TOML.
+    controller : dict
+        The law parameters of ``[controller]`` as given, those of other laws included
+        (:meth:`law_named` builds any law from the ones it takes).
     study, equilibria : dict or None
         The raw ``[study]`` and ``[equilibria]`` tables (validated by their users).
     warnings : tuple of str
-        Things that are allowed but probably unintended (a non-rigid graph, ...).
+        Things that are allowed but probably unintended (a non-rigid graph, keys
+        that have no effect, ...).
     """
 
     name: str
@@ -242,6 +93,7 @@ class Scenario:
     duration: float
     q0: NDArray[np.float64]
     raw: dict[str, Any]
+    controller: dict[str, Any] = field(default_factory=dict)
     study: dict[str, Any] | None = None
     equilibria: dict[str, Any] | None = None
     warnings: tuple[str, ...] = field(default=())
@@ -259,6 +111,55 @@ class Scenario:
             "integrator": {"name": self.integrator.name, **dataclasses.asdict(self.integrator)},
             "duration": self.duration,
         }
+
+    def law_named(self, name: str) -> Law:
+        """The law ``name`` built from the ``[controller]`` keys it takes (its defaults else).
+
+        The scenario's own law for its own name. Used by studies (``[study] laws``) and
+        ``equilibria --law``, so every law gets the file's keys whatever the file's law.
+
+        Raises
+        ------
+        ScenarioError
+            An unknown law, or a value this law refuses (with the key and its line).
+        """
+        if name in LAWS and LAWS.canonical(name) == self.law.name:
+            return self.law
+        given = {
+            k: v for k, v in self.controller.items() if name not in LAWS or k in _fields(LAWS[name])
+        }
+        law, _ = build_entry(
+            LAWS,
+            INTEGRATORS,
+            name,
+            given,
+            section="controller",
+            other_section="simulation",
+            fixed=FIXED["controller"],
+            source=self.source,
+            text=self.text,
+            fail=self.error,
+        )
+        return law  # type: ignore[no-any-return]
+
+    def error(self, key: str, message: str) -> ScenarioError:
+        """A :class:`ScenarioError` about the dotted ``key``: ``source: key (line N): message``."""
+        line = line_of(self.text, key)
+        at = f" (line {line})" if line else ""
+        return ScenarioError(f"{self.source}: {key}{at}: {message}", key=key)
+
+    def locate(self, exc: UserInputError, table: str = "") -> ScenarioError:
+        """``exc`` placed in the file: its ``key`` (under ``table``) with the key's line."""
+        if isinstance(exc, ScenarioError) and exc.key and str(exc).startswith(self.source):
+            return exc
+        key = ".".join(p for p in (table, exc.key or "") if p)
+        if not key:
+            return ScenarioError(f"{self.source}: {exc}")
+        return self.error(key, str(exc).removeprefix(f"{key}: "))
+
+
+def _fields(cls: type) -> set[str]:
+    return {f.name for f in dataclasses.fields(cls) if f.init}
 
 
 # --------------------------------------------------------------------------- parsing
@@ -302,7 +203,13 @@ def parse_scenario(text_or_dict: str | Mapping[str, Any], source: str = "<string
     try:
         model = ScenarioModel.model_validate(raw)
     except ValidationError as exc:
-        raise ScenarioError(format_errors(exc, source, text, SECTIONS)) from None
+        raise validation_error(
+            exc,
+            source=source,
+            text=text,
+            known=lambda table: SECTIONS.get(table, ()),
+            tables=[t for t in SECTIONS if t],
+        ) from None
     return _build(model, raw, text, source)
 
 
@@ -322,10 +229,9 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
     warnings: list[str] = []
 
     def fail(where: str, message: str) -> ScenarioError:
-        section, _, key = where.partition(".")
-        line = line_of(text, section, key)
+        line = line_of(text, where)
         at = f" (line {line})" if line else ""
-        return ScenarioError(f"{source}: {where}{at}: {message}")
+        return ScenarioError(f"{source}: {where}{at}: {message}", key=where)
 
     formation = build_formation(rob, frm, ctl.alpha_values, fail, warnings)
     try:
@@ -334,15 +240,49 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         raise fail("robots.positions", str(exc)) from None
     q0.setflags(write=False)  # the scenario is frozen, its arrays too
 
-    law = build_from_registry(LAWS, "law", ctl.law, ctl.model_extra, "controller", fail)
-    if formation.alpha is None and "k_a" in {f.name for f in dataclasses.fields(law)}:
+    study_laws = (model.study or {}).get("laws")
+    used_by = [str(x) for x in study_laws] if isinstance(study_laws, list) else []
+    given = dict(ctl.model_extra or {})
+    law, ignored_law = build_entry(
+        LAWS,
+        INTEGRATORS,
+        ctl.law,
+        given,
+        section="controller",
+        other_section="simulation",
+        fixed=FIXED["controller"],
+        used_by=used_by,
+        source=source,
+        text=text,
+        fail=fail,
+    )
+    if formation.alpha is None and "k_a" in _fields(type(law)):
         warnings.append(
             f"law {law.name!r} has an angular term but the orientation is free, so it acts as "
             'the distance law; set formation.orientation (e.g. "template") to use it'
         )
-    integrator = build_from_registry(
-        INTEGRATORS, "integrator", sim.integrator, sim.model_extra, "simulation", fail
+    integrator, ignored_integrator = build_entry(
+        INTEGRATORS,
+        LAWS,
+        sim.integrator,
+        dict(sim.model_extra or {}),
+        section="simulation",
+        other_section="controller",
+        fixed=FIXED["simulation"],
+        source=source,
+        text=text,
+        fail=fail,
     )
+    for table, registry, name, ignored in (
+        ("controller", LAWS, law.name, ignored_law),
+        ("simulation", INTEGRATORS, integrator.name, ignored_integrator),
+    ):
+        if ignored:
+            line = line_of(text, f"{table}.{ignored[0]}")
+            at = f" (line {line})" if line else ""
+            message = f"{source}: [{table}]{at}: {registry.ignored_message(name, ignored)}"
+            warnings.append(message)
+            _warnings.warn(message, IgnoredKeyWarning, stacklevel=3)
     return Scenario(
         name=model.name or stem(source),
         text=text,
@@ -354,6 +294,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         duration=float(sim.duration),
         q0=q0,
         raw=raw,
+        controller=given,
         study=model.study,
         equilibria=model.equilibria,
         warnings=tuple(warnings),

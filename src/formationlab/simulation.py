@@ -26,12 +26,14 @@ from .analysis import (
     edge_labels,
     net_speed,
 )
-from .controllers import Law
+from .controllers import LAWS, Law
 from .dynamics import System
 from .errors import ParameterError
-from .integrators import Euler, Integrator, RawSolution
+from .integrators import INTEGRATORS, Euler, Integrator, RawSolution
+from .registry import resolve
 from .spec import Formation
 from .status import Status
+from .validation import whole
 
 __all__ = ["SimulationResult", "simulate"]
 
@@ -193,11 +195,11 @@ class SimulationResult:
 
 def simulate(
     formation: Formation,
-    law: Law,
+    law: Law | str,
     q0: ArrayLike,
     *,
     duration: float,
-    integrator: Integrator | None = None,
+    integrator: Integrator | str | None = None,
     save_every: int = 1,
     progress: Callable[[float], None] | None = None,
     interruptible: bool = False,
@@ -208,14 +210,15 @@ def simulate(
     ----------
     formation : Formation
         Robots, graph, desired distances and orientation.
-    law : Law
-        The control law, e.g. :class:`~formationlab.AngleRestrictedLaw`.
+    law : Law or str
+        The control law, e.g. :class:`~formationlab.AngleRestrictedLaw`, or its name
+        (``"distance"``: built with its defaults).
     q0 : array_like, shape (n, 2)
         Initial positions; validated (finite, no overlapping robots).
     duration : float
         Simulated time, seconds.
-    integrator : Integrator, optional
-        Default ``Euler(dt=1e-3)``.
+    integrator : Integrator or str, optional
+        Default ``Euler(dt=1e-3)``; a name (``"rk4"``) gets the integrator's defaults.
     save_every : int
         Keep every K-th step (thins what is stored, not what is computed).
     progress : callable, optional
@@ -240,9 +243,8 @@ def simulate(
     q0 = formation.check_positions(q0)
     if q0.ndim != 2:
         raise ParameterError(f"simulate takes one initial state of shape (n, 2), got {q0.shape}")
-    if not isinstance(save_every, int | np.integer) or save_every < 1:
-        raise ParameterError(f"save_every must be an integer >= 1, got {save_every!r}")
-    integrator = integrator or Euler(dt=1e-3)
+    save_every = whole(save_every, "save_every")
+    law, integrator = resolve(LAWS, law), resolve(INTEGRATORS, integrator or Euler(dt=1e-3))
     system = System(formation=formation, law=law)
     raw: RawSolution = integrator.run(
         system, q0, float(duration), save_every=int(save_every), progress=progress,

@@ -54,10 +54,11 @@ def _per_item(value: float | ArrayLike, count: int, what: str, per: str) -> NDAr
         arr = np.full(count, float(arr))
     if arr.shape != (count,):
         raise FormationError(
-            f"{what} must be one number or one per {per} ({count}), got shape {arr.shape}"
+            f"{what} must be one number or one per {per} ({count}), got shape {arr.shape}",
+            key=what,
         )
     if not np.all(np.isfinite(arr)):
-        raise FormationError(f"{what} must be finite numbers, got {arr.tolist()}")
+        raise FormationError(f"{what} must be finite numbers, got {arr.tolist()}", key=what)
     return arr
 
 
@@ -100,9 +101,13 @@ class Formation:
         d = np.asarray(self.diameters, dtype=float)
         n = d.shape[0] if d.ndim == 1 else 0
         if d.ndim != 1 or n < 2:
-            raise FormationError(f"diameters must be a list of n >= 2 numbers, got {d.shape}")
+            raise FormationError(
+                f"diameters must be a list of n >= 2 numbers, got {d.shape}", key="diameters"
+            )
         if not np.all(np.isfinite(d)) or np.any(d < 0):
-            raise FormationError(f"diameters must be finite and >= 0, got {d.tolist()}")
+            raise FormationError(
+                f"diameters must be finite and >= 0, got {d.tolist()}", key="diameters"
+            )
         edges = as_edges(self.edges, n, one_based=False)
         dist = _per_item(self.distances, len(edges), "distances", "edge")
         a = 0.5 * (d[edges[:, 0]] + d[edges[:, 1]])
@@ -113,24 +118,29 @@ class Formation:
             raise FormationError(
                 f"desired distance d_{i}{j} = {dist[e]:g} must exceed the contact distance "
                 f"a_{i}{j} = (rho_{i} + rho_{j})/2 = {a[e]:g}; use smaller diameters or "
-                "larger distances"
+                "larger distances",
+                key="distances",
             )
         if self.orientation not in ("free", "template", "mirror", "table"):
             raise FormationError(
                 f'orientation must be "free", "template", "mirror" or "table", '
-                f"got {self.orientation!r}"
+                f"got {self.orientation!r}",
+                key="orientation",
             )
         if self.alpha_values not in ("sign", "angle"):
             raise FormationError(
-                f'alpha_values must be "sign" or "angle", got {self.alpha_values!r}'
+                f'alpha_values must be "sign" or "angle", got {self.alpha_values!r}',
+                key="alpha_values",
             )
         alpha = None
         if self.alpha is not None:
             alpha = np.asarray(self.alpha, dtype=float)
             if alpha.shape != (n, n, n) or not np.all(np.isfinite(alpha)):
-                raise FormationError(f"alpha must be a finite ({n}, {n}, {n}) array")
+                raise FormationError(f"alpha must be a finite ({n}, {n}, {n}) array", key="alpha")
             if not np.allclose(alpha, -alpha.transpose(0, 2, 1)):
-                raise FormationError("alpha must satisfy alpha_ikj = -alpha_ijk (eq. 3)")
+                raise FormationError(
+                    "alpha must satisfy alpha_ikj = -alpha_ijk (eq. 3)", key="alpha"
+                )
             adj = np.zeros((n, n), bool)
             adj[edges[:, 0], edges[:, 1]] = adj[edges[:, 1], edges[:, 0]] = True
             allowed = adj[:, :, None] & adj[:, None, :]
@@ -139,16 +149,19 @@ class Formation:
                 i, j, k = stray[0] + 1
                 raise FormationError(
                     f"alpha_{i}{j}{k} is given but robots {j} and {k} are not both "
-                    f"neighbours of robot {i}; add the edges or drop the entry"
+                    f"neighbours of robot {i}; add the edges or drop the entry",
+                    key="alpha",
                 )
             alpha.setflags(write=False)
         elif self.orientation != "free":
-            raise FormationError(f"orientation {self.orientation!r} needs alpha values")
+            raise FormationError(
+                f"orientation {self.orientation!r} needs alpha values", key="orientation"
+            )
         template = None
         if self.template is not None:
             template = np.asarray(self.template, dtype=float)
             if template.shape != (n, 2) or not np.all(np.isfinite(template)):
-                raise FormationError(f"template must be a finite ({n}, 2) array")
+                raise FormationError(f"template must be a finite ({n}, 2) array", key="template")
             template.setflags(write=False)
         for arr in (d, edges, dist):
             arr.setflags(write=False)
@@ -221,12 +234,15 @@ class Formation:
         """
         tpl = np.asarray(template, dtype=float)
         if tpl.ndim != 2 or tpl.shape[1] != 2 or tpl.shape[0] < 2:
-            raise FormationError(f"template must have shape (n, 2) with n >= 2, got {tpl.shape}")
+            raise FormationError(
+                f"template must have shape (n, 2) with n >= 2, got {tpl.shape}", key="template"
+            )
         if not np.all(np.isfinite(tpl)):
-            raise FormationError("template holds NaN or infinite numbers")
+            raise FormationError("template holds NaN or infinite numbers", key="template")
         if orientation not in ("template", "mirror", "free"):
             raise FormationError(
-                f'a template orientation is "template", "mirror" or "free", got {orientation!r}'
+                f'a template orientation is "template", "mirror" or "free", got {orientation!r}',
+                key="orientation",
             )
         n = tpl.shape[0]
         e = as_edges(edges, n, one_based=one_based)
@@ -280,21 +296,26 @@ class Formation:
         given = np.zeros((n, n, n), bool)
         for key, value in rows:
             if len(key) != 3:
-                raise FormationError(f"an alpha entry names three robots i, j, k, got {key!r}")
+                raise FormationError(
+                    f"an alpha entry names three robots i, j, k, got {key!r}", key="alpha"
+                )
             i, j, k = (int(x) - 1 for x in key)
             label = "".join(str(x + 1) for x in (i, j, k))
             if not all(0 <= x < n for x in (i, j, k)):
-                raise FormationError(f"alpha_{label} names a robot outside 1..{n}")
+                raise FormationError(f"alpha_{label} names a robot outside 1..{n}", key="alpha")
             if len({i, j, k}) != 3:
-                raise FormationError(f"alpha_{label} needs three different robots")
+                raise FormationError(f"alpha_{label} needs three different robots", key="alpha")
             v = float(value)
             if not math.isfinite(v) or v == 0:
-                raise FormationError(f"alpha_{label} must be a finite non-zero number, got {v}")
+                raise FormationError(
+                    f"alpha_{label} must be a finite non-zero number, got {v}", key="alpha"
+                )
             for (a, b, c), w in (((i, j, k), v), ((i, k, j), -v)):
                 if given[a, b, c] and alpha[a, b, c] != w:
                     raise FormationError(
                         f"alpha_{a + 1}{b + 1}{c + 1} is given twice with different values "
-                        "(remember alpha_ikj = -alpha_ijk)"
+                        "(remember alpha_ikj = -alpha_ijk)",
+                        key="alpha",
                     )
                 alpha[a, b, c], given[a, b, c] = w, True
         return cls(
@@ -311,7 +332,7 @@ class Formation:
         if orientation == "free":
             return Formation(diameters=self.diameters, edges=self.edges, distances=self.distances)
         if self.template is None:
-            raise FormationError(f"orientation {orientation!r} needs a template")
+            raise FormationError(f"orientation {orientation!r} needs a template", key="orientation")
         return Formation.from_template(
             self.template,
             edges=self.edges,
@@ -433,9 +454,11 @@ class Formation:
         """
         arr = np.asarray(q, dtype=float)
         if arr.ndim < 2 or arr.shape[-2:] != (self.n, 2):
-            raise FormationError(f"{what} must have shape (..., {self.n}, 2), got {arr.shape}")
+            raise FormationError(
+                f"{what} must have shape (..., {self.n}, 2), got {arr.shape}", key="positions"
+            )
         if not np.all(np.isfinite(arr)):
-            raise FormationError(f"{what} hold NaN or infinite numbers")
+            raise FormationError(f"{what} hold NaN or infinite numbers", key="positions")
         diff = arr[..., None, :, :] - arr[..., :, None, :]
         r = np.linalg.norm(diff, axis=-1)
         iu = np.triu_indices(self.n, k=1)
@@ -448,6 +471,7 @@ class Formation:
             raise FormationError(
                 f"robots {i + 1} and {j + 1} overlap in the {what}: distance {rr:g} <= "
                 f"a_{i + 1}{j + 1} = {self.contact_matrix[i, j]:g}; move them apart or "
-                "use smaller diameters"
+                "use smaller diameters",
+                key="positions",
             )
         return arr

@@ -1,18 +1,26 @@
-"""The typer application and the error handling every command shares."""
+"""The typer application, and the error and warning handling every command shares.
+
+User errors become one ``error:`` line and exit status 2; formationlab's own
+warnings (:class:`~formationlab.errors.FormationlabWarning`, e.g. a scenario key
+that has no effect) become one ``warning:`` line each, whatever the warning
+filters of the caller say, and never stop the command.
+"""
 
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+import warnings
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any, NoReturn, TypeVar
 
 import typer
 from rich.console import Console
 from rich.markup import escape
 
-from ..errors import UserInputError
+from ..errors import FormationlabWarning, UserInputError
 
-__all__ = ["app", "command", "err_console", "fail"]
+__all__ = ["app", "command", "err_console", "fail", "warn"]
 
 app = typer.Typer(
     name="formationlab",
@@ -33,6 +41,37 @@ def fail(message: str, code: int = 2) -> NoReturn:
     raise typer.Exit(code)
 
 
+def warn(message: str) -> None:
+    """Print ``warning: message`` on standard error, once per command."""
+    if message in _shown:
+        return
+    _shown.add(message)
+    err_console.print(
+        f"[bold yellow]warning:[/] {escape(message)}", highlight=False, soft_wrap=True
+    )
+
+
+_shown: set[str] = set()
+
+
+@contextmanager
+def _warnings_as_lines() -> Iterator[None]:
+    """Print formationlab's warnings as ``warning:`` lines; pass the others on."""
+    _shown.clear()
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", FormationlabWarning)
+        show = warnings.showwarning
+
+        def showwarning(message: Any, category: type[Warning], *args: Any, **kw: Any) -> None:
+            if issubclass(category, FormationlabWarning):
+                warn(str(message))
+            else:
+                show(message, category, *args, **kw)
+
+        warnings.showwarning = showwarning
+        yield
+
+
 def command(*args: Any, **kwargs: Any) -> Callable[[F], F]:
     """``app.command`` that turns user errors into a message and exit status 2."""
 
@@ -40,7 +79,8 @@ def command(*args: Any, **kwargs: Any) -> Callable[[F], F]:
         @functools.wraps(fn)
         def wrapper(*a: Any, **k: Any) -> Any:
             try:
-                return fn(*a, **k)
+                with _warnings_as_lines():
+                    return fn(*a, **k)
             except UserInputError as exc:
                 fail(str(exc))
             except FileNotFoundError as exc:
@@ -54,13 +94,22 @@ def command(*args: Any, **kwargs: Any) -> Callable[[F], F]:
     return deco
 
 
-@app.callback()
-def _root(
-    version: bool = typer.Option(False, "--version", help="Print the version and exit."),
-) -> None:
-    """Multi-robot formation control: reproduce the paper, run scenarios, study outcomes."""
-    if version:
+def _print_version(value: bool) -> None:
+    if value:
         from .. import __version__
 
         typer.echo(f"formationlab {__version__}")
         raise typer.Exit(0)
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(
+        False,
+        "--version",
+        help="Print the version and exit.",
+        is_eager=True,
+        callback=_print_version,
+    ),
+) -> None:
+    """Multi-robot formation control: reproduce the paper, run scenarios, study outcomes."""

@@ -2,42 +2,20 @@
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
-import numpy as np
 import typer
 
-from ..errors import ParameterError
-from ._app import command
+from ._app import command, warn
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    from ..controllers import Law
 
 __all__: list[str] = []
-
-_TABLE_KEYS = {
-    "starts",
-    "seed",
-    "duration",
-    "collinear",
-    "integrator",
-    "dt",
-    "follow",
-    "follow_steps",
-}
-
-
-def _parse_follow(text: str) -> tuple[str, float, float]:
-    """``"k_a=0.5:12"`` -> ``("k_a", 0.5, 12.0)``."""
-    try:
-        name, rng = text.split("=", 1)
-        lo, hi = (float(x) for x in rng.split(":"))
-    except ValueError:
-        raise ParameterError(
-            f"--follow takes PARAM=FROM:TO, e.g. k_a=0.5:12, got {text!r}"
-        ) from None
-    if not (np.isfinite(lo) and np.isfinite(hi)) or lo >= hi:
-        raise ParameterError(f"--follow needs FROM < TO, got {lo:g}:{hi:g}")
-    return name.strip(), lo, hi
 
 
 @command(
@@ -101,161 +79,53 @@ def equilibria(
     DIR/equilibria.json and DIR/gallery.png (desired shape first); with
     --follow also DIR/continuation.json and DIR/continuation.png.
     """
-    from .. import simulate
-    from ..equilibria import catalogue, random_starts, settle
-    from ..equilibria import follow as follow_branch
+    import dataclasses
+
+    from ..equilibria.report import equilibria_scenario, find_equilibria, parse_equilibria
     from ..io.equilibria import read_study_end_states, write_equilibria
     from ..io.figures import save_figure
     from ..io.files import atomic_write_json, prepare_output_dir
     from ..io.scenario import load_scenario
+    from ..plotting.equilibria import continuation_figure, gallery_figure
 
     sc = load_scenario(scenario)
-    if law is not None and law != sc.law.name:
-        sc = dataclasses.replace(sc, law=_law_named(law, sc.law))
-    table: dict[str, Any] = dict(sc.equilibria or {})
-    unknown = set(table) - _TABLE_KEYS
-    if unknown:
-        raise ParameterError(
-            f"unknown key(s) {', '.join(sorted(unknown))} in [equilibria]; "
-            f"known: {', '.join(sorted(_TABLE_KEYS))}"
-        )
-    n_starts = int(starts if starts is not None else table.get("starts", 200))
-    seed_value = int(seed if seed is not None else table.get("seed", 0))
-    duration = float(table.get("duration", 60.0))
-    collinear = float(table.get("collinear", 0.2))
-    integ_name = integrator if integrator is not None else table.get("integrator")
-    settler: Any = None
-    if integ_name is not None:
-        from ..integrators import INTEGRATORS, FixedStepIntegrator, get_integrator
-
-        fixed = sorted(k for k, v in INTEGRATORS.items() if issubclass(v, FixedStepIntegrator))
-        if str(integ_name) not in fixed:
-            raise ParameterError(
-                f"cannot settle a batch of starts with the integrator {integ_name!r}; "
-                f"use one of {', '.join(fixed)}"
-            )
-        built = get_integrator(str(integ_name), dt=float(table.get("dt", 0.01)))
-        settler = built if isinstance(built, FixedStepIntegrator) else None
-    follow = follow if follow is not None else table.get("follow")
-    follow_steps = int(follow_steps or table.get("follow_steps", 24))
-    spec = _parse_follow(follow) if follow else None
-    if spec and not hasattr(sc.law, spec[0]):
-        raise ParameterError(f"the law {sc.law.name!r} has no parameter {spec[0]!r} to follow")
+    for w in sc.warnings:
+        warn(w if w.startswith(sc.source) else f"{sc.source}: {w}")
+    config = parse_equilibria(
+        sc,
+        starts=starts,
+        seed=seed,
+        law=law,
+        follow=follow,
+        integrator=integrator,
+        follow_steps=follow_steps,
+    )
+    sc = equilibria_scenario(sc, config)  # an unknown law or parameter: fail before writing
     folder = prepare_output_dir(out, force=force, markers=("equilibria.json",))
 
-    own = simulate(sc.formation, sc.law, sc.q0, duration=sc.duration, integrator=sc.integrator)
-    cands = [own.q[-1][None]]
-    outs = [np.array([own.outcome()])]
-    source: dict[str, Any] = {"scenario_run": 1}
-    if from_study is not None:
-        numbers = {
-            f.name: getattr(sc.law, f.name)
-            for f in dataclasses.fields(sc.law)
-            if isinstance(getattr(sc.law, f.name), int | float)
-        }
-        q, o = read_study_end_states(from_study, sc.n, sc.law.name, numbers)
-        cands.append(q)
-        outs.append(o)
-        source["study"] = {"path": str(from_study), "trials": len(q)}
-    elif n_starts:
-        rng = np.random.default_rng(seed_value)
-        q0 = random_starts(sc.formation, n_starts, rng, collinear=collinear)
-        settled = settle(sc.formation, sc.law, q0, duration=duration, integrator=settler)
-        cands.append(settled.q_final)
-        outs.append(settled.outcome)
-        source["random_starts"] = {
-            "count": n_starts,
-            "seed": seed_value,
-            "duration": duration,
-            "collinear": collinear,
-            "integrator": (settler or _default_settler(sc.law)).name,
-        }
-    cat = catalogue(sc.formation, sc.law, np.concatenate(cands), outcomes=np.concatenate(outs))
-    data = {
-        "scenario": sc.name,
-        "parameters": sc.parameters,
-        "source": source,
-        **cat.to_dict(),
-    }
-    files = ["equilibria.json", "gallery.png"]
-    save_figure(_gallery(cat, sc.name), folder / "gallery.png")
-    if spec:
-        name, lo, hi = spec
-        branches, labels, rows = [], [], []
-        for k, eq in enumerate(cat.equilibria):
-            if eq.desired:
-                continue
-            b = _both_ways(follow_branch, sc, eq, name, lo, hi, follow_steps)
-            branches.append(b)
-            labels.append(f"#{k + 1} ({eq.stability})")
-            rows.append(
-                {
-                    "id": k + 1,
-                    "values": b.values.tolist(),
-                    "stability": [e.stability for e in b.equilibria],
-                    "growth_rate": [e.growth_rate for e in b.equilibria],
-                    "attractive": [e.attractive for e in b.equilibria],
-                    "distances": [e.distances.tolist() for e in b.equilibria],
-                    "positions": [e.q.tolist() for e in b.equilibria],
-                    "end": b.end,
-                }
-            )
-        atomic_write_json(folder / "continuation.json", {"parameter": name, "branches": rows})
-        from ..plotting.equilibria import continuation_figure
+    def study_ends(law_: Law) -> tuple[NDArray[np.float64], NDArray[np.str_]]:
+        assert from_study is not None
+        numbers = {k: v for k, v in dataclasses.asdict(law_).items() if isinstance(v, int | float)}
+        return read_study_end_states(from_study, sc.n, law_.name, numbers)
 
-        save_figure(continuation_figure(branches, labels=labels), folder / "continuation.png")
-        files += ["continuation.json", "continuation.png"]
-    write_equilibria({**data, "files": files}, folder / "equilibria.json")
-    if not quiet:
-        for k, (eq, count) in enumerate(zip(cat.equilibria, cat.counts, strict=True)):
-            extra = f", {eq.unstable_directions} unstable" if eq.unstable_directions else ""
-            typer.echo(
-                f"#{k + 1} {eq.outcome} {eq.stability}{extra}: "
-                f"{count} trials, max Re(lambda) = {eq.growth_rate:.4g}"
-            )
-        if cat.skipped:
-            typer.echo(
-                "skipped end states: "
-                + ", ".join(f"{k} {v}" for k, v in sorted(cat.skipped.items()))
-            )
-        typer.echo(f"wrote {folder}/")
-
-
-def _gallery(cat: Any, name: str) -> Any:
-    from ..plotting.equilibria import gallery_figure
-
-    return gallery_figure(cat, title=f"{name}: equilibria of the {cat.law.name} law")
-
-
-def _both_ways(
-    follow_branch: Any, sc: Any, eq: Any, name: str, lo: float, hi: float, k: int
-) -> Any:
-    """Follow ``eq`` from the scenario's value of ``name`` down to ``lo`` and up to ``hi``."""
-    from ..equilibria import Branch
-
-    v0 = float(getattr(sc.law, name))
-    grid = np.linspace(lo, hi, k)
-    up = follow_branch(sc.formation, sc.law, eq.q, name, [v0, *grid[grid > v0]])
-    down = follow_branch(sc.formation, sc.law, eq.q, name, [v0, *grid[grid < v0][::-1]])
-    values = np.concatenate([down.values[::-1], up.values[1:]])
-    eqs = [*down.equilibria[::-1], *up.equilibria[1:]]
-    return Branch(
-        parameter=name, values=values, equilibria=eqs, end=f"down: {down.end}; up: {up.end}"
+    report = find_equilibria(
+        sc,
+        config,
+        end_states=study_ends if from_study is not None else None,
+        end_states_source=str(from_study) if from_study is not None else None,
     )
-
-
-def _law_named(name: str, base: Any) -> Any:
-    """The law ``name`` with the parameters it shares with ``base`` (others default)."""
-    from ..controllers import LAWS, get_law
-
-    if name not in LAWS:
-        get_law(name)  # raises the error that lists the known laws
-    own = {f.name for f in dataclasses.fields(LAWS[name]) if f.init}
-    shared = {f.name: getattr(base, f.name) for f in dataclasses.fields(base) if f.name in own}
-    return get_law(name, **shared)
-
-
-def _default_settler(law: Any) -> Any:
-    from ..integrators import RK4, ImplicitEuler
-
-    return RK4(dt=0.01) if law.smooth else ImplicitEuler(dt=0.01)
+    cat, name = report.catalogue, report.scenario.name
+    files = ["equilibria.json", "gallery.png"]
+    title = f"{name}: equilibria of the {cat.law.name} law"
+    save_figure(gallery_figure(cat, title=title), folder / "gallery.png")
+    continuation = report.continuation()
+    if continuation is not None:
+        atomic_write_json(folder / "continuation.json", continuation)
+        figure = continuation_figure(report.branches, labels=report.labels)
+        save_figure(figure, folder / "continuation.png")
+        files += ["continuation.json", "continuation.png"]
+    write_equilibria({**report.to_dict(), "files": files}, folder / "equilibria.json")
+    if not quiet:
+        for line in report.lines():
+            typer.echo(line)
+        typer.echo(f"wrote {folder}/")

@@ -10,19 +10,13 @@ import typer
 from rich.markup import escape
 
 from ..errors import OutputExistsError, UserInputError
-from ._app import command, err_console, fail
+from ._app import command, err_console, fail, warn
 
 __all__: list[str] = []
 
 #: Files ``run`` writes besides the plots (summary.json last: it marks a finished run).
 RUN_FILES = ("scenario.toml", "trajectory.nc", "summary.json")
 ANIMATION_STEM = "animation"
-
-
-def _warn(message: str) -> None:
-    err_console.print(
-        f"[bold yellow]warning:[/] {escape(message)}", highlight=False, soft_wrap=True
-    )
 
 
 def _say(message: str, quiet: bool) -> None:
@@ -72,7 +66,7 @@ def run(
 
     sc = load_scenario(scenario)
     for w in sc.warnings:
-        _warn(w)
+        warn(w)
     folder = prepare_output_dir(out, force=force)
     result = _simulate(simulate, sc, save_every, quiet)
     atomic_write_text(folder / "scenario.toml", sc.text)
@@ -233,15 +227,25 @@ def validate(
 ) -> None:
     """Check scenario files and say what is wrong, without running them.
 
+    Checks every table the other commands read ([study] and [equilibria] too).
     Prints one line per file: what it describes, or the problem (key, line,
     what was expected and what was given). Exit status 2 if any file is bad.
     """
+    from ..equilibria.report import equilibria_scenario, parse_equilibria
     from ..io.scenario import load_scenario
+    from ..studies.runner import StudySetup
 
     bad = 0
     for path in scenarios:
         try:
             sc = load_scenario(path)
+            try:  # the tables other commands read
+                if sc.study is not None:
+                    StudySetup.from_scenario(sc)
+                if sc.equilibria is not None:
+                    equilibria_scenario(sc, parse_equilibria(sc))
+            except UserInputError as exc:
+                raise sc.locate(exc) from None
         except UserInputError as exc:
             bad += 1
             err_console.print(
@@ -249,7 +253,7 @@ def validate(
             )
             continue
         for w in sc.warnings:
-            _warn(f"{path}: {w}")
+            warn(w if w.startswith(sc.source) else f"{path}: {w}")
         f = sc.formation
         rigid = "rigid" if f.is_rigid else "not rigid"
         typer.echo(

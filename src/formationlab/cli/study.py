@@ -9,7 +9,7 @@ from typing import Annotated, Any
 
 import typer
 
-from ._app import command, err_console, fail
+from ._app import command, err_console, fail, warn
 
 
 @command("study")
@@ -81,9 +81,11 @@ def study(
     from ..io.scenario import load_scenario
     from ..io.trials import ChunkFolder
     from ..studies import parse_study
-    from ..studies.runner import run_study, study_groups, study_identity
+    from ..studies.runner import StudySetup, run_study
 
     sc = load_scenario(scenario)
+    for w in sc.warnings:
+        warn(w if w.startswith(sc.source) else f"{sc.source}: {w}")
     config = parse_study(
         sc.study,
         trials=trials,
@@ -92,14 +94,10 @@ def study(
         duration=duration,
         settle=settle,
         source=sc.source,
+        text=sc.text,
     )
-    dt = float(config.dt or getattr(sc.integrator, "dt", None) or 1e-3)
-    duration = float(config.duration or sc.duration)
-    center = None  # of gaussian starts: the template, else the scenario's positions
-    if config.initial.kind == "gaussian":
-        center = sc.formation.template if sc.formation.template is not None else sc.q0
-    groups = study_groups(sc.formation, sc.law, config)
-    identity = study_identity(groups, config, seed=seed, dt=dt, duration=duration, center=center)
+    setup = StudySetup.from_scenario(sc, config)
+    identity = setup.identity(seed)
     store = ChunkFolder(out, identity)
     if resume:
         if not out.is_dir():
@@ -113,24 +111,19 @@ def study(
         store.start()
     if sc.integrator.name != "euler":
         err_console.print(
-            f"note: studies use the batched explicit Euler kernel (dt = {dt:g}), not the "
+            f"note: studies use the batched explicit Euler kernel (dt = {setup.dt:g}), not the "
             f"scenario's {sc.integrator.name!r}",
             highlight=False,
         )
     err_console.print(
-        f"{len(groups)} groups x {config.trials} trials, dt = {dt:g}, duration = {duration:g}, "
-        f"seed = {seed}",
+        f"{len(setup.groups)} groups x {config.trials} trials, dt = {setup.dt:g}, "
+        f"duration = {setup.duration:g}, seed = {seed}",
         highlight=False,
     )
     result = _run_with_progress(
         run_study,
-        sc.formation,
-        sc.law,
-        config,
+        setup,
         seed=seed,
-        dt=dt,
-        duration=duration,
-        center=center,
         scheduler=scheduler,
         workers=workers,
         store=store,

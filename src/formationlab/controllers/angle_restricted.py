@@ -17,8 +17,9 @@ from numpy.typing import NDArray
 from ..geometry import perp
 from ..potentials import triangle_products, triple_products, upsilon
 from ..spec import Formation
+from ..validation import check_fields
 from .base import Law, Repulsion, register
-from .distance import _positive, grad_phi, pair_geometry, phi_sum
+from .distance import grad_phi, pair_geometry, phi_sum
 from .terms import LOG_BARRIER, KernelTerms, build_terms
 
 __all__ = [
@@ -130,9 +131,7 @@ class AngleRestrictedLaw(Law):
     repulsion: Repulsion = field(default_factory=Repulsion)
 
     def __post_init__(self) -> None:
-        _positive(self, "k_c")
-        _positive(self, "k_a", allow_zero=True)
-        _positive(self, "theta", allow_zero=True)
+        check_fields(self, positive=("k_c",), nonnegative=("k_a", "theta"))
 
     def lam(self, formation: Formation) -> float:
         """``lambda`` of eq. (25): ``lambda kappa k_c = 2 k_a`` (kappa = pi or 3)."""

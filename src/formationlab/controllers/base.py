@@ -26,7 +26,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import ParameterError
+from ..registry import Registry
 from ..spec import Formation
+from ..validation import check_fields
 from .terms import KernelTerms
 
 __all__ = ["LAWS", "Law", "Repulsion", "get_law", "register"]
@@ -49,10 +51,7 @@ class Repulsion:
     influence: float = 0.5
 
     def __post_init__(self) -> None:
-        for name in ("eta", "influence"):
-            v = getattr(self, name)
-            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
-                raise ParameterError(f"repulsion {name} must be a finite number > 0, got {v!r}")
+        check_fields(self, positive=("eta", "influence"))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -122,23 +121,20 @@ class Law:
         return replace(self, **params)
 
 
-LAWS: dict[str, type[Law]] = {}
+#: The laws by name (as in scenario files); case-insensitive, with did-you-mean suggestions.
+LAWS: Registry[Law] = Registry("law")
 L = TypeVar("L", bound=type[Law])
 
 
 def register(cls: L) -> L:
     """Class decorator: make a law available by its ``name``."""
-    if not cls.name:
-        raise TypeError(f"{cls.__name__} has no name")
-    LAWS[cls.name] = cls
-    return cls
+    return LAWS.register(cls)
 
 
 def get_law(name: str, **params: object) -> Law:
-    """The law registered as ``name``, built with ``params``."""
-    try:
-        cls = LAWS[name]
-    except KeyError:
-        known = ", ".join(sorted(LAWS))
-        raise ParameterError(f"unknown law {name!r}; known laws: {known}") from None
-    return cls(**params)  # type: ignore[arg-type]
+    """The law registered as ``name`` (any case), built with ``params``.
+
+    A parameter of another law is ignored with an
+    :class:`~formationlab.errors.IgnoredKeyWarning`; an unknown one is an error.
+    """
+    return LAWS.build(name, **params)

@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import ParameterError
 from ..potentials import dkhatib_ds, dphi_dr, khatib, pair_vectors, phi
 from ..spec import Formation
+from ..validation import check_fields
 from .base import Law, Repulsion, register
 from .terms import LOG_BARRIER, KernelTerms, build_terms
 
@@ -115,7 +115,7 @@ class DistanceLaw(Law):
     repulsion: Repulsion = field(default_factory=Repulsion)
 
     def __post_init__(self) -> None:
-        _positive(self, "k_c")
+        check_fields(self, positive=("k_c",))
 
     def control(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
         return -self.k_c * grad_phi(formation, q, self.repulsion)  # eq. (8)
@@ -129,13 +129,3 @@ class DistanceLaw(Law):
             formation, kind=LOG_BARRIER, edge_gain=self.k_c, repulsion_gain=self.k_c,
             eta=rep.eta, influence=rep.influence,
         )  # fmt: skip
-
-
-def _positive(obj: object, name: str, *, allow_zero: bool = False) -> None:
-    v = getattr(obj, name)
-    ok = isinstance(v, int | float) and np.isfinite(v) and (v >= 0 if allow_zero else v > 0)
-    if not ok:
-        bound = ">= 0" if allow_zero else "> 0"
-        raise ParameterError(
-            f"{type(obj).__name__}.{name} must be a finite number {bound}, got {v!r}"
-        )

@@ -40,8 +40,8 @@ from numpy.typing import NDArray
 from ..errors import FormationError
 from ..geometry import cross, parity, perp
 from ..spec import Formation
+from ..validation import check_fields
 from .base import Law, Repulsion, register
-from .distance import _positive
 from .squared_distance import (
     grad_repulsion,
     grad_squared_distance,
@@ -177,9 +177,7 @@ class SignedAreaLaw(Law):
     repulsion: Repulsion = field(default_factory=Repulsion)
 
     def __post_init__(self) -> None:
-        _positive(self, "k")
-        _positive(self, "k_s", allow_zero=True)
-        _positive(self, "k_r", allow_zero=True)
+        check_fields(self, positive=("k",), nonnegative=("k_s", "k_r"))
 
     def control(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
         u = -self.k * grad_squared_distance(formation, q)

@@ -28,8 +28,9 @@ from numpy.typing import NDArray
 
 from ..potentials import dkhatib_ds, khatib
 from ..spec import Formation
+from ..validation import check_fields
 from .base import Law, Repulsion, register
-from .distance import _positive, pair_geometry
+from .distance import pair_geometry
 from .terms import SQUARED, KernelTerms, build_terms
 
 __all__ = [
@@ -126,8 +127,7 @@ class SquaredDistanceLaw(Law):
     repulsion: Repulsion = field(default_factory=Repulsion)
 
     def __post_init__(self) -> None:
-        _positive(self, "k")
-        _positive(self, "k_r", allow_zero=True)
+        check_fields(self, positive=("k",), nonnegative=("k_r",))
 
     def control(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
         u = -self.k * grad_squared_distance(formation, q)

@@ -7,7 +7,8 @@ delay (``saddle``). See ``docs/equilibria.md``.
 Pipeline: :func:`random_starts` / a study's end states -> :func:`settle` ->
 :func:`catalogue` (:func:`refine` each, :func:`classify_equilibrium`, merge
 with :func:`same_equilibrium`). :func:`follow` continues one equilibrium in a
-law's gain.
+law's gain. :func:`find_equilibria` runs the whole pipeline on a scenario (what
+the ``equilibria`` command reports).
 """
 
 from .catalogue import Catalogue, catalogue
@@ -16,20 +17,25 @@ from .continuation import Branch, follow
 from .dedup import canonical_pose, group_equilibria, same_equilibrium
 from .jacobian import jacobian, reduced_eigenvalues, rigid_modes
 from .refine import Refined, refine
+from .report import EquilibriaConfig, EquilibriaReport, find_equilibria, parse_equilibria
 from .search import random_starts, settle
 
 __all__ = [
     "Branch",
     "Catalogue",
+    "EquilibriaConfig",
+    "EquilibriaReport",
     "Equilibrium",
     "Refined",
     "Stability",
     "canonical_pose",
     "catalogue",
     "classify_equilibrium",
+    "find_equilibria",
     "follow",
     "group_equilibria",
     "jacobian",
+    "parse_equilibria",
     "random_starts",
     "reduced_eigenvalues",
     "refine",

@@ -25,6 +25,7 @@ from ..errors import ParameterError
 from ..integrators import RK4, FixedStepIntegrator, ImplicitEuler, StopRule, drive
 from ..integrators.substeps import Substepped
 from ..spec import Formation
+from ..validation import fraction, whole
 
 __all__ = ["random_starts", "settle"]
 
@@ -48,10 +49,7 @@ def random_starts(
         Fraction of the starts with all robots on one random line through the
         origin (uniform in ``[-L, L]`` along it).
     """
-    if not isinstance(count, int | np.integer) or count < 0:
-        raise ParameterError(f"the number of starts must be an integer >= 0, got {count!r}")
-    if not 0.0 <= collinear <= 1.0:
-        raise ParameterError(f"the collinear fraction must be in [0, 1], got {collinear!r}")
+    count, collinear = whole(count, "starts", minimum=0), fraction(collinear, "collinear")
     n = formation.n
     L = float(half_width if half_width is not None else 3.0 * formation.distances.max())
     gap = 2.0 * formation.contact_matrix.max()

@@ -25,8 +25,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..dynamics import System
-from ..errors import ParameterError
+from ..registry import Registry
 from ..status import Status
+from ..validation import positive
 from .driver import Progress, drive
 
 __all__ = [
@@ -106,10 +107,7 @@ class FixedStepIntegrator(Integrator):
     dt: float = 1e-3
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.dt, int | float) and np.isfinite(self.dt) and self.dt > 0):
-            raise ParameterError(
-                f"{type(self).__name__}.dt must be a finite number > 0, got {self.dt!r}"
-            )
+        positive(self.dt, "dt", owner=type(self).__name__)
 
     #: right-hand-side evaluations per step (for the cost statistics)
     evaluations_per_step: ClassVar[int] = 1
@@ -152,26 +150,24 @@ class FixedStepIntegrator(Integrator):
 
 def steps_for(duration: float, dt: float) -> int:
     """Number of steps of ``dt`` in ``duration`` (the last one may end a little late)."""
-    if not (np.isfinite(duration) and duration > 0):
-        raise ParameterError(f"duration must be a finite number > 0, got {duration!r}")
+    positive(duration, "duration")
     return max(1, int(np.ceil(duration / dt - 1e-9)))
 
 
-INTEGRATORS: dict[str, type[Integrator]] = {}
+#: The integrators by name (as in scenario files); case-insensitive, with suggestions.
+INTEGRATORS: Registry[Integrator] = Registry("integrator")
 IntegratorT = TypeVar("IntegratorT", bound=type[Integrator])
 
 
 def register_integrator(cls: IntegratorT) -> IntegratorT:
     """Class decorator: make an integrator available by its ``name``."""
-    INTEGRATORS[cls.name] = cls
-    return cls
+    return INTEGRATORS.register(cls)
 
 
 def get_integrator(name: str, **params: object) -> Integrator:
-    """The integrator registered as ``name``, built with ``params``."""
-    try:
-        cls = INTEGRATORS[name]
-    except KeyError:
-        known = ", ".join(sorted(INTEGRATORS))
-        raise ParameterError(f"unknown integrator {name!r}; known integrators: {known}") from None
-    return cls(**params)  # type: ignore[arg-type]
+    """The integrator registered as ``name`` (any case), built with ``params``.
+
+    A parameter of another integrator (``dt`` for ``"filippov"``) is ignored with an
+    :class:`~formationlab.errors.IgnoredKeyWarning`; an unknown one is an error.
+    """
+    return INTEGRATORS.build(name, **params)

@@ -44,8 +44,8 @@ from numpy.typing import NDArray
 from scipy.integrate import solve_ivp
 
 from ..dynamics import System
-from ..errors import ParameterError
 from ..status import Status
+from ..validation import check_fields, one_of
 from .base import Integrator, RawSolution, register_integrator, steps_for
 from .driver import Progress
 
@@ -212,20 +212,9 @@ class Filippov(Integrator):
     max_events: int = 10_000
 
     def __post_init__(self) -> None:
-        for name in ("rtol", "atol", "save_dt", "touch_tol"):
-            v = getattr(self, name)
-            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
-                raise ParameterError(f"Filippov.{name} must be a finite number > 0, got {v!r}")
-        if self.method not in _METHODS:
-            raise ParameterError(
-                f"Filippov.method must be one of {', '.join(_METHODS)}, got {self.method!r}"
-            )
-        if not (isinstance(self.mu, int | float) and np.isfinite(self.mu) and self.mu >= 0):
-            raise ParameterError(f"Filippov.mu must be a finite number >= 0, got {self.mu!r}")
-        if not (isinstance(self.max_events, int) and self.max_events >= 1):
-            raise ParameterError(
-                f"Filippov.max_events must be an integer >= 1, got {self.max_events!r}"
-            )
+        pos = ("rtol", "atol", "save_dt", "touch_tol")
+        check_fields(self, positive=pos, nonnegative=("mu",), whole=("max_events",))
+        one_of(self.method, "method", _METHODS, owner="Filippov")
 
     def run(
         self,

@@ -48,7 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..dynamics import System
-from ..errors import ParameterError
+from ..validation import check_fields
 from .base import FixedStepIntegrator, register_integrator
 
 __all__ = ["ImplicitEuler"]
@@ -93,12 +93,7 @@ class ImplicitEuler(FixedStepIntegrator):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if not (isinstance(self.tol, int | float) and np.isfinite(self.tol) and self.tol > 0):
-            raise ParameterError(f"ImplicitEuler.tol must be a number > 0, got {self.tol!r}")
-        if not (isinstance(self.max_surfaces, int) and self.max_surfaces >= 1):
-            raise ParameterError(
-                f"ImplicitEuler.max_surfaces must be an integer >= 1, got {self.max_surfaces!r}"
-            )
+        check_fields(self, positive=("tol",), whole=("max_surfaces",))
 
     def advance(
         self, system: System, x: NDArray[np.float64], dt: float, counters: dict[str, float]

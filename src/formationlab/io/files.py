@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import tempfile
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -74,10 +75,27 @@ def atomic_write_text(target: str | os.PathLike[str], text: str) -> Path:
     return atomic_write_bytes(target, text.encode("utf-8"))
 
 
+#: Keys whose values count things (steps, evaluations, events): written as integers.
+COUNT_KEY = re.compile(r"^(steps|events)$|_(steps|count|evaluations|events)$")
+
+
+def _count(key: str, value: Any) -> Any:
+    """``10000.0`` -> ``10000`` under a count's key (statistics are kept as floats)."""
+    if COUNT_KEY.search(key) and isinstance(value, float | np.floating):
+        f = float(value)
+        if np.isfinite(f) and f.is_integer():
+            return int(f)
+    return value
+
+
 def to_jsonable(obj: Any) -> Any:
-    """Convert numpy scalars and arrays (recursively) to plain JSON values; NaN becomes null."""
+    """Convert numpy scalars and arrays (recursively) to plain JSON values; NaN becomes null.
+
+    Integral values under count keys (``steps``, ``rhs_evaluations``, ``switch_count``,
+    ...: :data:`COUNT_KEY`) become integers.
+    """
     if isinstance(obj, dict):
-        return {str(k): to_jsonable(v) for k, v in obj.items()}
+        return {str(k): to_jsonable(_count(str(k), v)) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
         return [to_jsonable(v) for v in obj]
     if isinstance(obj, np.ndarray):

@@ -39,6 +39,7 @@ from ..errors import FormationError, ParameterError
 from ..integrators import Euler, StopRule, drive
 from ..integrators.base import steps_for
 from ..spec import Formation
+from ..validation import positive, whole
 
 __all__ = [
     "KERNEL_LAWS",
@@ -108,14 +109,11 @@ def run_batch(
     """
     tol = tolerances or Tolerances()
     q0 = _check_initial(formation, q0)
-    for name, v in (("dt", dt), ("duration", duration)):
-        if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
-            raise ParameterError(f"{name} must be a finite number > 0, got {v!r}")
+    dt, duration = positive(dt, "dt"), positive(duration, "duration")
     n_steps = steps_for(float(duration), float(dt))
     if check_every is None:
         check_every = max(1, round(tol.window / dt))
-    if not isinstance(check_every, int | np.integer) or check_every < 1:
-        raise ParameterError(f"check_every must be an integer >= 1, got {check_every!r}")
+    check_every = whole(check_every, "check_every")
     if backend == "numba":
         return _run_numba(formation, law, q0, float(dt), n_steps, int(check_every), tol)
     if backend != "numpy":

@@ -57,7 +57,7 @@ from pydantic import (
 )
 
 from ..analysis import Tolerances
-from ..errors import ScenarioError
+from ..validation import validation_error
 
 __all__ = ["BoxInitial", "GaussianInitial", "SettleModel", "StudyConfig", "parse_study"]
 
@@ -174,16 +174,19 @@ def parse_study(
     duration: float | None = None,
     settle: bool | None = None,
     source: str = "scenario",
+    text: str = "",
 ) -> StudyConfig:
     """Validate a ``[study]`` table (``None``: all defaults), with command-line overrides.
 
     ``trials``, ``chunk_size``, ``dt`` and ``duration``, when given, replace the table's;
     ``settle``, when given, replaces ``settle.enabled`` (keeping its ``duration`` and ``dt``).
+    ``source`` and ``text`` (the scenario file and its TOML) place errors in the file.
 
     Raises
     ------
     ScenarioError
-        Naming the key (``study.initial.half_width``), what was expected and what was given.
+        Naming the key (``study.initial.half_width``) and its line, what was expected and
+        what was given; ``key`` is the first problem's key.
     """
     data = dict(table or {})
     for key, value in (
@@ -203,31 +206,23 @@ def parse_study(
     try:
         return StudyConfig.model_validate(data)
     except ValidationError as exc:
-        problems = []
-        for err in exc.errors(include_url=False):
-            loc = [str(p) for p in err["loc"] if not str(p).isdigit()]
-            # pydantic puts the union member in the path: initial.box.half_width
-            loc = [p for i, p in enumerate(loc) if not (i == 1 and loc[0] == "initial")]
-            where = ".".join(["study", *loc])
-            if err["type"] == "extra_forbidden":
-                known = _known_keys(loc[:-1])
-                msg = f"unknown key; known keys: {', '.join(known)}"
-            elif err["type"] == "value_error":
-                msg = str(err.get("ctx", {}).get("error", err["msg"]))
-            else:
-                msg = f"{err['msg']}, got {err.get('input')!r}"
-            problems.append(f"{where}: {msg}")
-        raise ScenarioError(f"{source}: [study]: " + "; ".join(problems)) from None
+        raise validation_error(
+            exc, source=source, text=text, prefix="study", known=_known_keys, tags=_TAGS
+        ) from None
 
 
-def _known_keys(path: list[str]) -> list[str]:
+#: pydantic puts the member of a tagged union in the location: initial.box.half_width
+_TAGS = ("box", "gaussian")
+
+
+def _known_keys(table: str) -> list[str]:
     models: dict[str, Any] = {
-        "": StudyConfig,
-        "initial": BoxInitial,
-        "tolerances": TolerancesModel,
-        "settle": SettleModel,
+        "study": StudyConfig,
+        "study.initial": BoxInitial,
+        "study.tolerances": TolerancesModel,
+        "study.settle": SettleModel,
     }
-    model = models.get(".".join(path), StudyConfig)
+    model = models.get(table, StudyConfig)
     keys = list(model.model_fields)
     if model is BoxInitial:
         keys += ["sigma (kind = gaussian)"]

@@ -11,12 +11,14 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from ..controllers import LAWS, Law
 from ..errors import ParameterError, UserInputError
 from ..spec import Formation
+from ..validation import choices, nearest
 from .config import StudyConfig
 
 __all__ = ["REPULSION_KEYS", "ROBOT_KEYS", "Group", "study_groups"]
@@ -90,11 +92,20 @@ def _apply(law: Law, formation: Formation, point: dict[str, float]) -> tuple[Law
     return law.with_params(**params) if params else law, formation
 
 
-def study_groups(formation: Formation, law: Law, config: StudyConfig) -> list[Group]:
+def study_groups(
+    formation: Formation,
+    law: Law,
+    config: StudyConfig,
+    *,
+    laws: Mapping[str, Law] | None = None,
+) -> list[Group]:
     """The groups of a study: every law of ``config.laws`` at every point of its sweep.
 
     A law runs the product of the sweep lists of the keys that apply to it
     (its dataclass fields, ``eta``/``influence`` of its repulsion, ``diameter``).
+    ``laws`` gives the base law of each name (a scenario's
+    :meth:`~formationlab.scenario.Scenario.law_named`: the file's keys that it takes);
+    without it, a law takes the parameters it shares with ``law``.
 
     Raises
     ------
@@ -102,23 +113,32 @@ def study_groups(formation: Formation, law: Law, config: StudyConfig) -> list[Gr
         An unknown law, a sweep key that applies to none of the laws, or a sweep
         value a law or the formation rejects.
     """
-    names = config.laws or (law.name,)
-    for name in names:
-        if name not in LAWS:
-            raise ParameterError(
-                f"study.laws: unknown law {name!r}; known laws: {', '.join(sorted(LAWS))}"
-            )
+    try:
+        names = tuple(LAWS.canonical(n) for n in config.laws or (law.name,))
+    except UserInputError as exc:
+        raise ParameterError(f"study.laws: {exc}", key="study.laws") from None
     keys = list(config.sweep)
     for key in keys:
         if not any(_applies(key, LAWS[name]) for name in names):
             takes = sorted(set().union(*(_fields(LAWS[n]) for n in names)) - {"repulsion"})
+            known = [*takes, *REPULSION_KEYS, *ROBOT_KEYS]
+            hint = choices(key, known, "Sweepable")
+            if hint.startswith("."):  # a parameter of a law the study does not run?
+                others = {k: n for n in LAWS for k in _fields(LAWS[n]) if n not in names}
+                far = nearest(key, others)
+                if far:
+                    hint = (
+                        f"; did you mean {far!r} (of the law {others[far]!r}: add it to "
+                        f"study.laws)?{hint.removeprefix('.')}"
+                    )
             raise ParameterError(
                 f"study.sweep.{key}: no law of the study ({', '.join(names)}) has a parameter "
-                f"{key!r}; sweepable: {', '.join([*takes, *REPULSION_KEYS, *ROBOT_KEYS])}"
+                f"{key!r}{hint}",
+                key=f"study.sweep.{key}",
             )
     groups: list[Group] = []
     for name in names:
-        base = _base_law(name, law)
+        base = laws[name] if laws is not None and name in laws else _base_law(name, law)
         mine = [k for k in keys if _applies(k, type(base))]
         for values in itertools.product(*(config.sweep[k] for k in mine)):
             point = {k: float(v) for k, v in zip(mine, values, strict=True)}
@@ -126,7 +146,9 @@ def study_groups(formation: Formation, law: Law, config: StudyConfig) -> list[Gr
                 g_law, g_formation = _apply(base, formation, point)
             except UserInputError as exc:
                 where = ", ".join(f"{k} = {v:g}" for k, v in point.items())
-                raise ParameterError(f"study.sweep ({name}, {where}): {exc}") from None
+                raise ParameterError(
+                    f"study.sweep ({name}, {where}): {exc}", key="study.sweep"
+                ) from None
             groups.append(
                 Group(index=len(groups), law=g_law, formation=g_formation, parameters=point)
             )

@@ -1,5 +1,8 @@
 """Monte-Carlo studies: many random starts, several laws, a parameter sweep.
 
+A :class:`StudySetup` holds what a study runs; :meth:`StudySetup.from_scenario`
+is the one place where a scenario's study gets its defaults (``dt``,
+``duration``, the centre of gaussian starts, each law's parameters).
 :func:`run_study` runs ``trials`` random initial states (see
 :mod:`formationlab.studies.sampling`) for every *group*, a group being one law
 at one point of the sweep (:func:`study_groups`). The trials of a group are
@@ -32,25 +35,32 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from functools import cached_property
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import pandas as pd
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from ..analysis import OUTCOMES
-from ..controllers import Law
+from ..controllers import LAWS, Law
 from ..errors import ParameterError
 from ..spec import Formation
+from ..validation import positive, whole
 from .chunks import ChunkTask, plan_chunks, run_chunk
-from .config import GaussianInitial, StudyConfig
+from .config import GaussianInitial, StudyConfig, parse_study
 from .executors import run_in_process, run_on_dask
 from .groups import REPULSION_KEYS, ROBOT_KEYS, Group, study_groups
 from .summary import summarize_groups
+
+if TYPE_CHECKING:
+    from ..scenario import Scenario
+
+#: Euler step of a study whose scenario's integrator has none (``filippov``), seconds.
+DEFAULT_DT = 1e-3
 
 __all__ = [
     "REPULSION_KEYS",
@@ -59,6 +69,7 @@ __all__ = [
     "ChunkTask",
     "Group",
     "StudyResult",
+    "StudySetup",
     "plan_chunks",
     "run_chunk",
     "run_study",
@@ -136,15 +147,111 @@ def study_identity(
     return ident
 
 
+@dataclass(frozen=True, kw_only=True, eq=False)
+class StudySetup:
+    """What a study runs: formation, laws, ``[study]`` configuration, step and duration.
+
+    Parameters
+    ----------
+    formation : Formation
+        The formation (the sweep may change its diameters).
+    law : Law
+        The scenario's law.
+    config : StudyConfig
+        The ``[study]`` table.
+    dt, duration : float
+        Euler step and simulated time per trial, seconds (> 0).
+    center : array_like, shape (n, 2), optional
+        Centre of gaussian starts; default the formation's template (required for
+        gaussian starts when the formation has none).
+    laws : mapping, optional
+        The base law of each name of ``config.laws`` (default: it takes the parameters
+        it shares with ``law``).
+    """
+
+    formation: Formation
+    law: Law
+    config: StudyConfig
+    dt: float
+    duration: float
+    center: NDArray[np.float64] | None = None
+    laws: Mapping[str, Law] | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "dt", positive(self.dt, "dt"))
+        object.__setattr__(self, "duration", positive(self.duration, "duration"))
+        center = self.center
+        if isinstance(self.config.initial, GaussianInitial):
+            if center is None:
+                center = self.formation.template
+            if center is None:
+                raise ParameterError(
+                    "a gaussian initial distribution needs a centre shape: give center= "
+                    "or a formation with a template"
+                )
+            center = np.asarray(center, dtype=float)
+        object.__setattr__(self, "center", center)
+
+    @classmethod
+    def from_scenario(cls, sc: Scenario, config: StudyConfig | None = None) -> StudySetup:
+        """The study of a scenario; ``config`` default: its ``[study]`` table.
+
+        Defaults (``docs/studies.md``): ``dt`` is ``study.dt``, else the scenario's
+        integrator's ``dt``, else 1e-3 s; ``duration`` is ``study.duration``, else the
+        scenario's; gaussian starts are centred on the template, else on
+        ``robots.positions``; every law of ``study.laws`` takes the ``[controller]``
+        keys it has (:meth:`~formationlab.scenario.Scenario.law_named`).
+
+        Raises
+        ------
+        ScenarioError
+            A bad ``[study]`` table, law parameter or sweep key, with its line.
+        """
+        if config is None:
+            config = parse_study(sc.study, source=sc.source, text=sc.text)
+        dt = config.dt if config.dt is not None else getattr(sc.integrator, "dt", DEFAULT_DT)
+        duration = config.duration if config.duration is not None else sc.duration
+        center = None  # of gaussian starts: the template, else the scenario's positions
+        if isinstance(config.initial, GaussianInitial):
+            center = sc.formation.template if sc.formation.template is not None else sc.q0
+        names = [n for n in config.laws or (sc.law.name,) if n in LAWS]
+        laws = {LAWS.canonical(n): sc.law_named(n) for n in names}
+        setup = cls(
+            formation=sc.formation,
+            law=sc.law,
+            config=config,
+            dt=dt,
+            duration=duration,
+            center=center,
+            laws=laws,
+        )
+        try:
+            setup.groups  # noqa: B018 - checks laws and sweep keys now, with the file's lines
+        except ParameterError as exc:
+            raise sc.locate(exc) from None
+        return setup
+
+    @cached_property
+    def groups(self) -> list[Group]:
+        """The groups (:func:`study_groups`)."""
+        return study_groups(self.formation, self.law, self.config, laws=self.laws)
+
+    def identity(self, seed: int) -> dict[str, Any]:
+        """:func:`study_identity` of this study with ``seed``."""
+        return study_identity(
+            self.groups,
+            self.config,
+            seed=seed,
+            dt=self.dt,
+            duration=self.duration,
+            center=self.center,
+        )
+
+
 def run_study(
-    formation: Formation,
-    law: Law,
-    config: StudyConfig,
+    setup: StudySetup,
     *,
     seed: int,
-    dt: float,
-    duration: float,
-    center: ArrayLike | None = None,
     scheduler: str | None = None,
     workers: int | None = None,
     store: ChunkStore | None = None,
@@ -155,20 +262,11 @@ def run_study(
 
     Parameters
     ----------
-    formation : Formation
-        The formation (the sweep may change its diameters).
-    law : Law
-        The scenario's law; other laws of ``config.laws`` take its parameters by name.
-    config : StudyConfig
-        The ``[study]`` table.
+    setup : StudySetup
+        What to run (:meth:`StudySetup.from_scenario` for a scenario file's study).
     seed : int
         Seed of the study (>= 0); trial ``t``'s start depends on ``(seed, t)`` only
         (:mod:`formationlab.studies.sampling`).
-    dt, duration : float
-        Euler step and simulated time per trial (config values take precedence).
-    center : array_like, shape (n, 2), optional
-        Centre of a gaussian initial distribution (the template, else the scenario's
-        positions).
     scheduler : str, optional
         ``"local"`` (a dask LocalCluster of ``workers`` processes, default one per core)
         or the address of a dask scheduler. Without it, chunks run in this process
@@ -189,21 +287,15 @@ def run_study(
     """
     if not isinstance(seed, int | np.integer) or seed < 0 or seed >= 2**63:
         raise ParameterError(f"--seed must be a whole number in [0, 2**63), got {seed!r}")
-    if workers is not None and workers < 1:
-        raise ParameterError(f"--workers must be >= 1, got {workers}")
+    if workers is not None:
+        whole(workers, "--workers")
     if resume and store is None:
         raise ParameterError("resume needs a store of finished chunks")
-    dt = float(config.dt or dt)
-    duration = float(config.duration or duration)
-    if not (dt > 0 and duration > 0 and math.isfinite(dt) and math.isfinite(duration)):
-        raise ParameterError(f"dt and duration must be > 0, got dt={dt}, duration={duration}")
-    if isinstance(config.initial, GaussianInitial):
-        if center is None:
-            center = formation.template
-        if center is None:
-            raise ParameterError("a gaussian initial distribution needs a centre shape")
-    groups = study_groups(formation, law, config)
-    tasks = plan_chunks(groups, config, seed=int(seed), dt=dt, duration=duration, center=center)
+    config, dt, duration = setup.config, setup.dt, setup.duration
+    groups = setup.groups
+    tasks = plan_chunks(
+        groups, config, seed=int(seed), dt=dt, duration=duration, center=setup.center
+    )
     total = sum(t.size for t in tasks)
     start = time.perf_counter()
     frames: dict[str, pd.DataFrame] = {}
@@ -246,7 +338,7 @@ def run_study(
         "tolerances": config.tolerances.model_dump(mode="json"),
         "backend": config.backend,
         "settle": config.settle.model_dump(mode="json"),
-        "laws": list(config.laws or (law.name,)),
+        "laws": list(dict.fromkeys(g.law.name for g in groups)),
         "sweep": {k: list(v) for k, v in config.sweep.items()},
         "outcomes": list(OUTCOMES),
         "groups": summarize_groups(trials, [g.describe() for g in groups]),
