@@ -10,6 +10,7 @@ from __future__ import annotations
 __all__ = [
     "FormationError",
     "FormationlabError",
+    "ObstacleError",
     "OutputExistsError",
     "ParameterError",
     "ScenarioError",
@@ -31,6 +32,10 @@ class FormationError(UserInputError):
 
 class ParameterError(UserInputError):
     """A law's, integrator's or study's parameter is out of range."""
+
+
+class ObstacleError(UserInputError):
+    """An obstacle is not valid, or it overlaps a robot's start."""
 
 
 class ScenarioError(UserInputError):
