@@ -22,7 +22,9 @@ violated constraint if it is feasible (closed form, multiplier
 multipliers (a 2 x 2 solve) are non-negative and which is feasible. That is
 ``O(m^2)`` candidates of ``O(m)`` checks for ``m`` constraints, a few dozen flops per
 robot for the usual handful of neighbours, and it runs batched over trials and
-robots in numba. If no candidate exists, the constraints are infeasible (only
+robots in one serial numba loop (``nogil``, so callers may run chunks in threads;
+a ``prange`` launch cost more than the whole loop below a few thousand robots when
+benchmarked). If no candidate exists, the constraints are infeasible (only
 possible when some ``h < 0``); those rows are relaxed to ``h_dot >= 0`` (bound 0, which
 the zero command satisfies) and the projection is solved again (status
 ``RELAXED``). :func:`decentralized_reference` solves the same per-robot QPs with
@@ -37,7 +39,7 @@ from collections.abc import Sequence
 import numpy as np
 import qpsolvers
 import scipy.sparse as sp
-from numba import njit, prange
+from numba import njit
 from numpy.typing import NDArray
 
 from .config import SafetyFilter
@@ -117,7 +119,7 @@ def _project(uh0: float, uh1: float, A: NDArray, b: NDArray, m: int, out: NDArra
     return -1
 
 
-@njit(cache=True, nogil=True, parallel=True)
+@njit(cache=True, nogil=True)
 def _kernel(
     q: NDArray,
     uh: NDArray,
@@ -137,7 +139,7 @@ def _kernel(
     n_rob = q.shape[0]
     n_obs = obs_b.shape[1]
     n_spd = speed_n.shape[0]
-    for r in prange(n_rob):
+    for r in range(n_rob):
         start = ptr[r]
         deg = ptr[r + 1] - start
         m = deg + n_obs + n_spd
