@@ -216,7 +216,7 @@ def test_configuration_errors():
     with pytest.raises(ParameterError, match=r"a_13 = 0.3 of robots 1 and 3; use distance >= 0.3"):
         SafetyFilter(filter="barrier", distance=0.25).check_contact(f.contact_matrix)
     with pytest.raises(ParameterError, match=r"radius 0.2 of robot 3"):
-        SafetyFilter(distance=0.3).check_contact(f.contact_matrix)
+        SafetyFilter(distance=0.35).check_contact(f.contact_matrix)
     SafetyFilter(distance=0.4).check_contact(f.contact_matrix)
     with pytest.raises(ParameterError, match="below the contact distance"):
         SafetyFilter(filter="barrier", distance=0.25).apply(
