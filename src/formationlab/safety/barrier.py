@@ -249,9 +249,10 @@ def solve_barrier_qp(constraints: BarrierConstraints, u_hat: NDArray[np.float64]
     )
 
 
-def _active_rows(c: BarrierConstraints, x: NDArray, bound: NDArray, z: NDArray) -> NDArray:
+def _active_rows(c: BarrierConstraints, x: NDArray, bound: NDArray, x_hat: NDArray) -> NDArray:
+    """Rows holding with equality at ``x`` (relative to the size of the command), not speed rows."""
     slack = bound - c.G @ x
-    scale = np.abs(bound) + abs(c.G) @ np.abs(x) + 1e-300
+    scale = np.abs(bound) + abs(c.G) @ (np.abs(x) + np.abs(x_hat)) + 1e-300
     return (slack <= 1e-7 * scale) & (c.kind != SPEED)
 
 
@@ -334,7 +335,7 @@ def barrier_filter(
         status[t] = sol.status
         if sol.message:
             notes.append(f"trial {t + 1}: {sol.message}")
-        on = _active_rows(sub, sol.u.reshape(-1), sol.bound, sol.multipliers)
+        on = _active_rows(sub, sol.u.reshape(-1), sol.bound, fu[t][chosen].reshape(-1))
         idx = sub.index[on]
         kind = sub.kind[on]
         pr = idx[kind == PAIR]
