@@ -40,7 +40,7 @@ def test_invalid_obstacles_are_rejected_with_clear_errors():
         Polygon(vertices=[[0, 0], [1, 1]])
     with pytest.raises(ObstacleError, match="finite"):
         Polygon(vertices=[[0, 0], [1, np.inf], [1, 0]])
-    with pytest.raises(ObstacleError, match="not simple|not valid"):
+    with pytest.raises(ObstacleError, match=r"not simple|not valid"):
         Polygon(vertices=[[0, 0], [1, 0], [2, 0]])  # no area
     with pytest.raises(ObstacleError, match="either circle"):
         obstacle_from_mapping({"square": 1})
@@ -70,7 +70,7 @@ def test_signed_distance_matches_shapely(rng):
 def test_clearance_and_repulsion_gradients_match_finite_differences(rng):
     radii = np.array([0.1, 0.05, 0.1])
     q = np.array([[-2.0, -0.3], [1.25, 1.3], [2.3, 0.5]])  # near the circle, in the notch, outside
-    s, grad = clearances(q, radii, OBSTACLES)
+    _, grad = clearances(q, radii, OBSTACLES)
     eps = 1e-6
     for axis in range(2):
         dq = np.zeros_like(q)
