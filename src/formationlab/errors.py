@@ -20,6 +20,7 @@ __all__ = [
     "FormationlabError",
     "FormationlabWarning",
     "IgnoredKeyWarning",
+    "ObstacleError",
     "OutputExistsError",
     "ParameterError",
     "ScenarioError",
@@ -62,6 +63,10 @@ class UnknownNameError(ParameterError, KeyError):
 
     def __str__(self) -> str:  # KeyError would quote the message
         return str(self.args[0]) if self.args else ""
+
+
+class ObstacleError(UserInputError):
+    """An obstacle is not valid, or it overlaps a robot's start."""
 
 
 class ScenarioError(UserInputError):

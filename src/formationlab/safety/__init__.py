@@ -1,0 +1,76 @@
+"""Safety filters and obstacles: barrier certificates that minimally change the commands.
+
+The barrier certificate of Wang, Ames and Egerstedt ("Safety barrier certificates
+for collisions-free multirobot systems", IEEE Transactions on Robotics 33(3), 2017),
+centralized (one sparse QP, Clarabel) and decentralized (each robot half the
+responsibility per pair, exact 2-D projection in numba); static circle and polygon
+obstacles with clearances, Khatib repulsion and barrier rows; the near-identity
+point of unicycles. See ``docs/safety.md``.
+
+This package depends on ``potentials`` and ``errors`` only, so laws and models can use it.
+"""
+
+from .barrier import (
+    BarrierConstraints,
+    QPSolution,
+    barrier_constraints,
+    barrier_filter,
+    pair_barrier_rows,
+    solve_barrier_qp,
+)
+from .config import FILTERS, SafetyFilter
+from .decentralized import decentralized_filter, decentralized_reference, project_onto_halfplanes
+from .obstacles import (
+    Circle,
+    Obstacle,
+    Polygon,
+    check_obstacle_starts,
+    clearances,
+    grad_obstacle_potential,
+    obstacle_barrier_rows,
+    obstacle_contacts,
+    obstacle_from_mapping,
+    obstacle_potential,
+)
+from .pairs import neighbour_lists, sensed_pairs
+from .result import FilterResult, FilterStatus
+from .unicycle import (
+    point_safety_distance,
+    point_to_unicycle,
+    point_velocity,
+    unicycle_points,
+    unicycle_velocity,
+)
+
+__all__ = [
+    "FILTERS",
+    "BarrierConstraints",
+    "Circle",
+    "FilterResult",
+    "FilterStatus",
+    "Obstacle",
+    "Polygon",
+    "QPSolution",
+    "SafetyFilter",
+    "barrier_constraints",
+    "barrier_filter",
+    "check_obstacle_starts",
+    "clearances",
+    "decentralized_filter",
+    "decentralized_reference",
+    "grad_obstacle_potential",
+    "neighbour_lists",
+    "obstacle_barrier_rows",
+    "obstacle_contacts",
+    "obstacle_from_mapping",
+    "obstacle_potential",
+    "pair_barrier_rows",
+    "point_safety_distance",
+    "point_to_unicycle",
+    "point_velocity",
+    "project_onto_halfplanes",
+    "sensed_pairs",
+    "solve_barrier_qp",
+    "unicycle_points",
+    "unicycle_velocity",
+]

@@ -1,0 +1,205 @@
+"""The safety filter's configuration: which filter, its distance, gain and limits.
+
+Scenario-file form (the ``[safety]`` table)::
+
+    [safety]
+    filter = "barrier"        # "none" (default) | "barrier" | "barrier-decentralized"
+    distance = 0.25           # D_s (m), at least the contact distance
+    gamma = 100.0
+    max_speed = 0.5           # optional speed limit in the filter
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import ParameterError
+
+if TYPE_CHECKING:
+    from .obstacles import Obstacle
+    from .result import FilterResult
+
+__all__ = ["FILTERS", "FilterKind", "SafetyFilter"]
+
+FilterKind = Literal["none", "barrier", "barrier-decentralized"]
+FILTERS: tuple[str, ...] = ("none", "barrier", "barrier-decentralized")
+
+
+def _number(obj: object, name: str, *, low: float, strict: bool, allow_inf: bool = False) -> None:
+    v = getattr(obj, name)
+    ok = isinstance(v, int | float) and not isinstance(v, bool) and not math.isnan(v)
+    ok = ok and (allow_inf or math.isfinite(v)) and (v > low if strict else v >= low)
+    if not ok:
+        bound = f"> {low:g}" if strict else f">= {low:g}"
+        kind = "a number" if allow_inf else "a finite number"
+        raise ParameterError(f"safety {name} must be {kind} {bound}, got {v!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class SafetyFilter:
+    """A safety filter that minimally changes every robot's command (Wang, Ames, Egerstedt 2017).
+
+    The barrier certificate of Wang, Ames and Egerstedt ("Safety barrier certificates
+    for collisions-free multirobot systems", IEEE Transactions on Robotics 33(3),
+    2017), as the Robotarium runs it: minimise ``sum_i |u_i - u_hat_i|^2`` subject to
+    ``h_dot_ij >= -gamma h_ij^3`` for every pair within the sensing radius, with
+    ``h_ij = |q_i - q_j|^2 - D_s^2``, plus obstacle barriers and speed limits.
+
+    Parameters
+    ----------
+    filter : {"none", "barrier", "barrier-decentralized"}
+        ``"none"`` returns the command unchanged; ``"barrier"`` solves one centralized QP
+        per trial and step (:func:`~formationlab.safety.barrier.barrier_filter`);
+        ``"barrier-decentralized"`` lets every robot solve its own constraints with half
+        the responsibility per pair
+        (:func:`~formationlab.safety.decentralized.decentralized_filter`).
+    distance : float
+        ``D_s`` (m): the centre-to-centre distance the filter keeps between robots. It
+        must be at least every pair's contact distance ``a_ij``
+        (:meth:`check_contact`). Default 0.25.
+    gamma : float
+        Barrier gain ``gamma >= 0`` (larger: robots may approach faster). Default 100.
+    max_speed : float or None
+        Speed limit ``|u_i| <= max_speed`` (m/s), imposed as the regular polygon with
+        ``speed_sides`` sides inscribed in that disc (so the limit always holds, and
+        the polygon loses at most ``1 - cos(pi / speed_sides)`` of it). ``None``: no limit.
+    speed_sides : int
+        Sides of that polygon (``>= 4``; 4 is the square inscribed in the disc). Default 8.
+    sensing_radius : float
+        Pairs farther apart than this pose no constraint (m). Default ``inf`` (every pair,
+        the formulation of the paper); large swarms should set it.
+    obstacle_distance : float or None
+        ``D_o`` (m): the centre-to-obstacle distance kept; ``None`` means ``distance / 2``
+        (half the pair distance, as each robot keeps half of ``D_s`` to a neighbour).
+    """
+
+    filter: FilterKind = "none"
+    distance: float = 0.25
+    gamma: float = 100.0
+    max_speed: float | None = None
+    speed_sides: int = 8
+    sensing_radius: float = math.inf
+    obstacle_distance: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.filter not in FILTERS:
+            known = ", ".join(f'"{f}"' for f in FILTERS)
+            raise ParameterError(f"safety filter must be one of {known}, got {self.filter!r}")
+        _number(self, "distance", low=0.0, strict=True)
+        _number(self, "gamma", low=0.0, strict=False)
+        if self.max_speed is not None:
+            _number(self, "max_speed", low=0.0, strict=True)
+        if not (isinstance(self.speed_sides, int) and self.speed_sides >= 4):
+            raise ParameterError(
+                f"safety speed_sides must be an integer >= 4, got {self.speed_sides!r}"
+            )
+        _number(self, "sensing_radius", low=0.0, strict=True, allow_inf=True)
+        if self.sensing_radius <= self.distance:
+            raise ParameterError(
+                f"safety sensing_radius ({self.sensing_radius:g}) must exceed the distance "
+                f"D_s ({self.distance:g}), or robots inside D_s would not see each other"
+            )
+        if self.obstacle_distance is not None:
+            _number(self, "obstacle_distance", low=0.0, strict=True)
+
+    @property
+    def enabled(self) -> bool:
+        """Whether the filter changes anything (``filter != "none"``)."""
+        return self.filter != "none"
+
+    @property
+    def d_obstacle(self) -> float:
+        """``D_o``: the given ``obstacle_distance``, or ``distance / 2``."""
+        return self.distance / 2 if self.obstacle_distance is None else self.obstacle_distance
+
+    def speed_polygon(self) -> tuple[NDArray[np.float64], float]:
+        """Outward normals ``(S, 2)`` and bound ``c`` of the speed limit ``n_k . u <= c``.
+
+        Empty when there is no limit. The polygon is inscribed in the disc of radius
+        ``max_speed`` (vertices on the circle), so ``c = max_speed cos(pi / S)``.
+        """
+        if self.max_speed is None:
+            return np.zeros((0, 2)), 0.0
+        s = self.speed_sides
+        angle = 2.0 * np.pi * np.arange(s) / s
+        normals = np.column_stack([np.cos(angle), np.sin(angle)])
+        return normals, self.max_speed * math.cos(math.pi / s)
+
+    def check_contact(self, contact: ArrayLike) -> None:
+        """Raise :class:`~formationlab.errors.ParameterError` if ``D_s`` or ``D_o`` is too small.
+
+        Parameters
+        ----------
+        contact : array_like, shape (n, n)
+            The formation's contact distances ``a_ij = (rho_i + rho_j) / 2``
+            (``Formation.contact_matrix``); the diagonal ``a_ii = rho_i`` is the robot's
+            diameter, so ``D_o >= rho_i / 2`` keeps its body off the obstacles.
+        """
+        a = np.asarray(contact, dtype=float)
+        if a.ndim != 2 or a.shape[0] != a.shape[1]:
+            raise ParameterError(f"contact distances must be an (n, n) matrix, got {a.shape}")
+        n = a.shape[0]
+        off = a + np.where(np.eye(n, dtype=bool), -np.inf, 0.0)
+        i, j = np.unravel_index(int(np.argmax(off)), off.shape) if n > 1 else (0, 0)
+        if n > 1 and self.distance < off[i, j]:
+            lo, hi = sorted((int(i), int(j)))
+            raise ParameterError(
+                f"safety distance D_s = {self.distance:g} is below the contact distance "
+                f"a_{lo + 1}{hi + 1} = {off[i, j]:g} of robots {lo + 1} and {hi + 1}; "
+                f"use distance >= {off[i, j]:g}"
+            )
+        radius = 0.5 * np.diag(a)
+        k = int(np.argmax(radius))
+        if self.d_obstacle < radius[k]:
+            raise ParameterError(
+                f"safety obstacle_distance D_o = {self.d_obstacle:g} is below the radius "
+                f"{radius[k]:g} of robot {k + 1}; use obstacle_distance >= {radius[k]:g}"
+            )
+
+    def apply(
+        self,
+        q: ArrayLike,
+        u_hat: ArrayLike,
+        *,
+        obstacles: Sequence[Obstacle] = (),
+        contact: ArrayLike | None = None,
+    ) -> FilterResult:
+        """Filter the commands ``u_hat`` at positions ``q``.
+
+        Parameters
+        ----------
+        q, u_hat : array_like, shape (n, 2) or (..., n, 2)
+            Positions and the law's commands, batch axes leading.
+        obstacles : sequence of Circle or Polygon
+            Static obstacles.
+        contact : array_like, shape (n, n), optional
+            The formation's contact distances; when given, :meth:`check_contact` runs first.
+
+        Returns
+        -------
+        FilterResult
+            The filtered command (``(..., n, 2)``), a status per trial and the active set.
+        """
+        # The filters import this module for their configuration, hence the late import.
+        from .barrier import barrier_filter, unchanged
+        from .decentralized import decentralized_filter
+
+        if contact is not None:
+            self.check_contact(contact)
+        q_arr = np.asarray(q, dtype=float)
+        u_arr = np.asarray(u_hat, dtype=float)
+        if q_arr.shape != u_arr.shape or q_arr.ndim < 2 or q_arr.shape[-1] != 2:
+            raise ParameterError(
+                f"q and u_hat must both have shape (..., n, 2), got {q_arr.shape} and {u_arr.shape}"
+            )
+        if self.filter == "none":
+            return unchanged(u_arr)
+        if self.filter == "barrier":
+            return barrier_filter(self, q_arr, u_arr, obstacles)
+        return decentralized_filter(self, q_arr, u_arr, obstacles)
