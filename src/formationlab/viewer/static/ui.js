@@ -392,6 +392,7 @@ function render({ model, el }) {
 
   // for tests and scripts: where robot i (1-based) is drawn, in page pixels
   ui.root.flv = {
+    switchingLine: flvSwitchingLine,
     robotPx(i) {
       const r = ui.scene.getBoundingClientRect();
       const [x, y] = view.px(latest.pos[2 * (i - 1)], latest.pos[2 * (i - 1) + 1]);
