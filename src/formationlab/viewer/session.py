@@ -41,6 +41,8 @@ LIVE_INTEGRATORS = ("euler", "rk4", "implicit-euler")
 EDGE_ERRORS_MAX = 24
 #: Surfaces whose on/off state goes into each frame (beyond: none, no switching lines drawn).
 SURFACES_MAX = 400
+#: Least wall time between two evaluations of V when one costs more than 4 ms.
+V_EVERY_S = 0.1
 #: Most replay samples of V and the errors sent for the plots.
 SERIES_MAX = 2000
 
@@ -169,6 +171,7 @@ class LiveSession:
         self.pinned: int | None = None
         self._pin_at: NDArray[np.float64] | None = None
         self._debt = 0.0
+        self._V: tuple[Any, float, float, float] | None = None
 
     # ------------------------------------------------------------------ package calls
 
@@ -216,7 +219,7 @@ class LiveSession:
         """The state now."""
         q = self.q
         pos, heading = _split_state(q)
-        V = float(np.asarray(self.law.potential(self.formation, q)))
+        V = self._lyapunov(q)
         sigma = np.asarray(self.law.switching(self.formation, q))
         header: dict[str, Any] = {
             "t": self.t,
@@ -238,6 +241,21 @@ class LiveSession:
             positions=pos.astype(np.float32),
             heading=None if heading is None else heading.astype(np.float32),
         )
+
+    def _lyapunov(self, q: NDArray[np.float64]) -> float:
+        """``V`` now; for large formations (where it costs more than a few milliseconds)
+        recomputed at most every :data:`V_EVERY_S` seconds of wall time, so that it does not
+        halve the frame rate (the plot then gets ~10 values a second)."""
+        key = (self.steps, self.t, self.law, q[0, 0], q[-1, -1])
+        now = time.perf_counter()
+        cached = self._V
+        fresh = cached is not None and cached[0] == key
+        if fresh or (cached is not None and cached[2] > 0.004 and now - cached[3] < V_EVERY_S):
+            assert cached is not None
+            return cached[1]
+        V = float(np.asarray(self.law.potential(self.formation, q)))
+        self._V = (key, V, time.perf_counter() - now, now)
+        return V
 
     def info(self) -> dict[str, Any]:
         """What the page needs once: the formation, the choices of laws and integrators."""

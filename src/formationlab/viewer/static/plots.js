@@ -87,7 +87,7 @@ function flvDrawPlot(ctx, w, h, series, opts) {
     y0 -= 0.5;
     y1 += 0.5;
   }
-  const t0 = t[0], t1 = Math.max(t[t.length - 1], t0 + 1e-9);
+  const t0 = t[0], t1 = Math.max(t[t.length - 1], t0 + 1);
   const X = (v) => left + ((v - t0) / (t1 - t0)) * (w - left - right);
   const Y = (v) => top + (1 - (v - y0) / (y1 - y0)) * (h - top - bottom);
   ctx.strokeStyle = "#ccc";

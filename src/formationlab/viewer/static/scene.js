@@ -155,34 +155,36 @@ function flvDrawScene(ctx, view, info, frame, opts) {
   const active = frame.header.active;
   const theta = opts.theta;
   if (surf && active && active.length && opts.lines && theta !== null) {
-    ctx.fillStyle = FLV_COLORS.active;
-    ctx.strokeStyle = FLV_COLORS.line;
-    ctx.lineWidth = 1.2;
-    ctx.setLineDash([6, 4]);
+    // one path for the triangles, one for the lines: a path per surface, or dashes on
+    // many lines, cost more to rasterise than the rest of the frame
+    const tris = new Path2D(), lines = new Path2D();
     for (const s1 of active) {
       const tri = surf.triangles[s1 - 1];
       const beta = surf.beta[s1 - 1];
       const [a, b, c] = [tri[0] - 1, tri[1] - 1, tri[2] - 1];
-      ctx.beginPath();
       const pa = view.px(pos[2 * a], pos[2 * a + 1]);
       const pb = view.px(pos[2 * b], pos[2 * b + 1]);
       const pc = view.px(pos[2 * c], pos[2 * c + 1]);
-      ctx.moveTo(pa[0], pa[1]);
-      ctx.lineTo(pb[0], pb[1]);
-      ctx.lineTo(pc[0], pc[1]);
-      ctx.closePath();
-      ctx.fill();
-      ctx.beginPath();
+      tris.moveTo(pa[0], pa[1]);
+      tris.lineTo(pb[0], pb[1]);
+      tris.lineTo(pc[0], pc[1]);
+      tris.closePath();
+      if (active.length > 60) continue; // beyond, the lines hide the formation
       for (const [v, w, u] of [[a, b, c], [b, c, a], [c, a, b]]) {
         const seg = flvSwitchingLine(pos, v, w, u, beta, theta);
         if (!seg) continue;
         const [x0, y0] = view.px(seg[0], seg[1]);
         const [x1, y1] = view.px(seg[2], seg[3]);
-        ctx.moveTo(x0, y0);
-        ctx.lineTo(x1, y1);
+        lines.moveTo(x0, y0);
+        lines.lineTo(x1, y1);
       }
-      ctx.stroke();
     }
+    ctx.fillStyle = FLV_COLORS.active;
+    ctx.fill(tris);
+    ctx.strokeStyle = FLV_COLORS.line;
+    ctx.lineWidth = active.length > 12 ? 0.8 : 1.2;
+    if (active.length <= 12) ctx.setLineDash([6, 4]);
+    ctx.stroke(lines);
     ctx.setLineDash([]);
   }
 

@@ -138,7 +138,7 @@ function render({ model, el }) {
   const ctx = ui.scene.getContext("2d");
   let info = null, latest = null, drawn = null, pending = false, pendingSince = 0;
   let alive = true, needFit = true, drag = null, dragSend = null;
-  let frames = 0, fpsCount = 0, fpsStart = performance.now();
+  let drawMs = 0, frames = 0, fpsCount = 0, fpsStart = performance.now();
   let seriesV = new FlvSeries(1), seriesE = new FlvSeries(2);
   const dpr = () => window.devicePixelRatio || 1;
 
@@ -304,7 +304,10 @@ function render({ model, el }) {
     if (!alive) return;
     const now = performance.now();
     if (latest && info && latest !== drawn) {
+      const d0 = performance.now();
       draw();
+      drawMs = 0.9 * drawMs + 0.1 * (performance.now() - d0);
+      ui.root.dataset.drawMs = drawMs.toFixed(2);
       drawn = latest;
       frames++;
       fpsCount++;
