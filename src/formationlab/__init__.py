@@ -35,6 +35,16 @@ try:
 except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0"
 
+
+def __getattr__(name: str) -> object:
+    """``fl.Viewer``, the notebook widget, imported on first use (it needs the ``view`` extra)."""
+    if name == "Viewer":
+        from .viewer.widget import Viewer
+
+        return Viewer
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 __all__ = [
     "INTEGRATORS",
     "LAWS",

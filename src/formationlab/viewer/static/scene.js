@@ -1,0 +1,261 @@
+// Drawing the formation on a 2-D canvas: robots (discs of their diameters, optional
+// headings), the graph's edges, the active restrictions and their switching lines s
+// (eq. 26 of the paper: parallel to r_jk at distance theta / |r_jk|).
+// Robot numbers in `info` and frames are 1-based; arrays here are 0-based.
+
+const FLV_COLORS = {
+  background: "#ffffff",
+  grid: "#eef0f3",
+  axis: "#d5d9df",
+  edge: "#9aa3ad",
+  robot: "#1f6fb5",
+  pinned: "#d0342c",
+  label: "#ffffff",
+  line: "#e08a00",
+  active: "rgba(224, 138, 0, 0.10)",
+  heading: "#0b2e4f",
+};
+
+// World (y up) <-> canvas pixels (y down).
+class FlvView {
+  constructor() {
+    this.cx = 0;
+    this.cy = 0;
+    this.scale = 40; // pixels per unit
+    this.w = 1;
+    this.h = 1;
+  }
+
+  fit(bounds, w, h) {
+    const [x0, x1, y0, y1] = bounds;
+    this.w = w;
+    this.h = h;
+    this.cx = 0.5 * (x0 + x1);
+    this.cy = 0.5 * (y0 + y1);
+    const sx = (0.84 * w) / Math.max(x1 - x0, 1e-9);
+    const sy = (0.84 * h) / Math.max(y1 - y0, 1e-9);
+    this.scale = Math.min(sx, sy);
+  }
+
+  resize(w, h) {
+    this.w = w;
+    this.h = h;
+  }
+
+  px(x, y) {
+    return [this.w / 2 + (x - this.cx) * this.scale, this.h / 2 - (y - this.cy) * this.scale];
+  }
+
+  world(px, py) {
+    return [this.cx + (px - this.w / 2) / this.scale, this.cy - (py - this.h / 2) / this.scale];
+  }
+
+  // whether world point (x, y) is inside the view with a margin of `m` pixels
+  contains(x, y, m) {
+    const [px, py] = this.px(x, y);
+    return px >= m && px <= this.w - m && py >= m && py <= this.h - m;
+  }
+}
+
+// [xmin, xmax, ymin, ymax] of the positions, padded by the largest radius, at least minSpan wide.
+function flvBounds(pos, diameters, minSpan) {
+  let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
+  for (let i = 0; i < pos.length; i += 2) {
+    const x = pos[i], y = pos[i + 1];
+    if (x < x0) x0 = x;
+    if (x > x1) x1 = x;
+    if (y < y0) y0 = y;
+    if (y > y1) y1 = y;
+  }
+  let r = 0;
+  for (const d of diameters) r = Math.max(r, d / 2);
+  if (!isFinite(x0)) return [-1, 1, -1, 1];
+  const pad = Math.max(r, 0.05 * Math.max(x1 - x0, y1 - y0, 1));
+  const bounds = [x0 - pad, x1 + pad, y0 - pad, y1 + pad];
+  for (const k of [0, 2]) {
+    const grow = (minSpan || 0) - (bounds[k + 1] - bounds[k]);
+    if (grow > 0) {
+      bounds[k] -= grow / 2;
+      bounds[k + 1] += grow / 2;
+    }
+  }
+  return bounds;
+}
+
+function flvGrid(ctx, view) {
+  const [wx0, wy1] = view.world(0, 0);
+  const [wx1, wy0] = view.world(view.w, view.h);
+  const span = Math.max(wx1 - wx0, wy1 - wy0);
+  let step = Math.pow(10, Math.floor(Math.log10(span / 4)));
+  if (span / step > 20) step *= 5;
+  else if (span / step > 10) step *= 2;
+  ctx.lineWidth = 1;
+  ctx.strokeStyle = FLV_COLORS.grid;
+  ctx.beginPath();
+  for (let x = Math.ceil(wx0 / step) * step; x <= wx1; x += step) {
+    const [px] = view.px(x, 0);
+    ctx.moveTo(Math.round(px) + 0.5, 0);
+    ctx.lineTo(Math.round(px) + 0.5, view.h);
+  }
+  for (let y = Math.ceil(wy0 / step) * step; y <= wy1; y += step) {
+    const [, py] = view.px(0, y);
+    ctx.moveTo(0, Math.round(py) + 0.5);
+    ctx.lineTo(view.w, Math.round(py) + 0.5);
+  }
+  ctx.stroke();
+  ctx.strokeStyle = FLV_COLORS.axis;
+  ctx.beginPath();
+  const [ox, oy] = view.px(0, 0);
+  ctx.moveTo(ox, 0);
+  ctx.lineTo(ox, view.h);
+  ctx.moveTo(0, oy);
+  ctx.lineTo(view.w, oy);
+  ctx.stroke();
+}
+
+// Line s of eq. (26) for the vertex `a` of a surface beta c_abc + theta = 0 (b, c the
+// other two in cyclic order): the points a with beta (b - a) x (c - a) = -theta, a line
+// parallel to r_bc at signed distance h = -theta / (beta |r_bc|) from the line through b, c.
+function flvSwitchingLine(pos, a, b, c, beta, theta) {
+  const bx = pos[2 * b], by = pos[2 * b + 1];
+  const dx = pos[2 * c] - bx, dy = pos[2 * c + 1] - by;
+  const L = Math.hypot(dx, dy);
+  if (!(L > 0) || beta === 0) return null;
+  const h = -theta / (beta * L); // eq. (26): distance theta / |r_bc| for |beta| = 1
+  const nx = -dy / L, ny = dx / L, ux = dx / L, uy = dy / L;
+  const ext = 0.6 * L;
+  const px = bx + h * nx, py = by + h * ny;
+  return [px - ext * ux, py - ext * uy, px + (L + ext) * ux, py + (L + ext) * uy];
+}
+
+// Draw one frame; returns the number of robots drawn.
+function flvDrawScene(ctx, view, info, frame, opts) {
+  const pos = frame.pos;
+  const n = pos.length / 2;
+  ctx.fillStyle = FLV_COLORS.background;
+  ctx.fillRect(0, 0, view.w, view.h);
+  if (opts.grid) flvGrid(ctx, view);
+
+  // graph
+  const edges = info.edges;
+  ctx.lineWidth = edges.length > 2000 ? 0.5 : 1.2;
+  ctx.strokeStyle = FLV_COLORS.edge;
+  ctx.beginPath();
+  for (let e = 0; e < edges.length; e++) {
+    const i = edges[e][0] - 1, j = edges[e][1] - 1;
+    const [x0, y0] = view.px(pos[2 * i], pos[2 * i + 1]);
+    const [x1, y1] = view.px(pos[2 * j], pos[2 * j + 1]);
+    ctx.moveTo(x0, y0);
+    ctx.lineTo(x1, y1);
+  }
+  ctx.stroke();
+
+  // active restrictions and their switching lines
+  const surf = info.surfaces;
+  const active = frame.header.active;
+  const theta = opts.theta;
+  if (surf && active && active.length && opts.lines && theta !== null) {
+    // one path for the triangles, one for the lines: a path per surface, or dashes on
+    // many lines, cost more to rasterise than the rest of the frame
+    const tris = new Path2D(), lines = new Path2D();
+    for (const s1 of active) {
+      const tri = surf.triangles[s1 - 1];
+      const beta = surf.beta[s1 - 1];
+      const [a, b, c] = [tri[0] - 1, tri[1] - 1, tri[2] - 1];
+      const pa = view.px(pos[2 * a], pos[2 * a + 1]);
+      const pb = view.px(pos[2 * b], pos[2 * b + 1]);
+      const pc = view.px(pos[2 * c], pos[2 * c + 1]);
+      tris.moveTo(pa[0], pa[1]);
+      tris.lineTo(pb[0], pb[1]);
+      tris.lineTo(pc[0], pc[1]);
+      tris.closePath();
+      if (active.length > 60) continue; // beyond, the lines hide the formation
+      for (const [v, w, u] of [[a, b, c], [b, c, a], [c, a, b]]) {
+        const seg = flvSwitchingLine(pos, v, w, u, beta, theta);
+        if (!seg) continue;
+        const [x0, y0] = view.px(seg[0], seg[1]);
+        const [x1, y1] = view.px(seg[2], seg[3]);
+        lines.moveTo(x0, y0);
+        lines.lineTo(x1, y1);
+      }
+    }
+    ctx.fillStyle = FLV_COLORS.active;
+    ctx.fill(tris);
+    ctx.strokeStyle = FLV_COLORS.line;
+    ctx.lineWidth = active.length > 12 ? 0.8 : 1.2;
+    if (active.length <= 12) ctx.setLineDash([6, 4]);
+    ctx.stroke(lines);
+    ctx.setLineDash([]);
+  }
+
+  // robots
+  const diam = info.diameters;
+  const pinned = frame.header.pinned ? frame.header.pinned - 1 : -1;
+  let minR = Infinity;
+  for (const d of diam) minR = Math.min(minR, (d / 2) * view.scale);
+  ctx.fillStyle = FLV_COLORS.robot;
+  if (minR < 2.5 && n > 200) {
+    // many small robots: squares are as legible and much cheaper than arcs
+    const s = Math.max(2, 2 * minR);
+    for (let i = 0; i < n; i++) {
+      const [x, y] = view.px(pos[2 * i], pos[2 * i + 1]);
+      ctx.fillRect(x - s / 2, y - s / 2, s, s);
+    }
+  } else {
+    ctx.beginPath();
+    for (let i = 0; i < n; i++) {
+      const [x, y] = view.px(pos[2 * i], pos[2 * i + 1]);
+      const r = Math.max(1.5, (diam[i] / 2) * view.scale);
+      ctx.moveTo(x + r, y);
+      ctx.arc(x, y, r, 0, 2 * Math.PI);
+    }
+    ctx.fill();
+  }
+  if (pinned >= 0) {
+    const [x, y] = view.px(pos[2 * pinned], pos[2 * pinned + 1]);
+    const r = Math.max(3, (diam[pinned] / 2) * view.scale);
+    ctx.fillStyle = FLV_COLORS.pinned;
+    ctx.beginPath();
+    ctx.arc(x, y, r, 0, 2 * Math.PI);
+    ctx.fill();
+  }
+  if (frame.heading) {
+    ctx.strokeStyle = FLV_COLORS.heading;
+    ctx.lineWidth = 1.5;
+    ctx.beginPath();
+    for (let i = 0; i < n; i++) {
+      const [x, y] = view.px(pos[2 * i], pos[2 * i + 1]);
+      const r = Math.max(4, diam[i] * view.scale);
+      ctx.moveTo(x, y);
+      ctx.lineTo(x + r * Math.cos(frame.heading[i]), y - r * Math.sin(frame.heading[i]));
+    }
+    ctx.stroke();
+  }
+  if (opts.labels && n <= 40) {
+    ctx.fillStyle = "#111";
+    ctx.font = "12px sans-serif";
+    ctx.textAlign = "left";
+    ctx.textBaseline = "bottom";
+    for (let i = 0; i < n; i++) {
+      const [x, y] = view.px(pos[2 * i], pos[2 * i + 1]);
+      const r = Math.max(1.5, (diam[i] / 2) * view.scale);
+      ctx.fillText(String(i + 1), x + r + 2, y - r);
+    }
+  }
+  return n;
+}
+
+// The robot (0-based) under pixel (px, py), or -1: the nearest within its radius plus 6 px.
+function flvPick(view, info, pos, px, py) {
+  let best = -1, bestD = Infinity;
+  for (let i = 0; i < pos.length / 2; i++) {
+    const [x, y] = view.px(pos[2 * i], pos[2 * i + 1]);
+    const d = Math.hypot(x - px, y - py);
+    const r = Math.max(1.5, (info.diameters[i] / 2) * view.scale) + 6;
+    if (d <= r && d < bestD) {
+      best = i;
+      bestD = d;
+    }
+  }
+  return best;
+}

@@ -1,0 +1,416 @@
+// The viewer's page: controls, the render loop, and the transport.
+// `render({ model, el })` is the anywidget entry point; the stand-alone page passes a
+// `socketModel(url)` that speaks the same protocol over a websocket. The page asks for
+// a frame once per display frame (a "tick"), so states arrive at the display's rate.
+
+// Decode one binary websocket message: uint32 header length, JSON header, padding, buffers.
+function flvDecode(buf) {
+  const dv = new DataView(buf);
+  const h = dv.getUint32(0, true);
+  const header = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 4, h)));
+  let off = 4 + h + ((4 - ((4 + h) % 4)) % 4);
+  const buffers = [];
+  for (const nb of header.buffers || []) {
+    buffers.push(new DataView(buf, off, nb));
+    off += nb;
+  }
+  return [header, buffers];
+}
+
+function flvFloats(view) {
+  if (view instanceof ArrayBuffer) return new Float32Array(view);
+  if (view.byteOffset % 4 === 0) {
+    return new Float32Array(view.buffer, view.byteOffset, view.byteLength / 4);
+  }
+  return new Float32Array(view.buffer.slice(view.byteOffset, view.byteOffset + view.byteLength));
+}
+
+// A model with anywidget's interface (send, on/off "msg:custom") over a websocket.
+function socketModel(url) {
+  const handlers = new Set();
+  const emit = (msg, buffers) => handlers.forEach((h) => h(msg, buffers || []));
+  const ws = new WebSocket(url);
+  ws.binaryType = "arraybuffer";
+  ws.onopen = () => emit({ type: "_open" });
+  ws.onclose = (e) => emit({ type: "_closed", code: e.code, reason: e.reason });
+  ws.onmessage = (e) => {
+    if (typeof e.data === "string") emit(JSON.parse(e.data));
+    else {
+      const [header, buffers] = flvDecode(e.data);
+      emit(header, buffers);
+    }
+  };
+  return {
+    socket: ws,
+    send(msg) {
+      if (ws.readyState === 1) ws.send(JSON.stringify(msg));
+    },
+    on(event, cb) {
+      if (event === "msg:custom") handlers.add(cb);
+    },
+    off(event, cb) {
+      if (event === "msg:custom") handlers.delete(cb);
+    },
+    get() {
+      return undefined;
+    },
+  };
+}
+
+function flvEl(tag, attrs, children) {
+  const e = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs || {})) {
+    if (k === "text") e.textContent = v;
+    else e.setAttribute(k, v);
+  }
+  for (const c of children || []) e.appendChild(typeof c === "string" ? document.createTextNode(c) : c);
+  return e;
+}
+
+function flvDownload(name, blob) {
+  const a = flvEl("a", { href: URL.createObjectURL(blob), download: name });
+  document.body.appendChild(a);
+  a.click();
+  setTimeout(() => {
+    URL.revokeObjectURL(a.href);
+    a.remove();
+  }, 2000);
+}
+
+function flvLayout(el) {
+  const B = (role, text, title) => flvEl("button", { "data-role": role, title: title || "", text });
+  const root = flvEl("div", { class: "flv-root", "data-robots": "0", "data-fps": "0",
+    "data-frames": "0", "data-errors": "0", "data-state": "connecting" });
+  const scene = flvEl("canvas", { class: "flv-scene", "data-role": "scene" });
+  const status = flvEl("div", { class: "flv-status", "data-role": "status" });
+  const speed = flvEl("input", { type: "range", min: "-2", max: "2", step: "0.1", value: "0",
+    "data-role": "speed" });
+  const speedLabel = flvEl("span", { class: "flv-speed", text: "x1" });
+  const stepCount = flvEl("input", { type: "number", min: "1", max: "10000", value: "10",
+    "data-role": "step-count", class: "flv-num" });
+  const scale = flvEl("input", { type: "number", min: "0.01", max: "100", step: "0.05",
+    value: "0.3", "data-role": "perturb-scale", class: "flv-num" });
+  const law = flvEl("select", { "data-role": "law" });
+  const params = flvEl("div", { class: "flv-params", "data-role": "params" });
+  const integrator = flvEl("select", { "data-role": "integrator" });
+  const dt = flvEl("input", { type: "number", min: "1e-6", max: "1", step: "0.0005",
+    "data-role": "dt", class: "flv-num" });
+  const model = flvEl("select", { "data-role": "model" });
+  const slider = flvEl("input", { type: "range", min: "0", max: "0", step: "1", value: "0",
+    "data-role": "slider" });
+  const lines = flvEl("input", { type: "checkbox", "data-role": "lines", checked: "" });
+  const labels = flvEl("input", { type: "checkbox", "data-role": "labels", checked: "" });
+  const plotV = flvEl("canvas", { class: "flv-plot", "data-role": "plot-v" });
+  const plotE = flvEl("canvas", { class: "flv-plot", "data-role": "plot-e" });
+  const logBox = flvEl("div", { class: "flv-log", "data-role": "log" });
+  const Row = (label, ...kids) => flvEl("div", { class: "flv-row" },
+    [flvEl("span", { class: "flv-label", text: label }), ...kids]);
+  const live = flvEl("div", { class: "flv-live" }, [
+    Row("law", law), params,
+    Row("integrator", integrator, flvEl("span", { text: " dt" }), dt),
+    Row("model", model),
+    Row("perturb", scale, B("perturb", "Perturb", "add a random displacement to every robot")),
+  ]);
+  const replay = flvEl("div", { class: "flv-replay" }, [Row("time", slider)]);
+  const side = flvEl("div", { class: "flv-side" }, [
+    flvEl("div", { class: "flv-title", "data-role": "title" }),
+    flvEl("div", { class: "flv-row" }, [B("pause", "Pause"), B("step", "Step", "take N steps"),
+      stepCount, B("reset", "Reset", "back to the initial state")]),
+    Row("speed", speed, speedLabel),
+    live, replay,
+    flvEl("div", { class: "flv-row" }, [B("export", "Export TOML", "download the state as a scenario"),
+      B("png", "PNG", "download a snapshot"), B("fit", "Fit", "fit the view")]),
+    flvEl("div", { class: "flv-row" }, [flvEl("label", {}, [lines, " switching lines"]),
+      flvEl("label", {}, [labels, " numbers"])]),
+    plotV, plotE, logBox,
+  ]);
+  root.append(flvEl("div", { class: "flv-main" }, [scene, status]), side);
+  el.appendChild(root);
+  return { root, scene, status, speed, speedLabel, stepCount, scale, law, params, integrator,
+    dt, model, slider, lines, labels, plotV, plotE, logBox, live, replay,
+    title: side.querySelector("[data-role=title]"),
+    button: (role) => root.querySelector(`button[data-role=${role}]`) };
+}
+
+function render({ model, el }) {
+  const ui = flvLayout(el);
+  const view = new FlvView();
+  const ctx = ui.scene.getContext("2d");
+  let info = null, latest = null, drawn = null, pending = false, pendingSince = 0;
+  let alive = true, needFit = true, drag = null, dragSend = null;
+  let drawMs = 0, frames = 0, fpsCount = 0, fpsStart = performance.now();
+  let seriesV = new FlvSeries(1), seriesE = new FlvSeries(2);
+  const dpr = () => window.devicePixelRatio || 1;
+
+  function log(text, kind) {
+    const line = flvEl("div", { class: `flv-msg flv-${kind}`, text });
+    ui.logBox.prepend(line);
+    while (ui.logBox.childNodes.length > 6) ui.logBox.lastChild.remove();
+  }
+
+  function sizeCanvas(c) {
+    const w = Math.max(50, c.clientWidth), h = Math.max(50, c.clientHeight);
+    if (c.width !== Math.round(w * dpr()) || c.height !== Math.round(h * dpr())) {
+      c.width = Math.round(w * dpr());
+      c.height = Math.round(h * dpr());
+    }
+    return [w, h];
+  }
+
+  function fillLaw() {
+    ui.params.replaceChildren();
+    const params = info.law ? info.law.params : {};
+    for (const [k, v] of Object.entries(params)) {
+      const input = flvEl("input", { type: "number", step: "0.1", min: "0", value: String(v),
+        "data-role": `param-${k}`, class: "flv-num" });
+      input.addEventListener("change", () => {
+        const x = Number(input.value);
+        if (isFinite(x)) model.send({ type: "set_params", params: { [k]: x } });
+      });
+      ui.params.append(flvEl("label", { class: "flv-param" }, [`${k} `, input]));
+    }
+    if (info.law) ui.law.value = info.law.name;
+    if (info.integrator) {
+      ui.integrator.value = info.integrator.name;
+      ui.dt.value = String(info.integrator.dt);
+    }
+  }
+
+  function onInfo(msg) {
+    info = msg;
+    let longest = 0;
+    for (const d of info.distances) longest = Math.max(longest, d);
+    info.minSpan = 3 * longest;
+    ui.title.textContent = `${info.name} — ${info.n} robots (${info.mode})`;
+    ui.live.style.display = info.mode === "live" ? "" : "none";
+    ui.replay.style.display = info.mode === "replay" ? "" : "none";
+    ui.law.replaceChildren(...Object.keys(info.laws || {}).map((k) => flvEl("option", { value: k, text: k })));
+    ui.integrator.replaceChildren(...(info.integrators || []).map((k) => flvEl("option", { value: k, text: k })));
+    ui.model.replaceChildren(...(info.models || []).map((k) => flvEl("option", { value: k, text: k })));
+    ui.model.disabled = (info.models || []).length < 2;
+    fillLaw();
+    const k = info.edge_errors ? info.edges.length : 2;
+    seriesV = new FlvSeries(1);
+    seriesE = new FlvSeries(k);
+    if (info.mode === "replay") {
+      ui.slider.max = String(info.frames - 1);
+      const s = info.series;
+      seriesV.set(s.t, [s.V]);
+      if (info.edge_errors && s.errors) seriesE.set(s.t, s.errors);
+      else seriesE.set(s.t, [s.err_max]);
+    }
+    for (const n of info.notices || []) log(n, "notice");
+    needFit = true;
+    ui.root.dataset.state = "ready";
+  }
+
+  function onFrame(msg, buffers) {
+    const pos = flvFloats(buffers[0]);
+    const heading = msg.heading && buffers[1] ? flvFloats(buffers[1]) : null;
+    latest = { header: msg, pos, heading };
+    pending = false;
+    if (info && info.mode === "live") {
+      if (info.edge_errors && msg.errors) seriesE.push(msg.t, msg.errors);
+      else seriesE.push(msg.t, [msg.err_max, msg.err_rms]);
+      seriesV.push(msg.t, [msg.V]);
+    }
+    ui.button("pause").textContent = msg.paused ? "Run" : "Pause";
+    if (info && info.mode === "replay" && document.activeElement !== ui.slider) {
+      ui.slider.value = String(msg.index);
+    }
+    if (msg.status !== "running" && msg.status !== "replay" && msg.message) {
+      if (ui.root.dataset.lastStatus !== msg.message) log(msg.message, "error");
+    }
+    ui.root.dataset.lastStatus = msg.message || "";
+  }
+
+  function onMessage(msg, buffers) {
+    switch (msg.type) {
+      case "_open":
+        model.send({ type: "hello" });
+        break;
+      case "_closed":
+        ui.root.dataset.state = "closed";
+        log(`connection closed (${msg.code}${msg.reason ? ": " + msg.reason : ""})`, "error");
+        break;
+      case "info":
+        onInfo(msg);
+        break;
+      case "settings":
+        Object.assign(info, msg);
+        fillLaw();
+        for (const n of msg.notices || []) log(n, "notice");
+        break;
+      case "frame":
+        onFrame(msg, buffers);
+        break;
+      case "error":
+        ui.root.dataset.errors = String(Number(ui.root.dataset.errors) + 1);
+        ui.root.dataset.lastError = msg.message;
+        if (msg.code === "refused" && info) fillLaw(); // show the values in force again
+        log(msg.message, "error");
+        break;
+      case "export":
+        flvDownload(msg.filename, new Blob([msg.text], { type: "application/toml" }));
+        log(`exported ${msg.filename}`, "notice");
+        break;
+      default:
+        break;
+    }
+  }
+  model.on("msg:custom", onMessage);
+
+  function draw() {
+    const [w, h] = sizeCanvas(ui.scene);
+    ctx.setTransform(dpr(), 0, 0, dpr(), 0, 0);
+    view.resize(w, h);
+    const pos = latest.pos;
+    const minSpan = info.minSpan;
+    if (needFit) {
+      view.fit(flvBounds(pos, info.diameters, minSpan), w, h);
+      needFit = false;
+    } else if (!drag && pos.length <= 2000) {
+      // refit when a robot leaves the view, or when the formation has shrunk to a speck
+      const b = flvBounds(pos, info.diameters, minSpan);
+      const small = (b[1] - b[0]) * view.scale < 0.2 * w && (b[3] - b[2]) * view.scale < 0.2 * h;
+      let out = false;
+      for (let i = 0; i < pos.length && !out; i += 2) out = !view.contains(pos[i], pos[i + 1], 4);
+      if (out || small) view.fit(b, w, h);
+    }
+    const theta = info.law && info.law.params && "theta" in info.law.params ? info.law.params.theta : null;
+    const count = flvDrawScene(ctx, view, info, latest, {
+      grid: true, lines: ui.lines.checked, labels: ui.labels.checked, theta,
+    });
+    const hd = latest.header;
+    const V = hd.V === null ? "—" : flvFmt(hd.V);
+    ui.status.textContent = `t = ${hd.t.toFixed(3)} s   V = ${V}   max|r-d| = ${flvFmt(hd.err_max)}` +
+      `   ${ui.root.dataset.fps} fps` + (hd.status !== "running" && hd.status !== "replay" ? `   [${hd.status}]` : "");
+    ui.root.dataset.robots = String(count);
+    ui.root.dataset.t = String(hd.t);
+    for (const [c, s, title, labels, cursor] of [
+      [ui.plotV, seriesV, "Lyapunov function V", null],
+      [ui.plotE, seriesE, info.edge_errors ? "distance errors r_ij − d_ij" : "distance errors: max |r−d|, rms",
+        info.edge_errors ? info.edges.map((e) => `${e[0]}-${e[1]}`) : ["max", "rms"]],
+    ]) {
+      const [pw, ph] = sizeCanvas(c);
+      const pc = c.getContext("2d");
+      pc.setTransform(dpr(), 0, 0, dpr(), 0, 0);
+      flvDrawPlot(pc, pw, ph, s, { title, labels, zero: s === seriesE,
+        cursor: info.mode === "replay" ? hd.t : cursor });
+    }
+  }
+
+  function loop() {
+    if (!alive) return;
+    const now = performance.now();
+    if (latest && info && latest !== drawn) {
+      const d0 = performance.now();
+      draw();
+      drawMs = 0.9 * drawMs + 0.1 * (performance.now() - d0);
+      ui.root.dataset.drawMs = drawMs.toFixed(2);
+      drawn = latest;
+      frames++;
+      fpsCount++;
+      ui.root.dataset.frames = String(frames);
+    }
+    if (now - fpsStart >= 1000) {
+      ui.root.dataset.fps = (fpsCount * 1000 / (now - fpsStart)).toFixed(1);
+      fpsCount = 0;
+      fpsStart = now;
+    }
+    if (dragSend) {
+      model.send(dragSend);
+      dragSend = null;
+    }
+    if (info && (!pending || now - pendingSince > 2000)) {
+      model.send({ type: "tick" });
+      pending = true;
+      pendingSince = now;
+    }
+    requestAnimationFrame(loop);
+  }
+  requestAnimationFrame(loop);
+
+  // ---- interaction
+  function pointer(e) {
+    const r = ui.scene.getBoundingClientRect();
+    return [e.clientX - r.left, e.clientY - r.top];
+  }
+  ui.scene.addEventListener("pointerdown", (e) => {
+    if (!latest || !info || info.mode !== "live") return;
+    const [px, py] = pointer(e);
+    const i = flvPick(view, info, latest.pos, px, py);
+    if (i < 0) return;
+    drag = i;
+    ui.scene.setPointerCapture(e.pointerId);
+    const [x, y] = view.world(px, py);
+    dragSend = { type: "drag", robot: i + 1, x, y };
+  });
+  ui.scene.addEventListener("pointermove", (e) => {
+    if (drag === null) return;
+    const [x, y] = view.world(...pointer(e));
+    dragSend = { type: "drag", robot: drag + 1, x, y };
+  });
+  const endDrag = () => {
+    if (drag === null) return;
+    if (dragSend) model.send(dragSend);
+    dragSend = null;
+    drag = null;
+    model.send({ type: "release" });
+  };
+  ui.scene.addEventListener("pointerup", endDrag);
+  ui.scene.addEventListener("pointercancel", endDrag);
+
+  ui.button("pause").addEventListener("click", () =>
+    model.send({ type: "pause", paused: !(latest && latest.header.paused) }));
+  ui.button("step").addEventListener("click", () =>
+    model.send({ type: "step", count: Math.max(1, Math.min(10000, Math.round(Number(ui.stepCount.value)) || 1)) }));
+  ui.button("reset").addEventListener("click", () => {
+    model.send({ type: "reset" });
+    needFit = true;
+  });
+  ui.button("fit").addEventListener("click", () => (needFit = true));
+  ui.speed.addEventListener("input", () => {
+    const v = Math.pow(10, Number(ui.speed.value));
+    ui.speedLabel.textContent = `x${v.toPrecision(2)}`;
+    model.send({ type: "speed", value: v });
+  });
+  ui.law.addEventListener("change", () => model.send({ type: "set_law", name: ui.law.value }));
+  const sendIntegrator = () => {
+    const dt = Number(ui.dt.value);
+    if (isFinite(dt) && dt > 0) model.send({ type: "set_integrator", name: ui.integrator.value, dt });
+  };
+  ui.integrator.addEventListener("change", sendIntegrator);
+  ui.dt.addEventListener("change", sendIntegrator);
+  ui.button("perturb").addEventListener("click", () => {
+    const s = Number(ui.scale.value);
+    if (isFinite(s) && s > 0) model.send({ type: "perturb", scale: s });
+  });
+  ui.button("export").addEventListener("click", () => model.send({ type: "export_scenario" }));
+  ui.button("png").addEventListener("click", () => {
+    const t = latest ? latest.header.t.toFixed(3) : "0";
+    ui.scene.toBlob((blob) => flvDownload(`${info ? info.name : "formation"}-t${t}.png`, blob), "image/png");
+  });
+  ui.slider.addEventListener("input", () => model.send({ type: "seek", index: Number(ui.slider.value) }));
+
+  // for tests and scripts: where robot i (1-based) is drawn, in page pixels
+  ui.root.flv = {
+    switchingLine: flvSwitchingLine,
+    robotPx(i) {
+      const r = ui.scene.getBoundingClientRect();
+      const [x, y] = view.px(latest.pos[2 * (i - 1)], latest.pos[2 * (i - 1) + 1]);
+      return [r.left + x, r.top + y];
+    },
+    worldToPage(x, y) {
+      const r = ui.scene.getBoundingClientRect();
+      const [px, py] = view.px(x, y);
+      return [r.left + px, r.top + py];
+    },
+  };
+
+  if (!model.socket) model.send({ type: "hello" }); // a notebook widget is connected already
+  return () => {
+    alive = false;
+    model.off("msg:custom", onMessage);
+  };
+}

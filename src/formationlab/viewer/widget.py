@@ -1,0 +1,147 @@
+"""The viewer as a Jupyter widget (anywidget): ``fl.Viewer(scenario)`` in a notebook cell.
+
+The widget runs the same front end as the stand-alone page (the bundle of
+:mod:`formationlab.viewer.assets`) and the same protocol: the front end sends
+its messages as widget messages, the Python side answers through the shared
+:class:`~formationlab.viewer.controller.Controller` (frames with their float32
+buffers). The state a notebook user may read or set is mirrored in traitlets:
+``t``, ``paused``, ``speed``, ``law``, ``law_params``, ``integrator``, ``dt``,
+``status``; setting one from Python applies it to the run (and is validated
+like a message from the page), and every message from the page updates them.
+Works in JupyterLab, Jupyter Notebook 7 and VS Code notebooks (anywidget).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Any
+
+import anywidget
+import numpy as np
+import traitlets
+from numpy.typing import NDArray
+
+from ..scenario import Scenario
+from .assets import bundle, read_asset
+from .controller import Controller, Reply
+from .session import LiveSession, SessionError
+from .sources import open_session
+
+__all__ = ["Viewer"]
+
+_SETTABLE = ("paused", "speed", "law", "law_params", "integrator", "dt")
+
+
+class Viewer(anywidget.AnyWidget):  # type: ignore[misc]
+    """An interactive view of a scenario (or a replay of a run folder) in a notebook.
+
+    Parameters
+    ----------
+    scenario : Scenario or path
+        A scenario, a scenario file, or the output folder of ``formationlab run``.
+    seed : int, optional
+        Seed of the random perturbations.
+
+    Examples
+    --------
+    >>> import formationlab as fl                                      # doctest: +SKIP
+    >>> v = fl.Viewer("examples/paper-simulation-2.toml"); v           # doctest: +SKIP
+    >>> v.law_params = {"k_a": 5.0}; v.positions                       # doctest: +SKIP
+    """
+
+    _esm = traitlets.Unicode(bundle()).tag(sync=True)
+    _css = traitlets.Unicode(read_asset("viewer.css")).tag(sync=True)
+
+    name = traitlets.Unicode("").tag(sync=True)
+    mode = traitlets.Unicode("live").tag(sync=True)
+    n = traitlets.Int(0).tag(sync=True)
+    t = traitlets.Float(0.0).tag(sync=True)
+    paused = traitlets.Bool(False).tag(sync=True)
+    speed = traitlets.Float(1.0).tag(sync=True)
+    law = traitlets.Unicode("").tag(sync=True)
+    law_params = traitlets.Dict().tag(sync=True)
+    integrator = traitlets.Unicode("").tag(sync=True)
+    dt = traitlets.Float(0.0).tag(sync=True)
+    status = traitlets.Unicode("").tag(sync=True)
+
+    def __init__(
+        self, scenario: Scenario | str | os.PathLike[str], *, seed: int | None = None, **kwargs: Any
+    ) -> None:
+        session = open_session(scenario, seed=seed)
+        self._syncing = True
+        super().__init__(**kwargs)
+        self.controller = Controller(session)
+        self.controller.listeners.append(self._sync)
+        self.on_msg(self._on_front_end)
+        self._sync()
+        self.observe(self._on_python_change, names=list(_SETTABLE))
+
+    @property
+    def session(self) -> Any:
+        """The :class:`LiveSession` or :class:`ReplaySession` behind the widget."""
+        return self.controller.session
+
+    @property
+    def positions(self) -> NDArray[np.float64]:
+        """Positions now, shape ``(n, 2)`` (robot 1 is row 0)."""
+        return np.array(self.session.frame().positions, dtype=float)
+
+    # ------------------------------------------------------------------ front end -> Python
+
+    def _on_front_end(self, _widget: Any, content: Any, buffers: list[bytes]) -> None:
+        """A message from the front end: answer it like the server does."""
+        text = content if isinstance(content, str) else json.dumps(content)
+        self._reply(self.controller.handle(text))
+
+    def _reply(self, replies: list[Reply]) -> None:
+        for reply in replies:
+            self.send(reply.header, reply.buffers or None)
+
+    # ------------------------------------------------------------------ Python -> run
+
+    def _on_python_change(self, change: dict[str, Any]) -> None:
+        if self._syncing:
+            return
+        name, value = change["name"], change["new"]
+        if name == "paused":
+            msg: dict[str, Any] = {"type": "pause", "paused": bool(value)}
+        elif name == "speed":
+            msg = {"type": "speed", "value": float(value)}
+        elif name == "law":
+            msg = {"type": "set_law", "name": value}
+        elif name == "law_params":
+            msg = {"type": "set_params", "params": {k: float(v) for k, v in value.items()}}
+        else:  # integrator, dt
+            msg = {"type": "set_integrator", "name": self.integrator, "dt": float(self.dt)}
+        replies = self.controller.handle(json.dumps(msg))
+        errors = [r.header["message"] for r in replies if r.header.get("type") == "error"]
+        if errors:
+            self._sync()  # back to the values in force
+            raise SessionError(errors[0])
+        self._reply(replies)
+
+    def _sync(self) -> None:
+        """Copy the run's state into the traitlets (without acting on the change)."""
+        s = self.session
+        self._syncing = True
+        try:
+            with self.hold_trait_notifications():
+                self.mode = s.mode
+                self.n = int(s.frame().positions.shape[0])
+                self.paused = bool(s.paused)
+                self.speed = float(s.speed)
+                if isinstance(s, LiveSession):
+                    self.name = s.scenario.name
+                    self.t = float(s.t)
+                    self.law = s.law.name
+                    self.law_params = dict(s.info()["law"]["params"])
+                    self.integrator = s.integrator.name
+                    self.dt = float(s.integrator.dt)
+                    self.status = s.status
+                else:
+                    self.name = s.name
+                    self.t = float(s.t[s.index])
+                    self.status = "replay"
+        finally:
+            self._syncing = False

@@ -1,0 +1,181 @@
+"""End to end in headless chromium (Debian's, through Playwright): draw, drag, switch, export."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from _viewer import launch_chromium, serving, sim2_session, wait_for
+from playwright.sync_api import sync_playwright
+
+import formationlab as fl
+from formationlab.cli import main
+from formationlab.io.scenario import load_scenario
+
+ROOT_SEL = ".flv-root"
+
+
+@pytest.fixture(scope="module")
+def browser():
+    with sync_playwright() as p:
+        b = launch_chromium(p)
+        yield b
+        b.close()
+
+
+@pytest.fixture
+def live(browser):
+    session = sim2_session()
+    with serving(session) as srv:
+        page = browser.new_page(viewport={"width": 1100, "height": 720}, accept_downloads=True)
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(srv.url)
+        page.wait_for_selector(f"{ROOT_SEL}[data-state=ready]", timeout=15_000)
+        yield page, session
+        page.close()
+        assert not errors, errors
+
+
+def attr(page, name):
+    return page.get_attribute(ROOT_SEL, f"data-{name}")
+
+
+def pause(page, session):
+    page.click("button[data-role=pause]")
+    wait_for(lambda: session.paused, what="the run to pause")
+
+
+def test_page_draws_every_robot_and_streams(live):
+    page, session = live
+    wait_for(lambda: int(attr(page, "frames")) > 20, what="20 frames drawn")
+    assert int(attr(page, "robots")) == session.formation.n == 3
+    t0 = session.t
+    wait_for(lambda: session.t > t0 + 0.1, what="the run to advance")
+    assert attr(page, "errors") == "0"
+
+
+def test_drag_robot_1_moves_it_on_the_server_and_the_run_continues(live):
+    page, session = live
+    pause(page, session)
+    x0, y0 = page.evaluate(f"document.querySelector('{ROOT_SEL}').flv.robotPx(1)")
+    tx, ty = page.evaluate(f"document.querySelector('{ROOT_SEL}').flv.worldToPage(-1.5, 0.5)")
+    page.mouse.move(x0, y0)
+    page.mouse.down()
+    for k in range(1, 11):
+        page.mouse.move(x0 + (tx - x0) * k / 10, y0 + (ty - y0) * k / 10)
+        page.wait_for_timeout(20)
+    wait_for(lambda: np.linalg.norm(session.q[0] - [-1.5, 0.5]) < 0.05, what="robot 1 at the drop")
+    page.mouse.up()
+    wait_for(lambda: session.pinned is None, what="the release")
+    dropped, t_drop = session.q[0].copy(), session.t
+    page.click("button[data-role=pause]")  # run on
+    wait_for(lambda: session.t > t_drop + 0.2, what="the run to continue")
+    assert np.linalg.norm(session.q[0] - dropped) > 1e-3  # robot 1 moves on from the drop
+
+
+def test_switching_the_law_changes_the_motion(live):
+    page, session = live
+    pause(page, session)
+    q0 = session.q.copy()
+    page.select_option("select[data-role=law]", "distance")
+    wait_for(lambda: session.law.name == "distance", what="the law switch")
+    steps = session.steps
+    page.fill("input[data-role=step-count]", "50")
+    page.click("button[data-role=step]")
+    wait_for(lambda: session.steps == steps + 50, what="50 steps")
+    f, euler = session.formation, fl.Euler(dt=1e-3)
+    ref = {}
+    for law in (fl.DistanceLaw(k_c=2.0), session.scenario.law):
+        system, q = fl.System(formation=f, law=law), q0.copy()
+        for _ in range(50):
+            q = euler.step(system, q, 1e-3)
+        ref[law.name] = q
+    np.testing.assert_allclose(session.q, ref["distance"], rtol=0, atol=1e-12)
+    assert np.linalg.norm(ref["distance"] - ref["angle-restricted"]) > 1e-2
+
+
+def test_export_downloads_a_scenario_that_validates(live, tmp_path, capsys):
+    page, session = live
+    pause(page, session)
+    with page.expect_download() as dl:
+        page.click("button[data-role=export]")
+    path = tmp_path / dl.value.suggested_filename
+    dl.value.save_as(path)
+    with pytest.raises(SystemExit) as exc:
+        main(["validate", str(path)])
+    assert exc.value.code in (0, None)
+    assert capsys.readouterr().out.startswith("ok:")
+    np.testing.assert_array_equal(load_scenario(path).q0, session.q)
+
+
+def test_switching_lines_lie_where_sigma_vanishes(live):
+    page, session = live
+    pause(page, session)
+    f, law, q = session.formation, session.law, session.q.copy()
+    (tri,), (beta,) = f.surfaces[0], f.surfaces[1]
+    flat = [float(v) for v in q.ravel()]
+    for a, b, c in ((tri[0], tri[1], tri[2]), (tri[1], tri[2], tri[0]), (tri[2], tri[0], tri[1])):
+        seg = page.evaluate(
+            f"([p, a, b, c, beta, th]) => document.querySelector('{ROOT_SEL}')"
+            ".flv.switchingLine(new Float32Array(p), a, b, c, beta, th)",
+            [flat, int(a), int(b), int(c), float(beta), law.theta],
+        )
+        for end in (seg[:2], seg[2:]):  # both ends of line s of robot a: sigma = 0 there
+            moved = q.copy()
+            moved[a] = end
+            assert law.switching(f, moved)[0] == pytest.approx(0.0, abs=1e-5)  # float32 input
+
+
+def test_screenshot_is_kept(live, tmp_path):
+    page, _ = live
+    wait_for(lambda: int(attr(page, "frames")) > 5, what="frames")
+    shot = tmp_path / "viewer.png"
+    page.screenshot(path=str(shot))
+    data = shot.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
+
+
+def test_png_snapshot_download(live, tmp_path):
+    page, _ = live
+    with page.expect_download() as dl:
+        page.click("button[data-role=png]")
+    path = tmp_path / dl.value.suggested_filename
+    dl.value.save_as(path)
+    assert path.suffix == ".png" and path.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_bad_gain_is_refused_on_the_page(live):
+    page, session = live
+    page.fill("input[data-role=param-k_c]", "0")
+    page.dispatch_event("input[data-role=param-k_c]", "change")
+    wait_for(lambda: int(attr(page, "errors")) >= 1, what="the error on the page")
+    assert "k_c" in attr(page, "last-error") and session.law.k_c == 2.0
+    wait_for(lambda: page.input_value("input[data-role=param-k_c]") == "2", what="value back")
+
+
+def test_replay_with_the_time_slider(browser, tmp_path):
+    import tomli_w
+    from _viewer import SIM2
+
+    from formationlab.scenario import parse_scenario
+    from formationlab.viewer.sources import open_session
+
+    raw = dict(parse_scenario(SIM2.read_text()).raw)
+    raw["simulation"] = {**raw["simulation"], "duration": 0.5}
+    sc = tmp_path / "short.toml"
+    sc.write_text(tomli_w.dumps(raw))
+    with pytest.raises(SystemExit):
+        main(["run", str(sc), "--out", str(tmp_path / "run"), "--save-every", "10", "-q"])
+    session = open_session(tmp_path / "run")
+    with serving(session) as srv:
+        page = browser.new_page(viewport={"width": 1100, "height": 720})
+        page.goto(srv.url)
+        page.wait_for_selector(f"{ROOT_SEL}[data-state=ready]", timeout=15_000)
+        assert page.get_attribute("input[data-role=slider]", "max") == "50"
+        page.click("button[data-role=pause]")
+        wait_for(lambda: session.paused, what="pause")
+        page.fill("input[data-role=slider]", "25")
+        wait_for(lambda: session.index == 25, what="the seek")
+        wait_for(lambda: abs(float(attr(page, "t")) - 0.25) < 1e-9, what="frame 25 drawn")
+        assert int(attr(page, "robots")) == 3
+        page.close()

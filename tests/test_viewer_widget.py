@@ -1,0 +1,67 @@
+"""The notebook widget's Python side: traitlets and the run stay in sync, both ways."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from _viewer import SIM2
+
+import formationlab as fl
+from formationlab.io.scenario import load_scenario
+from formationlab.viewer import SessionError
+
+
+@pytest.fixture
+def widget():
+    v = fl.Viewer(load_scenario(SIM2), seed=3)
+    v.sent = []
+    v.send = lambda content, buffers=None: v.sent.append((content, buffers))
+    return v
+
+
+def front_end(v, msg):
+    v._on_front_end(v, msg, [])
+    return [c["type"] for c, _ in v.sent]
+
+
+def test_initial_traits_mirror_the_scenario(widget):
+    v = widget
+    assert (v.name, v.mode, v.n, v.t, v.paused) == ("paper-simulation-2", "live", 3, 0.0, False)
+    assert (v.law, v.law_params) == ("angle-restricted", {"k_c": 2.0, "k_a": 3.0, "theta": 0.5})
+    assert (v.integrator, v.dt) == ("euler", 1e-3)
+    assert "export default { render }" in v._esm  # the page's own front end
+
+
+def test_front_end_messages_update_the_traits(widget):
+    v = widget
+    assert front_end(v, {"type": "hello"}) == ["info", "frame"]
+    _, buffers = v.sent[-1]
+    np.testing.assert_array_equal(np.frombuffer(buffers[0], "<f4"), v.positions.ravel())
+    front_end(v, {"type": "step", "count": 40})
+    assert v.t == pytest.approx(0.04)
+    front_end(v, {"type": "drag", "robot": 2, "x": 1.0, "y": 1.0})
+    np.testing.assert_array_equal(v.positions[1], [1.0, 1.0])
+    front_end(v, {"type": "pause", "paused": True})
+    assert v.paused
+    front_end(v, {"type": "set_law", "name": "distance"})
+    assert (v.law, v.law_params) == ("distance", {"k_c": 2.0})
+    assert front_end(v, {"type": "drag", "robot": 9, "x": 0, "y": 0})[-1] == "error"
+
+
+def test_python_changes_drive_the_run_and_reach_the_front_end(widget):
+    v = widget
+    v.law_params = {"k_a": 6.0}
+    assert v.session.law.k_a == 6.0 and v.law_params["k_a"] == 6.0
+    assert [c["type"] for c, _ in v.sent] == ["settings", "frame"]
+    v.paused = True
+    assert v.session.paused
+    v.integrator = "rk4"
+    assert v.session.integrator == fl.RK4(dt=1e-3)
+    v.speed = 4.0
+    assert v.session.speed == 4.0
+    with pytest.raises(SessionError, match="unknown law"):
+        v.law = "no-such-law"
+    assert v.law == "angle-restricted"  # back to the law in force
+    with pytest.raises(SessionError, match="k_c"):
+        v.law_params = {"k_c": -1.0}
+    assert v.law_params["k_c"] == 2.0 and v.session.law.k_c == 2.0
