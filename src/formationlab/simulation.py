@@ -96,12 +96,7 @@ class SimulationResult:
         """
         if self.sigma.shape[-1] == 0:
             return []
-        tris, _, index = self.formation.surfaces
-        labels = []
-        for s in range(len(tris)):
-            i, j, k = np.argwhere(index == s)[0] + 1
-            labels.append(f"alpha_{i}{j}{k}")
-        return labels
+        return self.formation.surface_labels
 
     @property
     def final(self) -> NDArray[np.float64]:

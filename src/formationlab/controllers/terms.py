@@ -88,19 +88,17 @@ def build_terms(
     pi, pj = (np.ascontiguousarray(x, dtype=np.int64) for x in np.triu_indices(n, k=1))
     is_edge = formation.adjacency[pi, pj].copy()
     dist = np.where(is_edge, np.nan_to_num(formation.distance_matrix[pi, pj]), 0.0)
-    tris, beta, index = formation.surfaces
-    if formation.alpha is None or k_a <= 0:
+    tris, beta, surface = formation.surfaces
+    terms, alpha = formation.restricted_triples, formation.restricted_alpha
+    if not formation.has_orientation or k_a <= 0:
         tris, beta = np.zeros((0, 3), np.int64), np.zeros(0)
-        terms = np.zeros((0, 3), np.int64)
-    else:
-        terms = np.argwhere(index >= 0).astype(np.int64)
-        terms = terms[terms[:, 1] < terms[:, 2]]  # (i, k, j) is the same term as (i, j, k)
-    surface = index[tuple(terms.T)] if len(terms) else np.zeros(0, np.int64)
+        terms, alpha, surface = np.zeros((0, 3), np.int64), np.zeros(0), np.zeros(0, np.int64)
+    half = terms[:, 1] < terms[:, 2]  # (i, k, j) is the same term as (i, j, k)
+    terms, alpha, surface = terms[half], alpha[half], surface[half]
     order = np.argsort(surface, kind="stable")
-    terms, surface = terms[order], surface[order]
+    terms, alpha, surface = terms[order], alpha[order], surface[order]
     start = np.searchsorted(surface, np.arange(len(tris) + 1)).astype(np.int64)
     i, j, k = (np.ascontiguousarray(terms[:, m]) for m in range(3))
-    alpha = formation.alpha[i, j, k] if len(terms) else np.zeros(0)  # type: ignore[index]
     area_tris, target = areas if areas is not None else (np.zeros((0, 3), np.int64), np.zeros(0))
     return KernelTerms(
         kind=int(kind),

@@ -125,7 +125,8 @@ def study_identity(
     h = hashlib.sha256()
     for g in groups:
         f = g.formation
-        for arr in (f.diameters, f.edges, f.distances, f.alpha, f.template):
+        alpha = f.alpha if f.alpha is not None or not f.has_orientation else f.restricted_alpha
+        for arr in (f.diameters, f.edges, f.distances, alpha, f.template):
             h.update(b"-" if arr is None else np.ascontiguousarray(arr).tobytes())
     if center is not None:
         h.update(np.ascontiguousarray(center, dtype=float).tobytes())
