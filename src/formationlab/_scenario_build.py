@@ -14,6 +14,7 @@ from typing import Any
 
 from ._scenario_parts import Fail, param_key, params, unknown
 from .errors import UserInputError
+from .realisability import realisability_problems
 from .spec import AlphaValues, Formation
 
 __all__ = ["build_formation", "build_from_registry", "stem"]
@@ -120,6 +121,11 @@ def build_formation(
             "the graph is not rigid: the distances do not fix the shape (add edges to make "
             f"it rigid; {n} robots need at least {2 * n - 3} well-placed edges)"
         )
+    warnings.extend(
+        f"formation.distances cannot all be met: {p}; runs will not reach the desired shape, "
+        "check the distances"
+        for p in realisability_problems(formation)
+    )
     return formation
 
 
@@ -148,6 +154,8 @@ def _formation_key(message: str, frm: Any) -> str:
         return "formation.template"
     if "alpha" in message:
         return "formation.alpha"
+    if message.startswith("distances"):  # e.g. one number per edge, but the wrong count
+        return "formation.distances"
     if "edge" in message and "desired distance" not in message:
         return "formation.edges"
     if "diameters" in message and "distance" not in message:

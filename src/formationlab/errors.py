@@ -10,6 +10,7 @@ from __future__ import annotations
 __all__ = [
     "FormationError",
     "FormationlabError",
+    "OutputError",
     "OutputExistsError",
     "ParameterError",
     "ScenarioError",
@@ -39,3 +40,7 @@ class ScenarioError(UserInputError):
 
 class OutputExistsError(UserInputError):
     """An output folder already holds results and overwriting was not asked for."""
+
+
+class OutputError(UserInputError):
+    """An output file or folder cannot be written (permission, disk full, a path under a file)."""

@@ -3,31 +3,53 @@
 from __future__ import annotations
 
 import json
+import subprocess
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from click.core import ParameterSource
 from rich.markup import escape
 
-from ..errors import OutputExistsError, UserInputError
-from ._app import command, err_console, fail
+from ..errors import OutputExistsError, ParameterError, UserInputError
+from ._app import INTERRUPTED, command, err_console, fail, warn
+from ._plan import RunPlan, check_plan, plan_run
 
 __all__: list[str] = []
 
 #: Files ``run`` writes besides the plots (summary.json last: it marks a finished run).
 RUN_FILES = ("scenario.toml", "trajectory.nc", "summary.json")
 ANIMATION_STEM = "animation"
+FORMATS_ALL = ("gif", "mp4", "html")
+#: files of an earlier run (without a manifest) that ``run --force`` replaces
+EARLIER_PATTERNS = (*RUN_FILES, "*.png", f"{ANIMATION_STEM}.*")
 
 
-def _warn(message: str) -> None:
-    err_console.print(
-        f"[bold yellow]warning:[/] {escape(message)}", highlight=False, soft_wrap=True
-    )
+def _check_formats(formats: tuple[str, ...], *, explicit: bool) -> tuple[str, ...]:
+    """The formats that can be written; a missing writer is an error when the format was
+    asked for by name, else a warning and the format is left out."""
+    from ..io.animation import missing_writer
+
+    keep = []
+    for f in formats:
+        missing = missing_writer(f)
+        if missing and explicit:
+            raise ParameterError(missing)
+        if missing:
+            warn(f"{ANIMATION_STEM}.{f} left out: {missing}")
+        else:
+            keep.append(f)
+    return tuple(keep)
 
 
 def _say(message: str, quiet: bool) -> None:
     if not quiet:
         typer.echo(message)
+
+
+def _note(message: str, quiet: bool) -> None:
+    if not quiet:
+        err_console.print(message, highlight=False, soft_wrap=True)
 
 
 @command(
@@ -37,6 +59,7 @@ def _say(message: str, quiet: bool) -> None:
     ),
 )
 def run(
+    ctx: typer.Context,
     scenario: Annotated[Path, typer.Argument(help="Scenario file (TOML), see docs/scenarios.md.")],
     out: Annotated[
         Path, typer.Option("--out", "-o", help="Output folder (created; must be empty).")
@@ -51,7 +74,12 @@ def run(
         int, typer.Option(min=2, help="Most frames in the animation (the run is thinned).")
     ] = 150,
     force: Annotated[
-        bool, typer.Option("--force", help="Replace the files of an earlier run in --out.")
+        bool,
+        typer.Option(
+            "--force",
+            help="Replace the files of an earlier run in --out (and run even if the saved "
+            "trajectory looks too large for memory or disk).",
+        ),
     ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress, no report.")] = False,
 ) -> None:
@@ -61,59 +89,157 @@ def run(
     functions sigma) goes to DIR/trajectory.nc (netCDF, open it with
     xarray.open_dataset), the outcome and final distance errors to
     DIR/summary.json, and PNG plots of trajectories, controls, V and distance
-    errors beside them. Exit status: 0 when the run finished, 1 when the
-    integrator stopped early (results up to then are written), 2 on bad input.
+    errors beside them. Before it starts, the run prints its step count and
+    the memory and disk it will need, and refuses (unless --force) a run that
+    would not fit: store fewer steps with --save-every. Ctrl-C stops the run
+    and writes the trajectory so far, with status "interrupted". Exit status:
+    0 when the run finished, 1 when the integrator stopped early (results up
+    to then are written), 2 on bad input or a folder that cannot be written,
+    130 when interrupted (results up to then are written).
     """
-    from .. import __version__, simulate
-    from ..io.figures import save_figure
-    from ..io.files import atomic_write_json, atomic_write_text, prepare_output_dir
-    from ..io.netcdf import write_trajectory
     from ..io.scenario import load_scenario
 
     sc = load_scenario(scenario)
     for w in sc.warnings:
-        _warn(w)
+        warn(w)
+    formats = _check_formats(FORMATS_ALL, explicit=False) if animate else ()
+    plan = _plan(sc, save_every)
+    if plan is not None:
+        _note(f"{sc.name}: {plan.describe()}", quiet)
+        given = ctx.get_parameter_source("save_every") is ParameterSource.COMMANDLINE
+        problem = check_plan(plan, out, save_every_given=given)
+        if problem and not force:
+            raise ParameterError(problem)
+        if problem:
+            warn(problem.split("; ")[0] + "; running it anyway (--force)")
+    _run(sc, scenario, out, save_every, formats, frames, force, quiet)
+
+
+def _plan(sc: Any, save_every: int) -> RunPlan | None:
+    """The run's size, or None for an event-driven integrator (no fixed step count)."""
+    try:
+        return plan_run(sc, save_every)
+    except ParameterError:
+        return None
+
+
+def _run(
+    sc: Any,
+    scenario: Path,
+    out: Path,
+    save_every: int,
+    formats: tuple[str, ...],
+    frames: int,
+    force: bool,
+    quiet: bool,
+) -> None:
+    """Simulate, write the results, then animate (so that Ctrl-C while animating keeps them)."""
+    from .. import simulate
+    from ..io.files import earlier_files, prepare_output_dir, remove_stale
+
     folder = prepare_output_dir(out, force=force)
+    earlier = earlier_files(folder, EARLIER_PATTERNS) if force else []
     result = _simulate(simulate, sc, save_every, quiet)
+    interrupted = result.status == "interrupted"
+    summary = result.summary()
+    written = _write_results(folder, sc, scenario, result, summary, save_every)
+    if formats and not interrupted:
+        _note(f"animating ({frames} frames at most) ...", quiet)
+        done: list[Path] = []
+        try:
+            _animate(folder, result, sc.name, frames, formats, done)
+        except (KeyboardInterrupt, subprocess.CalledProcessError):
+            # Ctrl-C reaches ffmpeg too, which then fails: the simulation's results stay
+            written = [*written, *(p.name for p in done)]
+            _write_summary(folder, sc, scenario, summary, save_every, written)
+            remove_stale(folder, earlier, written)
+            _say(f"{sc.name}: {_verdict(summary)}; wrote {folder}/", quiet)
+            fail(
+                f"interrupted while animating; the run's results are in {folder} "
+                f"(animate them with `formationlab animate {folder} --force`)",
+                INTERRUPTED,
+            )
+        written = [*written, *(p.name for p in done)]
+        _write_summary(folder, sc, scenario, summary, save_every, written)
+    removed = remove_stale(folder, earlier, written)
+    if removed:
+        _note(f"removed {', '.join(removed)} of the earlier run in {folder}", quiet)
+    _say(f"{sc.name}: {_verdict(summary)}; wrote {folder}/", quiet)
+    if interrupted:
+        fail(f"{result.message}; the results up to then are in {folder}", INTERRUPTED)
+    if result.status != "success":
+        fail(f"the run stopped early: {result.message} (results up to then are in {folder})", 1)
+
+
+def _write_results(
+    folder: Path, sc: Any, scenario: Path, result: Any, summary: dict[str, Any], save_every: int
+) -> list[str]:
+    """Write scenario.toml, trajectory.nc, the plots and summary.json (last, atomically:
+    it marks the folder as holding a run); returns the manifest, the names written."""
+    from ..io.figures import save_figure
+    from ..io.files import atomic_write_text
+    from ..io.netcdf import write_trajectory
+    from ..plotting.runs import run_figures
+
     atomic_write_text(folder / "scenario.toml", sc.text)
     write_trajectory(
         result,
         folder / "trajectory.nc",
         attrs={"scenario": sc.text, "scenario_name": sc.name, "save_every": save_every},
     )
-    from ..plotting.runs import run_figures
+    pictures = [
+        save_figure(fig, folder / f"{name}.png").name
+        for name, fig in run_figures(result, prefix=sc.name).items()
+    ]
+    return _write_summary(folder, sc, scenario, summary, save_every, [*RUN_FILES, *pictures])
 
-    pictures = []
-    for name, fig in run_figures(result, prefix=sc.name).items():
-        pictures.append(save_figure(fig, folder / f"{name}.png").name)
-    if animate:
-        if not quiet:
-            err_console.print(f"animating ({frames} frames at most) ...", highlight=False)
-        pictures += [p.name for p in _animate(folder, result, sc.name, frames)]
-    summary: dict[str, Any] = {
+
+def _write_summary(
+    folder: Path,
+    sc: Any,
+    scenario: Path,
+    summary: dict[str, Any],
+    save_every: int,
+    manifest: list[str],
+) -> list[str]:
+    from .. import __version__
+    from ..io.files import MANIFEST, atomic_write_json
+
+    data: dict[str, Any] = {
         "scenario": sc.name,
         "description": sc.description,
         "source": str(scenario),
-        **result.summary(),
+        **summary,
         "parameters": sc.parameters,
         "n_robots": sc.n,
         "edges": [[int(i) + 1, int(j) + 1] for i, j in sc.formation.edges],
         "save_every": save_every,
         "warnings": list(sc.warnings),
         "formationlab_version": __version__,
-        "files": [*RUN_FILES, *pictures],
+        MANIFEST: manifest,
     }
-    atomic_write_json(folder / "summary.json", summary)
-    conv = summary["converged_time"]
-    _say(
-        f"{sc.name}: outcome {summary['outcome']}, max |r_ij - d_ij| = "
-        f"{summary['max_distance_error']:.3g}, "
-        + (f"converged at t = {conv:.3g} s" if conv is not None else "not converged")
-        + f"; wrote {folder}/",
-        quiet,
-    )
-    if result.status != "success":
-        fail(f"the run stopped early: {result.message} (results up to then are in {folder})", 1)
+    atomic_write_json(folder / "summary.json", data)
+    return manifest
+
+
+def _verdict(s: dict[str, Any]) -> str:
+    """The one-line verdict of a run's summary: the outcome, and whether the robots stopped.
+
+    ``outcome`` judges the final shape (analysis.classify); the robots may still
+    move within the distance tolerance, which the line says in the same breath
+    instead of a contradictory "not converged".
+    """
+    tol = s["tolerances"]
+    line = f"outcome {s['outcome']}, max |r_ij - d_ij| = {s['max_distance_error']:.3g}"
+    if s["converged_time"] is not None:
+        return line + f", stopped at t = {s['converged_time']:.3g} s"
+    speed = min(v for v in (s["final_speed"], s["net_speed"]) if v is not None)
+    if s["outcome"] in ("desired", "mirror"):
+        return line + (
+            f" (within the tolerance {tol['distance']:g}), still moving at the end "
+            f"({speed:.2g} m/s > {tol['speed']:g})"
+        )
+    return line + f", still moving at the end ({speed:.2g} m/s > {tol['speed']:g})"
 
 
 def _simulate(simulate: Any, sc: Any, save_every: int, quiet: bool) -> Any:
@@ -147,7 +273,8 @@ def _animate(
     result_or_ds: Any,
     title: str,
     frames: int,
-    formats: tuple[str, ...] = ("gif", "mp4", "html"),
+    formats: tuple[str, ...] = FORMATS_ALL,
+    done: list[Path] | None = None,
 ) -> list[Path]:
     from ..io.animation import save_animation
     from ..plotting.animation import animate_run
@@ -160,7 +287,7 @@ def _animate(
         t, q = ds["time"].values, ds["q"].values
         edges, diam = ds["edge_robots"].values - 1, ds["diameter"].values
     anim = animate_run(t, q, edges=edges, diameters=diam, max_frames=frames, title=title)
-    return save_animation(anim, folder / ANIMATION_STEM, formats=formats)
+    return save_animation(anim, folder / ANIMATION_STEM, formats=formats, written=done)
 
 
 @command(
@@ -195,6 +322,7 @@ def animate_cmd(
         raise UserInputError(
             f"unknown animation format {bad[0]!r}; choose from {', '.join(FORMATS)}"
         )
+    formats = _check_formats(formats, explicit=bool(fmt))
     if not folder.is_dir():
         raise UserInputError(
             f"{folder} is not a folder; give the --out folder of `formationlab run`"
@@ -220,8 +348,31 @@ def animate_cmd(
     if "q" not in ds or "edge_robots" not in ds:
         raise UserInputError(f"{nc} is not a formationlab trajectory (no q or edge_robots)")
     title = str(ds.attrs.get("scenario_name", folder.name))
-    for p in _animate(folder, ds, title, frames, formats):
-        typer.echo(f"wrote {p}")
+    done: list[Path] = []
+    try:
+        _animate(folder, ds, title, frames, formats, done)
+    except (KeyboardInterrupt, subprocess.CalledProcessError):  # Ctrl-C, also killing ffmpeg
+        _add_to_manifest(folder, [p.name for p in done])
+        kept = f"; kept {', '.join(p.name for p in done)}" if done else ""
+        fail(f"interrupted{kept}", INTERRUPTED)
+    finally:
+        for p in done:
+            typer.echo(f"wrote {p}")
+    _add_to_manifest(folder, [p.name for p in done])
+
+
+def _add_to_manifest(folder: Path, names: list[str]) -> None:
+    """List ``names`` in the manifest of the run's summary.json (when there is one)."""
+    from ..io.files import MANIFEST, atomic_write_json
+
+    path = folder / "summary.json"
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return  # no summary (an interrupted run's folder, or not ours): nothing to list in
+    if isinstance(data, dict) and isinstance(data.get(MANIFEST), list):
+        data[MANIFEST] = [*data[MANIFEST], *(n for n in names if n not in data[MANIFEST])]
+        atomic_write_json(path, data)
 
 
 @command(
@@ -249,13 +400,22 @@ def validate(
             )
             continue
         for w in sc.warnings:
-            _warn(f"{path}: {w}")
+            warn(f"{path}: {w}")
         f = sc.formation
         rigid = "rigid" if f.is_rigid else "not rigid"
         typer.echo(
-            f"ok: {path}: {sc.name!r}, {f.n} robots, {len(f.edges)} edges ({rigid}), "
+            f"ok: {path}: {sc.name!r}, {_count(f.n, 'robot')}, {_count(len(f.edges), 'edge')} "
+            f"({rigid}), "
             f"orientation {f.orientation}, law {sc.law.name}, integrator "
             f"{json.dumps(sc.parameters['integrator'])}, duration {sc.duration:g} s"
         )
+        plan = _plan(sc, 1)
+        if plan is not None:
+            typer.echo(f"    {plan.describe()}")
     if bad:
         raise typer.Exit(2)
+
+
+def _count(k: int, noun: str) -> str:
+    """``"1 edge"``, ``"3 edges"``."""
+    return f"{k} {noun}" if k == 1 else f"{k} {noun}s"

@@ -36,7 +36,7 @@ __all__ = [
     "register_integrator",
 ]
 
-Status = Literal["success", "step-collision", "non-finite", "event-limit"]
+Status = Literal["success", "step-collision", "non-finite", "event-limit", "interrupted"]
 Progress = Callable[[float], None]
 
 
@@ -51,8 +51,9 @@ class RawSolution:
     q : ndarray, shape (T, n, 2)
         Saved positions.
     status : str
-        ``"success"``, ``"step-collision"``, ``"non-finite"`` or ``"event-limit"``
-        (an event-driven integrator met more switching events than it allows).
+        ``"success"``, ``"step-collision"``, ``"non-finite"``, ``"event-limit"``
+        (an event-driven integrator met more switching events than it allows) or
+        ``"interrupted"`` (Ctrl-C: the states up to the last accepted step).
     message : str
         What happened, in words; says what to change when the run failed.
     stats : dict
@@ -133,30 +134,40 @@ class FixedStepIntegrator(Integrator):
         report = max(1, n_steps // 100)
         monitor = SwitchMonitor(sigma0=system.sigma(q), t0=0.0)
         counters: dict[str, float] = {}
-        k = 0
-        for k in range(1, n_steps + 1):
-            q_new = self._advance(system, q, self.dt, counters)
-            if not np.all(np.isfinite(q_new)):
-                status = "non-finite"
-                message = (
-                    f"the step to t = {k * self.dt:g} s produced NaN or infinite positions; "
-                    f"reduce dt (now {self.dt:g} s)"
-                )
-                break
-            gap = system.swept_clearance(q, q_new)
-            if gap <= 0:
-                status = "step-collision"
-                message = contact_message(system, q_new, k * self.dt, self.dt)
-                break
-            q = q_new
-            monitor.record(k * self.dt, system.sigma(q))
-            if k % save_every == 0 or k == n_steps:
-                ts.append(k * self.dt)
-                qs.append(q.copy())
-            if progress is not None and k % report == 0:
-                progress(k * self.dt)
-        else:
-            k = n_steps + 1
+        k = accepted = 0
+        shown = start
+        try:
+            for k in range(1, n_steps + 1):
+                q_new = self._advance(system, q, self.dt, counters)
+                if not np.all(np.isfinite(q_new)):
+                    status = "non-finite"
+                    message = (
+                        f"the step to t = {k * self.dt:g} s produced NaN or infinite positions; "
+                        f"reduce dt (now {self.dt:g} s)"
+                    )
+                    break
+                gap = system.swept_clearance(q, q_new)
+                if gap <= 0:
+                    status = "step-collision"
+                    message = contact_message(system, q_new, k * self.dt, self.dt)
+                    break
+                q = q_new
+                accepted = k
+                monitor.record(k * self.dt, system.sigma(q))
+                if k % save_every == 0 or k == n_steps:
+                    ts.append(k * self.dt)
+                    qs.append(q.copy())
+                if progress is not None and (
+                    k % report == 0 or (k % 64 == 0 and time.perf_counter() - shown >= 0.5)
+                ):
+                    progress(k * self.dt)  # every 1 % of the run, and at least twice a second
+                    shown = time.perf_counter()
+            else:
+                k = n_steps + 1
+        except KeyboardInterrupt:  # Ctrl-C: keep the states so far
+            status = "interrupted"
+            message = f"interrupted by the user at t = {accepted * self.dt:g} s"
+            k = accepted + 1
         if status != "success" and (not ts or ts[-1] != (k - 1) * self.dt):
             ts.append((k - 1) * self.dt)  # keep the last accepted state
             qs.append(q.copy())
