@@ -112,7 +112,21 @@ def run(
             raise ParameterError(problem)
         if problem:
             warn(problem.split("; ")[0] + "; running it anyway (--force)")
+    _note_glyphs(sc.name, quiet)
     _run(sc, scenario, out, save_every, formats, frames, force, quiet)
+
+
+def _note_glyphs(name: str, quiet: bool) -> None:
+    """Say once which characters of the name the figures cannot show (no font has them)."""
+    from ..plotting.fonts import missing_characters
+
+    missing = missing_characters(name)
+    if missing:
+        _note(
+            f"note: the figures show ? for {missing}: no installed font has these characters "
+            "(a font such as Noto Sans CJK would)",
+            quiet,
+        )
 
 
 def _plan(sc: Any, save_every: int) -> RunPlan | None:
