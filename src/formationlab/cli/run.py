@@ -8,7 +8,6 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from click.core import ParameterSource
 from rich.markup import escape
 
 from ..errors import OutputExistsError, ParameterError, UserInputError
@@ -106,7 +105,8 @@ def run(
     plan = _plan(sc, save_every)
     if plan is not None:
         _note(f"{sc.name}: {plan.describe()}", quiet)
-        given = ctx.get_parameter_source("save_every") is ParameterSource.COMMANDLINE
+        source = ctx.get_parameter_source("save_every")
+        given = getattr(source, "name", "") == "COMMANDLINE"
         problem = check_plan(plan, out, save_every_given=given)
         if problem and not force:
             raise ParameterError(problem)
