@@ -42,5 +42,9 @@ class OutputExistsError(UserInputError):
     """An output folder already holds results and overwriting was not asked for."""
 
 
-class OutputError(UserInputError):
-    """An output file or folder cannot be written (permission, disk full, a path under a file)."""
+class OutputError(UserInputError, OSError):
+    """An output file or folder cannot be written (permission, disk full, a path under a file).
+
+    Also an ``OSError``, so that code catching the writer's own errors still catches it;
+    the message names the folder, the reason and what to do.
+    """
