@@ -314,3 +314,32 @@ def test_validate_and_run_print_the_size_of_the_run(scenario: Path, tmp_path: Pa
     res = invoke("run", scenario, "--out", tmp_path / "o", "--save-every", 10)
     assert res.exit_code == 0
     assert "short-triangle: 200 steps, 21 saved: ~" in res.stderr
+
+
+# ------------------------------------------------------------ files that cannot be read
+
+
+def test_resume_over_a_damaged_chunk_names_it(scenario: Path, tmp_path: Path) -> None:
+    out = tmp_path / "st"
+    assert invoke("study", scenario, "--out", out).exit_code == 0
+    chunk = next((out / "chunks").glob("*/g*-c*.parquet"))
+    chunk.write_bytes(b"not parquet")
+    res = invoke("study", scenario, "--out", out, "--resume")
+    assert res.exit_code == 2
+    line = one_error_line(res)
+    assert line.startswith(f"error: cannot read {chunk} as a trials table (parquet): ")
+    assert line.endswith("; delete it and resume again to rerun that chunk")
+
+
+def test_equilibria_from_a_damaged_study_names_the_file(scenario: Path, tmp_path: Path) -> None:
+    study = tmp_path / "st"
+    study.mkdir()
+    (study / "trials.parquet").write_bytes(b"PAR1 but not really")
+    res = invoke(
+        "equilibria", scenario, "--out", tmp_path / "eq", "--from-study", study, "--starts", 0
+    )
+    assert res.exit_code == 2
+    line = one_error_line(res)
+    assert line.startswith(
+        f"error: cannot read {study / 'trials.parquet'} as a study's trials table: "
+    )

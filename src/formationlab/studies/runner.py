@@ -208,7 +208,9 @@ def run_study(
     groups = study_groups(formation, law, config)
     tasks = plan_chunks(groups, config, seed=int(seed), dt=dt, duration=duration, center=center)
     total = sum(t.size for t in tasks)
-    compile_time = _warm_kernels(tasks, notify)  # timed apart from the trials
+    # compiled (or loaded from numba's cache) here, timed apart from the trials; dask
+    # workers compile for themselves
+    compile_time = _warm_kernels(tasks, notify) if scheduler is None else 0.0
     start = time.perf_counter()
     frames: dict[str, pd.DataFrame] = {}
     done = 0
