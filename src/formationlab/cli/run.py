@@ -1,4 +1,4 @@
-"""Commands ``run``, ``validate``, ``animate``: scenario files in; data, plots, animations out."""
+"""Commands ``run`` and ``validate``: scenario files in; data, plots (and animations) out."""
 
 from __future__ import annotations
 
@@ -10,35 +10,17 @@ from typing import Annotated, Any
 import typer
 from rich.markup import escape
 
-from ..errors import OutputExistsError, ParameterError, UserInputError
+from ..errors import ParameterError, UserInputError
 from ._app import INTERRUPTED, command, err_console, fail, warn
 from ._plan import RunPlan, check_plan, plan_run
+from .animate import ANIMATION_STEM, FORMATS_ALL, usable_formats, write_animation
 
 __all__: list[str] = []
 
 #: Files ``run`` writes besides the plots (summary.json last: it marks a finished run).
 RUN_FILES = ("scenario.toml", "trajectory.nc", "summary.json")
-ANIMATION_STEM = "animation"
-FORMATS_ALL = ("gif", "mp4", "html")
 #: files of an earlier run (without a manifest) that ``run --force`` replaces
 EARLIER_PATTERNS = (*RUN_FILES, "*.png", f"{ANIMATION_STEM}.*")
-
-
-def _check_formats(formats: tuple[str, ...], *, explicit: bool) -> tuple[str, ...]:
-    """The formats that can be written; a missing writer is an error when the format was
-    asked for by name, else a warning and the format is left out."""
-    from ..io.animation import missing_writer
-
-    keep = []
-    for f in formats:
-        missing = missing_writer(f)
-        if missing and explicit:
-            raise ParameterError(missing)
-        if missing:
-            warn(f"{ANIMATION_STEM}.{f} left out: {missing}")
-        else:
-            keep.append(f)
-    return tuple(keep)
 
 
 def _say(message: str, quiet: bool) -> None:
@@ -101,7 +83,7 @@ def run(
     sc = load_scenario(scenario)
     for w in sc.warnings:
         warn(w)
-    formats = _check_formats(FORMATS_ALL, explicit=False) if animate else ()
+    formats = usable_formats(FORMATS_ALL, explicit=False) if animate else ()
     plan = _plan(sc, save_every)
     if plan is not None:
         _note(f"{sc.name}: {plan.describe()}", quiet)
@@ -161,7 +143,7 @@ def _run(
         _note(f"animating ({frames} frames at most) ...", quiet)
         done: list[Path] = []
         try:
-            _animate(folder, result, sc.name, frames, formats, done)
+            write_animation(folder, result, sc.name, frames, formats, done)
         except (KeyboardInterrupt, subprocess.CalledProcessError):
             # Ctrl-C reaches ffmpeg too, which then fails: the simulation's results stay
             written = [*written, *(p.name for p in done)]
@@ -280,113 +262,6 @@ def _simulate(simulate: Any, sc: Any, save_every: int, quiet: bool) -> Any:
             progress=lambda t: bar.update(task, completed=t),
             **kwargs,
         )
-
-
-def _animate(
-    folder: Path,
-    result_or_ds: Any,
-    title: str,
-    frames: int,
-    formats: tuple[str, ...] = FORMATS_ALL,
-    done: list[Path] | None = None,
-) -> list[Path]:
-    from ..io.animation import save_animation
-    from ..plotting.animation import animate_run
-
-    if hasattr(result_or_ds, "formation"):
-        r = result_or_ds
-        t, q, edges, diam = r.t, r.q, r.formation.edges, r.formation.diameters
-    else:
-        ds = result_or_ds
-        t, q = ds["time"].values, ds["q"].values
-        edges, diam = ds["edge_robots"].values - 1, ds["diameter"].values
-    anim = animate_run(t, q, edges=edges, diameters=diam, max_frames=frames, title=title)
-    return save_animation(anim, folder / ANIMATION_STEM, formats=formats, written=done)
-
-
-@command(
-    "animate",
-    epilog="Example:  formationlab animate runs/sim2 --frames 100 --format gif",
-)
-def animate_cmd(
-    folder: Annotated[Path, typer.Argument(help="Output folder of `formationlab run`.")],
-    frames: Annotated[
-        int, typer.Option(min=2, help="Most frames in the animation (the run is thinned).")
-    ] = 150,
-    fmt: Annotated[
-        list[str] | None,
-        typer.Option("--format", "-f", help="gif, mp4 or html; repeat for several (default: all)."),
-    ] = None,
-    force: Annotated[
-        bool, typer.Option("--force", help="Replace an existing animation in the folder.")
-    ] = False,
-) -> None:
-    """Animate a finished run: robots as discs of their diameters and the graph's edges.
-
-    Reads DIR/trajectory.nc and writes DIR/animation.gif (pillow),
-    DIR/animation.mp4 (ffmpeg from imageio-ffmpeg) and DIR/animation.html (a
-    self-contained player), with at most --frames frames evenly spaced in time.
-    """
-    from ..io.animation import FORMATS
-    from ..io.netcdf import load_trajectory
-
-    formats = tuple(dict.fromkeys(fmt or FORMATS))
-    bad = [f for f in formats if f not in FORMATS]
-    if bad:
-        raise UserInputError(
-            f"unknown animation format {bad[0]!r}; choose from {', '.join(FORMATS)}"
-        )
-    formats = _check_formats(formats, explicit=bool(fmt))
-    if not folder.is_dir():
-        raise UserInputError(
-            f"{folder} is not a folder; give the --out folder of `formationlab run`"
-        )
-    nc = folder / "trajectory.nc"
-    if not nc.is_file():
-        raise UserInputError(
-            f"{folder} holds no trajectory.nc; run `formationlab run SCENARIO --out {folder}` first"
-        )
-    existing = [
-        (folder / ANIMATION_STEM).with_suffix(FORMATS[f]).name
-        for f in formats
-        if (folder / ANIMATION_STEM).with_suffix(FORMATS[f]).exists()
-    ]
-    if existing and not force:
-        raise OutputExistsError(
-            f"{folder} already holds {', '.join(existing)}; pass --force to replace it"
-        )
-    try:
-        ds = load_trajectory(nc)
-    except (OSError, ValueError) as exc:
-        raise UserInputError(f"cannot read {nc} as netCDF: {exc}") from None
-    if "q" not in ds or "edge_robots" not in ds:
-        raise UserInputError(f"{nc} is not a formationlab trajectory (no q or edge_robots)")
-    title = str(ds.attrs.get("scenario_name", folder.name))
-    done: list[Path] = []
-    try:
-        _animate(folder, ds, title, frames, formats, done)
-    except (KeyboardInterrupt, subprocess.CalledProcessError):  # Ctrl-C, also killing ffmpeg
-        _add_to_manifest(folder, [p.name for p in done])
-        kept = f"; kept {', '.join(p.name for p in done)}" if done else ""
-        fail(f"interrupted{kept}", INTERRUPTED)
-    finally:
-        for p in done:
-            typer.echo(f"wrote {p}")
-    _add_to_manifest(folder, [p.name for p in done])
-
-
-def _add_to_manifest(folder: Path, names: list[str]) -> None:
-    """List ``names`` in the manifest of the run's summary.json (when there is one)."""
-    from ..io.files import MANIFEST, atomic_write_json
-
-    path = folder / "summary.json"
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return  # no summary (an interrupted run's folder, or not ours): nothing to list in
-    if isinstance(data, dict) and isinstance(data.get(MANIFEST), list):
-        data[MANIFEST] = [*data[MANIFEST], *(n for n in names if n not in data[MANIFEST])]
-        atomic_write_json(path, data)
 
 
 @command(
