@@ -222,6 +222,10 @@ def test_a_run_too_large_to_keep_is_refused_with_a_save_every_that_fits(tmp_path
     assert _plan.check_plan(_plan.plan_run(sc, k), out, save_every_given=True) is None
     still = invoke("run", scenario, "--out", out, "--save-every", max(k // 4, 1))
     assert still.exit_code == 2 and "too large with --save-every" in still.stderr
+    checked = invoke("validate", scenario)  # validate says so too, and is not an error
+    assert checked.exit_code == 0
+    assert "1,000,000,000 steps, all saved: ~" in checked.stdout
+    assert f"warning: {scenario}: the run is too large:" in checked.stderr
 
 
 def test_force_runs_a_run_that_looks_too_large(

@@ -301,6 +301,9 @@ def validate(
         plan = _plan(sc, 1)
         if plan is not None:
             typer.echo(f"    {plan.describe()}")
+            problem = check_plan(plan, Path.cwd(), save_every_given=False)
+            if problem:  # what `run` would refuse (disk: the current folder's)
+                warn(f"{path}: {problem}")
     if bad:
         raise typer.Exit(2)
 
