@@ -168,6 +168,7 @@ class FixedStepIntegrator(Integrator):
             status = "interrupted"
             message = f"interrupted by the user at t = {accepted * self.dt:g} s"
             k = accepted + 1
+            del ts[len(qs) :]  # Ctrl-C between the two appends
         if status != "success" and (not ts or ts[-1] != (k - 1) * self.dt):
             ts.append((k - 1) * self.dt)  # keep the last accepted state
             qs.append(q.copy())
