@@ -13,6 +13,7 @@ from typing import Any
 
 from ._scenario_parts import Fail
 from .errors import UserInputError
+from .realisability import realisability_problems
 from .spec import AlphaValues, Formation
 
 __all__ = ["FIXED", "build_formation", "stem"]
@@ -119,6 +120,11 @@ def build_formation(
             "the graph is not rigid: the distances do not fix the shape (add edges to make "
             f"it rigid; {n} robots need at least {2 * n - 3} well-placed edges)"
         )
+    warnings.extend(
+        f"formation.distances cannot all be met: {p}; runs will not reach the desired shape, "
+        "check the distances"
+        for p in realisability_problems(formation)
+    )
     return formation
 
 
