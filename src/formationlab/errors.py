@@ -84,6 +84,8 @@ class FormationlabWarning(UserWarning):
 
 class IgnoredKeyWarning(FormationlabWarning):
     """A parameter that belongs to another law, integrator or model, so it has no effect."""
+
+
 class OutputError(UserInputError, OSError):
     """An output file or folder cannot be written (permission, disk full, a path under a file).
 

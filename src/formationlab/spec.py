@@ -556,19 +556,25 @@ class Formation:
             )
         if not np.all(np.isfinite(arr)):
             raise FormationError(f"{what} hold NaN or infinite numbers", key="positions")
-        diff = arr[..., None, :, :] - arr[..., :, None, :]
-        r = np.linalg.norm(diff, axis=-1)
-        iu = np.triu_indices(self.n, k=1)
-        gap = r[..., iu[0], iu[1]] - self.contact_matrix[iu]
+        if self.n <= DENSE_LIMIT:
+            iu = np.triu_indices(self.n, k=1)
+            pi, pj = iu
+        else:  # only pairs that could touch
+            from .neighbours import close_pairs
+
+            pi, pj = close_pairs(arr, float(self.diameters.max())).T
+        diff = arr[..., pj, :] - arr[..., pi, :]
+        r = np.sqrt(diff[..., 0] * diff[..., 0] + diff[..., 1] * diff[..., 1])
+        gap = r - 0.5 * (self.diameters[pi] + self.diameters[pj])
         if np.any(gap <= 0):
             flat = np.argwhere(gap <= 0)[0]
             p = flat[-1]
-            i, j = iu[0][p], iu[1][p]
-            rr = r[(*flat[:-1], i, j)]
+            i, j = int(pi[p]), int(pj[p])
+            rr = r[tuple(flat)]
+            a = 0.5 * (self.diameters[i] + self.diameters[j])
             raise FormationError(
                 f"robots {i + 1} and {j + 1} overlap in the {what}: distance {rr:g} <= "
-                f"a_{i + 1}{j + 1} = {self.contact_matrix[i, j]:g}; move them apart or "
-                "use smaller diameters",
+                f"a_{i + 1}{j + 1} = {a:g}; move them apart or use smaller diameters",
                 key="positions",
             )
         return arr
