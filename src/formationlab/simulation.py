@@ -266,6 +266,16 @@ def simulate(
             interruptible=interruptible,
         )  # fmt: skip
     points = system.model.points(raw.x)
+    status, message = raw.status, raw.message
+    try:
+        V, sigma = law.potential(formation, points), law.switching(formation, points)
+    except KeyboardInterrupt:  # while reading the run: keep the states, not V and sigma
+        if not interruptible:
+            raise
+        V = np.full(len(raw.t), np.nan)
+        sigma = np.full((len(raw.t), len(formation.surfaces[0])), np.nan)
+        status = Status.INTERRUPTED
+        message = f"interrupted by the user at t = {raw.t[-1]:g} s"
     return SimulationResult(
         formation=formation,
         law=law,
@@ -273,9 +283,9 @@ def simulate(
         t=raw.t,
         q=raw.q,
         u=raw.v[..., :2],
-        V=law.potential(formation, points),
-        sigma=law.switching(formation, points),
-        status=raw.status,
-        message=raw.message,
+        V=V,
+        sigma=sigma if law.switching(formation, points[:1]).shape[-1] else sigma[..., :0],
+        status=status,
+        message=message,
         stats=dict(raw.stats),
     )

@@ -29,7 +29,7 @@ from ..errors import ParameterError
 __all__ = ["RunPlan", "available_disk", "available_memory", "check_plan", "plan_run"]
 
 #: states in the stack whose post-processing is measured
-_PROBE = 8
+_PROBE = 64
 #: share of the available memory (and disk) a run may plan to use
 _SHARE = 0.8
 #: Python's cost of a saved state beyond its data: the ndarray object, the
@@ -115,8 +115,7 @@ def plan_run(sc: Any, save_every: int) -> RunPlan:
     tracemalloc.start()
     try:
         base = tracemalloc.get_traced_memory()[0]
-        sigma = law.switching(f, q)
-        law.control(f, q)
+        sigma = law.switching(f, q)  # what simulate computes over the saved states
         law.potential(f, q)
         post = (tracemalloc.get_traced_memory()[1] - base) / _PROBE
     finally:

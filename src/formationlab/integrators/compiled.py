@@ -98,7 +98,9 @@ def run_compiled(
     info = np.zeros(3)  # status, last accepted step, saved rows
     clear = np.full(1, np.inf)
     q = np.ascontiguousarray(q0, dtype=float).copy()
-    k0, chunk, status = 0, 256, Status.SUCCESS
+    k0, status = 0, Status.SUCCESS
+    step_cap = max(1, n_steps // 100)  # progress at least every 1 % of the run, as the driver
+    chunk = min(256, step_cap)
     start = time.perf_counter()
     try:
         while True:
@@ -116,11 +118,20 @@ def run_compiled(
             if progress is not None:
                 progress(k0 * dt)
             spent = time.perf_counter() - began
-            chunk = int(min(max(chunk * 0.25 / max(spent, 1e-6), 16), 1 << 20))
+            chunk = int(min(max(chunk * 0.25 / max(spent, 1e-6), 16), 1 << 20, step_cap))
     except KeyboardInterrupt:
         if not interruptible:
             raise
         status = Status.INTERRUPTED
+        k0 = int(info[1])  # the loop's own count (it may have returned just before Ctrl-C)
+        if int(info[2]) == 0:  # stopped before the first state was kept: keep it
+            info[:] = 0
+            _run(
+                q, terms, nbr_ptr, nbr, nbr_d, nbr_a, term_ptr, torder, area_ptr, area_item,
+                area_role, reach, dt, 0, 0, n_steps, save_every, k_out, x_out, v_out,
+                info, clear,
+            )  # fmt: skip
+            k0 = 0
     wall = time.perf_counter() - start
     saved = int(info[2])
     return CompiledRun(

@@ -165,6 +165,8 @@ def switching_diagnostics(
     t = np.asarray(t, dtype=float)
     sigma = np.asarray(sigma, dtype=float)
     sigma = sigma.reshape(len(t), -1)
+    if sigma.shape[1] == 0:  # a smooth law: nothing switches
+        return SwitchMonitor(sigma0=sigma[0] if len(t) else np.zeros(0)).stats()
     mon = SwitchMonitor(sigma0=sigma[0], t0=float(t[0]), tol=tol, chatter_factor=chatter_factor)
     for tk, sk in zip(t[1:], sigma[1:], strict=True):
         mon.record(float(tk), sk)
