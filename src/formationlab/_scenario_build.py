@@ -11,11 +11,22 @@ from __future__ import annotations
 import re
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
+from ._scenario_models import Lattice, StartAround
 from ._scenario_parts import Fail
 from .errors import UserInputError
+from .graph import edges_connected
+from .graphs import build_edges, nearest_gap, overlapping_pairs
 from .spec import AlphaValues, Formation
+from .templates import lattice
 
-__all__ = ["FIXED", "build_formation", "stem"]
+__all__ = ["DENSE_CHECK_MAX", "FIXED", "build_formation", "initial_positions", "stem"]
+
+#: Up to this many robots the start is checked by ``Formation.check_positions`` (all pairs);
+#: above, by a k-d tree (:func:`formationlab.graphs.overlapping_pairs`).
+DENSE_CHECK_MAX = 2000
 
 #: The keys of ``[controller]`` and ``[simulation]`` that are not the class's parameters.
 FIXED = {"controller": ("law", "alpha_values"), "simulation": ("integrator", "duration")}
@@ -31,7 +42,15 @@ def build_formation(
     ``from_alpha_table`` or ``from_distances``; appends warnings (non-rigid
     graph, default distances) to ``warnings``.
     """
-    n = len(rob.positions)
+    template = _template(frm, fail)
+    around = isinstance(rob.positions, StartAround)
+    if around and template is None:
+        raise fail(
+            "robots.positions",
+            'positions = { around = "template", ... } needs formation.template (a list of '
+            'points or { lattice = "triangular", count = ..., spacing = ... })',
+        )
+    n = len(template) if around else len(rob.positions)  # type: ignore[arg-type]
     if isinstance(rob.diameters, list) and len(rob.diameters) != n:
         raise fail(
             "robots.diameters",
@@ -40,13 +59,14 @@ def build_formation(
         )
     orientation = frm.orientation
     if orientation is None:
-        orientation = "template" if frm.template is not None else "table" if frm.alpha else "free"
-    if frm.template is not None:
-        if len(frm.template) != n:
+        orientation = "template" if template is not None else "table" if frm.alpha else "free"
+    if template is not None:
+        if len(template) != n:
             raise fail(
                 "formation.template",
-                f"the template has {len(frm.template)} points but there are {n} robots "
-                "(robots.positions); give one template point per robot",
+                f"the template has {len(template)} points but there are {n} robots "
+                "(robots.positions); give one template point per robot, or start around it "
+                'with robots.positions = { around = "template", sigma = ... }',
             )
         if frm.distances is not None:
             raise fail(
@@ -81,15 +101,25 @@ def build_formation(
                 "formation.alpha",
                 f'an alpha table is only used with orientation = "table", got "{orientation}"',
             )
+    built = isinstance(frm.edges, dict) or frm.edges in ("delaunay", "henneberg")
+    if built and template is None:
+        raise fail(
+            "formation.edges",
+            f"edges = {_edges_text(frm.edges)} builds the graph from the template's points; "
+            "add formation.template (a list of points or { lattice = ... }) or give the "
+            "edges as a list of pairs [i, j]",
+        )
     distances = 1.0 if frm.distances is None else frm.distances
     try:
-        if frm.template is not None:
+        if template is not None:
+            edges = build_edges(frm.edges, template) if built else frm.edges
             formation = Formation.from_template(
-                frm.template,
-                edges=frm.edges,
+                template,
+                edges=edges,
                 diameters=rob.diameters,
                 orientation=orientation,  # type: ignore[arg-type]
                 alpha_values=alpha_values,
+                one_based=not built,
             )
         elif orientation == "table":
             formation = Formation.from_alpha_table(
@@ -106,9 +136,9 @@ def build_formation(
             )
     except UserInputError as exc:
         raise fail(_formation_key(exc, frm), str(exc)) from None
-    if frm.distances is None and frm.template is None:
+    if frm.distances is None and template is None:
         warnings.append("formation.distances not given: every d_ij = 1")
-    if not formation.is_connected:
+    if not edges_connected(formation.edges, formation.n):
         raise fail(
             "formation.edges",
             "the graph is not connected, so the formation cannot hold together; add edges "
@@ -120,6 +150,82 @@ def build_formation(
             f"it rigid; {n} robots need at least {2 * n - 3} well-placed edges)"
         )
     return formation
+
+
+def _template(frm: Any, fail: Fail) -> NDArray[np.float64] | None:
+    """The template's points: the list given, or the lattice patch (``templates.lattice``)."""
+    if frm.template is None:
+        return None
+    if isinstance(frm.template, Lattice):
+        try:
+            return lattice(frm.template.lattice, frm.template.count, frm.template.spacing)
+        except UserInputError as exc:
+            raise fail("formation.template", str(exc)) from None
+    return np.asarray(frm.template, dtype=float)
+
+
+def _edges_text(edges: Any) -> str:
+    if isinstance(edges, dict):
+        key, value = next(iter(edges.items()))
+        return f"{{ {key} = {value} }}"
+    return f'"{edges}"'
+
+
+def initial_positions(rob: Any, formation: Formation, fail: Fail) -> NDArray[np.float64]:
+    """The start ``q0`` (n, 2) of ``[robots] positions``: the list, or around the template.
+
+    Checked for overlapping robots (all pairs up to :data:`DENSE_CHECK_MAX`
+    robots, a k-d tree above); a perturbed start that overlaps names the robots
+    and suggests a smaller ``sigma`` or another ``seed``.
+    """
+    start = rob.positions
+    if isinstance(start, StartAround):
+        assert formation.template is not None  # build_formation requires it
+        rng = np.random.default_rng(start.seed)
+        noise = rng.normal(scale=start.sigma, size=formation.template.shape)
+        q0 = formation.template + noise
+    else:
+        q0 = np.asarray(start, dtype=float)
+    if not isinstance(start, StartAround) and formation.n <= DENSE_CHECK_MAX:
+        try:
+            return formation.check_positions(q0)
+        except UserInputError as exc:
+            raise fail("robots.positions", str(exc)) from None
+    if not np.all(np.isfinite(q0)):
+        raise fail("robots.positions", "initial positions hold NaN or infinite numbers")
+    pairs = overlapping_pairs(q0, formation.diameters)
+    if len(pairs):
+        i, j = pairs[0]
+        r = float(np.linalg.norm(q0[j] - q0[i]))
+        a = 0.5 * float(formation.diameters[i] + formation.diameters[j])
+        what = f"robots {i + 1} and {j + 1} overlap"
+        if isinstance(start, StartAround):
+            tip = _sigma_hint(formation, start.sigma)
+            raise fail(
+                "robots.positions",
+                f"{what} in the start drawn around the template (sigma = {start.sigma:g}, "
+                f"seed = {start.seed}): distance {r:g} <= a_{i + 1},{j + 1} = {a:g} "
+                f"({len(pairs)} overlapping pairs); {tip}",
+            )
+        raise fail(
+            "robots.positions",
+            f"{what} in the initial positions: distance {r:g} <= a_{i + 1}{j + 1} = {a:g}; "
+            "move them apart or use smaller diameters",
+        )
+    return q0
+
+
+def _sigma_hint(formation: Formation, sigma: float) -> str:
+    """Advice for a perturbed start that overlaps: a sigma that keeps robots apart."""
+    tpl = formation.template
+    assert tpl is not None
+    gap = nearest_gap(tpl, formation.diameters)
+    if gap <= 0:
+        return "the template itself has touching robots: use smaller diameters or a larger spacing"
+    # the difference of two starts has std sigma * sqrt(2) per axis; keep the gap ~8 std wide
+    good = 10.0 ** np.floor(np.log10(gap / (8.0 * np.sqrt(2.0))))
+    good = min(good * np.floor(gap / (8.0 * np.sqrt(2.0)) / good), sigma / 2)
+    return f"use a smaller sigma (e.g. sigma = {good:.2g}) or another seed"
 
 
 #: Scenario keys of the formation builders' parameters (``FormationError.key``).

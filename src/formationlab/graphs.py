@@ -36,6 +36,8 @@ __all__ = [
     "delaunay_edges",
     "henneberg_edges",
     "knn_edges",
+    "nearest_gap",
+    "overlapping_pairs",
     "within_edges",
 ]
 
@@ -138,7 +140,7 @@ def _peel(
     open_side = nbr < 0  # side k (opposite vertex k) lies on the boundary
     for t, k in np.argwhere(open_side):
         boundary[simp[t, (k + 1) % 3]] = boundary[simp[t, (k + 2) % 3]] = True
-    queue = list(np.flatnonzero(open_side.any(axis=1)))
+    queue: list[int] = np.flatnonzero(open_side.any(axis=1)).tolist()
     while queue:
         t = int(queue.pop())
         if not alive[t]:
@@ -293,7 +295,7 @@ def build_edges(spec: str | Mapping[str, Any] | ArrayLike, points: ArrayLike) ->
         if spec == "henneberg":
             return henneberg_edges(points)
         raise FormationError(
-            f'unknown graph {spec!r}{suggest(spec, BUILDERS)} Known: "complete", '
+            f'unknown graph {spec!r}{suggest(spec, BUILDERS) or "."} Known: "complete", '
             '"delaunay", "henneberg", { knn = k }, { within = r }, or a list of pairs',
             key="edges",
         )
@@ -309,3 +311,41 @@ def build_edges(spec: str | Mapping[str, Any] | ArrayLike, points: ArrayLike) ->
             return knn_edges(points, spec["knn"])
         return within_edges(points, spec["within"])
     raise FormationError(f"not a graph name or table: {spec!r}", key="edges")
+
+
+def overlapping_pairs(q: ArrayLike, diameters: ArrayLike) -> NDArray[np.int64]:
+    """Pairs of robots that touch or overlap: ``|q_i - q_j| <= a_ij = (rho_i + rho_j) / 2``.
+
+    A k-d tree search, so it works for 100,000 robots (``Formation.check_positions``
+    compares all pairs).
+
+    Parameters
+    ----------
+    q : array_like, shape (n, 2)
+    diameters : array_like, shape (n,)
+
+    Returns
+    -------
+    ndarray of int, shape (p, 2)
+        0-based pairs ``i < j``, sorted.
+    """
+    pts = np.asarray(q, dtype=float)
+    d = np.asarray(diameters, dtype=float)
+    pairs = cKDTree(pts).query_pairs(float(np.max(d)), output_type="ndarray").astype(np.int64)
+    pairs = _sorted_unique(pairs[:, 0], pairs[:, 1]) if len(pairs) else pairs.reshape(0, 2)
+    r = np.linalg.norm(pts[pairs[:, 1]] - pts[pairs[:, 0]], axis=-1)
+    return pairs[r <= 0.5 * (d[pairs[:, 0]] + d[pairs[:, 1]])]
+
+
+def nearest_gap(q: ArrayLike, diameters: ArrayLike) -> float:
+    """The smallest clearance ``|q_i - q_j| - a_ij`` over each robot's nearest neighbour.
+
+    Parameters
+    ----------
+    q : array_like, shape (n, 2)
+    diameters : array_like, shape (n,)
+    """
+    pts = np.asarray(q, dtype=float)
+    d = np.asarray(diameters, dtype=float)
+    dist, idx = cKDTree(pts).query(pts, k=2)
+    return float(np.min(dist[:, 1] - 0.5 * (d + d[idx[:, 1]])))

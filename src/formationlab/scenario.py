@@ -35,7 +35,7 @@ import tomli_w
 from numpy.typing import NDArray
 from pydantic import ValidationError
 
-from ._scenario_build import FIXED, build_formation, stem
+from ._scenario_build import FIXED, build_formation, initial_positions, stem
 from ._scenario_models import SECTIONS, ScenarioModel
 from ._scenario_parts import build_entry
 from .controllers import LAWS, Law
@@ -234,10 +234,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         return ScenarioError(f"{source}: {where}{at}: {message}", key=where)
 
     formation = build_formation(rob, frm, ctl.alpha_values, fail, warnings)
-    try:
-        q0 = formation.check_positions(np.asarray(rob.positions, dtype=float))
-    except UserInputError as exc:
-        raise fail("robots.positions", str(exc)) from None
+    q0 = initial_positions(rob, formation, fail)
     q0.setflags(write=False)  # the scenario is frozen, its arrays too
 
     study_laws = (model.study or {}).get("laws")

@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import FormationError
-from .validation import suggest
+from .validation import choices
 
 __all__ = ["LATTICES", "LatticeKind", "lattice"]
 
@@ -74,7 +74,7 @@ def lattice(kind: str, count: int, spacing: float = 1.0) -> NDArray[np.float64]:
     """
     if kind not in LATTICES:
         raise FormationError(
-            f"unknown lattice {kind!r}{suggest(str(kind), LATTICES)} Known: {', '.join(LATTICES)}",
+            f"unknown lattice {kind!r}{choices(str(kind), LATTICES)}",
             key="template",
         )
     if isinstance(count, bool) or not isinstance(count, int | np.integer) or count < 2:
