@@ -29,8 +29,7 @@ def lattice_text(
 ) -> str:
     return (
         f"[robots]\npositions = {positions}\ndiameters = {diameters}\n"
-        f"[formation]\ntemplate = {template}\nedges = {edges}\norientation = {orientation}\n"
-        + TAIL
+        f"[formation]\ntemplate = {template}\nedges = {edges}\norientation = {orientation}\n" + TAIL
     )
 
 

@@ -57,11 +57,15 @@ BUILDERS = ("complete", "delaunay", "henneberg", "knn", "within")
 
 
 def _sorted_unique(i: NDArray[np.int64], j: NDArray[np.int64]) -> NDArray[np.int64]:
-    """Pairs ``(min, max)``, without repeats, sorted; shape ``(m, 2)``."""
-    lo, hi = np.minimum(i, j), np.maximum(i, j)
+    """Pairs ``(min, max)``, without repeats or loops, sorted; shape ``(m, 2)``."""
+    lo, hi = np.minimum(i, j).astype(np.int64), np.maximum(i, j).astype(np.int64)
     keep = lo != hi
-    pairs = np.unique(np.stack([lo[keep], hi[keep]], axis=1).astype(np.int64), axis=0)
-    return pairs.reshape(-1, 2)
+    lo, hi = lo[keep], hi[keep]
+    if lo.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    base = int(hi.max()) + 1
+    key = np.unique(lo * base + hi)  # one integer per pair: sorts as (lo, hi)
+    return np.stack([key // base, key % base], axis=1)
 
 
 def _points(points: ArrayLike) -> NDArray[np.float64]:

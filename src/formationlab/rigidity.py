@@ -142,7 +142,8 @@ def _reduce(edges: NDArray[np.int64], n: int) -> tuple[NDArray[np.int64], int, i
     body = rigid_bodies(edges, n)
     nb = int(body.max()) + 1
     ends = np.concatenate([edges[:, 0], edges[:, 1]])
-    vb = np.unique(np.stack([ends, np.tile(body, 2)], axis=1), axis=0)  # (vertex, body)
+    key = np.unique(ends * nb + np.tile(body, 2))
+    vb = np.stack([key // nb, key % nb], axis=1)  # (vertex, body) incidences, sorted
     per_vertex = np.bincount(vb[:, 0], minlength=n)
     if nb == 1:
         return np.zeros((0, 2), dtype=np.int64), 0, 2 * int(np.count_nonzero(per_vertex)) - 3
@@ -166,7 +167,9 @@ def _reduce(edges: NDArray[np.int64], n: int) -> tuple[NDArray[np.int64], int, i
     )
     used, inverse = np.unique(red, return_inverse=True)
     red = inverse.reshape(-1, 2).astype(np.int64)
-    red = np.unique(np.sort(red, axis=1), axis=0)  # bodies sharing two vertices repeat an edge
+    lo, hi = np.minimum(red[:, 0], red[:, 1]), np.maximum(red[:, 0], red[:, 1])
+    key = np.unique(lo * len(used) + hi)  # bodies sharing two vertices repeat an edge
+    red = np.stack([key // len(used), key % len(used)], axis=1)
     return red, len(used), carried
 
 
