@@ -1,25 +1,38 @@
 """Partial communication: outcome fractions over graph families for N = 4 to 8 robots.
 
 The paper leaves "partial communication between robots" as future work. This script
-writes one scenario per (N, graph family) under examples/graph-families/, and, once
-``formationlab study`` has run each of them, collects their summaries into the tables
-and the figure of docs/swarms.md.
+writes one scenario per (template, N, graph family) under examples/graph-families/, and,
+once ``formationlab study`` has run each of them, collects their summaries into the
+tables and the figures of docs/swarms.md.
 
     python benchmarks/graph_families.py write
-    for f in examples/graph-families/*.toml; do
-        formationlab study "$f" --seed 1 --out "out/graph-families/$(basename "$f" .toml)"
+    for t in polygon lattice; do
+        for f in examples/graph-families/$t/*.toml; do
+            formationlab study "$f" --seed 1 --out "out/graph-families/$t/$(basename "$f" .toml)"
+        done
     done
-    python benchmarks/graph_families.py tables out/graph-families
+    python benchmarks/graph_families.py tables polygon out/graph-families/polygon
+    python benchmarks/graph_families.py tables lattice out/graph-families/lattice
+    python benchmarks/graph_families.py lattices      # docs/figures/lattices.png
 
-Families, on one template per N (a patch of the triangular lattice of spacing 1 whose
-points are moved by a fixed random offset, std 0.1, seed N, so that no three points are
-collinear and the template has an orientation everywhere):
+Templates, one per N:
+
+* ``polygon``: the regular N-gon of side 1 (robots counter-clockwise). Every triangle of
+  its vertices has ``|c_ijk| >= sin(2 pi / N) >= 0.71 > theta = 0.5``.
+* ``lattice``: a patch of the triangular lattice of spacing 1 whose points are moved by a
+  fixed random offset (std 0.1, seed N), so that no three are exactly collinear; nearly
+  collinear neighbours make triangles thinner than theta.
+
+Families:
 
 * ``complete``: every pair;
-* ``delaunay``: the Delaunay triangulation (rigid, made of triangles);
+* ``triangulated`` (polygon): the sides and the short diagonals ``i, i + 2``: rigid, made
+  of triangles, 2N edges (3 more than needed; for N = 4 the complete graph);
+* ``delaunay`` (lattice): the Delaunay triangulation (rigid, made of triangles);
 * ``henneberg``: minimally rigid, 2N - 3 edges (Henneberg type-I steps);
-* ``tree``: the Euclidean minimum spanning tree (N - 1 edges, not rigid);
-* ``cycle-chord``: the polygon through the points in angular order and one chord from
+* ``tree``: the Euclidean minimum spanning tree (N - 1 edges, not rigid; on the polygon
+  the path 1-2-...-N);
+* ``cycle-chord``: the cycle through the points in angular order and one chord from
   robot 1 to the opposite robot (N + 1 edges; rigid only for N = 4).
 """
 
@@ -40,22 +53,35 @@ from formationlab.templates import lattice
 ROOT = Path(__file__).resolve().parents[1]
 FOLDER = ROOT / "examples" / "graph-families"
 SIZES = (4, 5, 6, 7, 8)
-FAMILIES = ("complete", "delaunay", "henneberg", "tree", "cycle-chord")
+FAMILIES = {
+    "polygon": ("complete", "triangulated", "henneberg", "tree", "cycle-chord"),
+    "lattice": ("complete", "delaunay", "henneberg", "tree", "cycle-chord"),
+}
 LAWS = ("distance", "angle-restricted")
 TRIALS = 500
 
 
-def template(n: int) -> np.ndarray:
+def template(kind: str, n: int) -> np.ndarray:
     """The template of ``n`` robots, shape (n, 2)."""
+    if kind == "polygon":
+        angle = 2.0 * np.pi * np.arange(n) / n
+        radius = 0.5 / np.sin(np.pi / n)  # side 1
+        return radius * np.stack([np.cos(angle), np.sin(angle)], axis=1)
     pts = lattice("triangular", n, 1.0)
     return pts + np.random.default_rng(n).normal(scale=0.1, size=pts.shape)
 
 
-def edges(n: int, family: str) -> np.ndarray | str:
+def edges(kind: str, n: int, family: str) -> np.ndarray | str:
     """The graph of a family: a builder's name, or 0-based pairs (m, 2)."""
-    pts = template(n)
+    pts = template(kind, n)
     if family in ("complete", "delaunay", "henneberg"):
         return family
+    if family == "triangulated":
+        i = np.arange(n)
+        pairs = np.concatenate([np.stack([i, (i + 1) % n], 1), np.stack([i, (i + 2) % n], 1)])
+        return np.unique(np.sort(pairs, axis=1), axis=0)
+    if family == "tree" and kind == "polygon":
+        return np.stack([np.arange(n - 1), np.arange(1, n)], axis=1)
     if family == "tree":
         full = build_edges("complete", pts)
         w = np.linalg.norm(pts[full[:, 1]] - pts[full[:, 0]], axis=1)
@@ -68,15 +94,16 @@ def edges(n: int, family: str) -> np.ndarray | str:
     return np.sort(np.concatenate([cyc, chord]), axis=1)
 
 
-def scenario(n: int, family: str) -> str:
-    pts = template(n)
-    e = edges(n, family)
+def scenario(kind: str, n: int, family: str) -> str:
+    pts = template(kind, n)
+    e = edges(kind, n, family)
     e_text = f'"{e}"' if isinstance(e, str) else json.dumps((np.asarray(e) + 1).tolist())
     tpl = json.dumps(np.round(pts, 6).tolist())
     return f"""\
-# Partial communication, generated by benchmarks/graph_families.py: {n} robots, {family} graph.
-name = "n{n}-{family}"
-description = "{n} robots, {family} graph, distance and angle-restricted laws, box starts"
+# Partial communication, generated by benchmarks/graph_families.py: {n} robots, {kind}
+# template, {family} graph.
+name = "{kind}-n{n}-{family}"
+description = "{n} robots, {kind} template, {family} graph: distance and angle-restricted laws"
 
 [robots]
 positions = {{ around = "template", sigma = 0.1, seed = 1 }}
@@ -108,14 +135,17 @@ chunk_size = {TRIALS}
 
 
 def write() -> None:
-    FOLDER.mkdir(parents=True, exist_ok=True)
-    for n in SIZES:
-        for family in FAMILIES:
-            (FOLDER / f"n{n}-{family}.toml").write_text(scenario(n, family), encoding="utf-8")
-    print(f"wrote {len(SIZES) * len(FAMILIES)} scenarios to {FOLDER}")
+    for kind, families in FAMILIES.items():
+        folder = FOLDER / kind
+        folder.mkdir(parents=True, exist_ok=True)
+        for n in SIZES:
+            for family in families:
+                text = scenario(kind, n, family)
+                (folder / f"n{n}-{family}.toml").write_text(text, encoding="utf-8")
+        print(f"wrote {len(SIZES) * len(families)} scenarios to {folder}")
 
 
-def tables(out: Path) -> None:
+def tables(kind: str, out: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -123,12 +153,13 @@ def tables(out: Path) -> None:
 
     from formationlab.io.scenario import load_scenario
 
+    families = FAMILIES[kind]
     rows = {}
     for n in SIZES:
-        for family in FAMILIES:
+        for family in families:
             name = f"n{n}-{family}"
             summary = json.loads((out / name / "summary.json").read_text(encoding="utf-8"))
-            sc = load_scenario(FOLDER / f"{name}.toml")
+            sc = load_scenario(FOLDER / kind / f"{name}.toml")
             rigid = is_rigid(sc.formation.edges, sc.n)
             for group in summary["groups"]:
                 rows[(n, family, group["law"])] = (len(sc.formation.edges), rigid, group)
@@ -138,7 +169,7 @@ def tables(out: Path) -> None:
         print("| N | graph | edges | rigid | " + " | ".join(outcomes) + " |")
         print("| --- | --- | --- | --- | " + " | ".join("---" for _ in outcomes) + " |")
         for n in SIZES:
-            for family in FAMILIES:
+            for family in families:
                 m, rigid, g = rows[(n, family, law)]
                 frac = [100.0 * g["fractions"].get(o, 0.0) for o in outcomes]
                 print(
@@ -148,24 +179,54 @@ def tables(out: Path) -> None:
                 )
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True, layout="constrained")
     for ax, law in zip(axes, LAWS, strict=True):
-        for family in FAMILIES:
+        for family in families:
             y = [100.0 * rows[(n, family, law)][2]["fractions"].get("desired", 0.0) for n in SIZES]
             ax.plot(SIZES, y, marker="o", label=family)
-        ax.set_title(law)
+        ax.set_title(f"{law}, {kind} templates")
         ax.set_xlabel("robots N")
         ax.set_xticks(SIZES)
         ax.grid(alpha=0.3)
     axes[0].set_ylabel("desired (% of trials)")
     axes[1].legend(title="graph")
-    target = ROOT / "docs" / "figures" / "graph-families.png"
+    target = ROOT / "docs" / "figures" / f"graph-families-{kind}.png"
     fig.savefig(target, dpi=120)
     print(f"\nwrote {target}")
+
+
+def lattices() -> None:
+    """Three lattice patches of 60 points under three graph builders (docs/figures/lattices.png)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import LineCollection
+
+    kinds = ("triangular", "square", "hexagonal")
+    graphs: tuple[str | dict[str, int], ...] = ("delaunay", "henneberg", {"knn": 3})
+    fig, axes = plt.subplots(3, 3, figsize=(9, 9), layout="constrained")
+    for r, kind in enumerate(kinds):
+        pts = lattice(kind, 60, 1.0)
+        for c, spec in enumerate(graphs):
+            e = build_edges(spec, pts)
+            ax = axes[r, c]
+            ax.add_collection(LineCollection(pts[e], colors="0.4", linewidths=0.8))
+            ax.plot(pts[:, 0], pts[:, 1], "o", ms=3, color="tab:blue")
+            rigid = "rigid" if is_rigid(e, len(pts)) else "not rigid"
+            name = spec if isinstance(spec, str) else f"knn = {spec['knn']}"
+            ax.set_title(f"{kind}, {name}: {len(e)} edges, {rigid}", fontsize=9)
+            ax.set_aspect("equal")
+            ax.set_axis_off()
+    target = ROOT / "docs" / "figures" / "lattices.png"
+    fig.savefig(target, dpi=110)
+    print(f"wrote {target}")
 
 
 if __name__ == "__main__":
     if sys.argv[1:2] == ["write"]:
         write()
-    elif sys.argv[1:2] == ["tables"] and len(sys.argv) == 3:
-        tables(Path(sys.argv[2]))
+    elif sys.argv[1:2] == ["lattices"]:
+        lattices()
+    elif sys.argv[1:2] == ["tables"] and len(sys.argv) == 4 and sys.argv[2] in FAMILIES:
+        tables(sys.argv[2], Path(sys.argv[3]))
     else:
         raise SystemExit(__doc__)

@@ -193,3 +193,34 @@ def test_bad_input(case: str) -> None:
         parse_scenario(text)
     assert info.value.key == key, str(info.value)
     assert message in str(info.value)
+
+
+THIN = """
+[robots]
+positions = [[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]
+[formation]
+template = [[0.0, 0.0], [1.0, 0.0], [0.5, {h}]]
+orientation = "{orientation}"
+[controller]
+law = "angle-restricted"
+theta = {theta}
+[simulation]
+duration = 1.0
+"""
+
+
+@pytest.mark.parametrize("orientation", ["template", "mirror"])
+def test_a_template_triangle_thinner_than_theta_is_a_warning(orientation: str) -> None:
+    # c_123 = 1 * 0.2 = 0.2 (twice the area) <= theta = 0.5: the restriction stays on at the
+    # desired shape, so the angular term pushes there and it is not an equilibrium
+    sc = parse_scenario(THIN.format(h=0.2, theta=0.5, orientation=orientation))
+    (msg,) = [w for w in sc.warnings if "restrictions" in w]
+    assert "1 of the 1 restrictions of law 'angle-restricted' are on at the desired shape" in msg
+    assert "|c_123| = 0.2 <= theta = 0.5" in msg and "use theta below 0.2" in msg
+    target = sc.formation.template * ([-1.0, 1.0] if orientation == "mirror" else [1.0, 1.0])
+    u = sc.law.control(sc.formation, target)
+    assert np.max(np.abs(u)) > 0.1  # the desired shape is not an equilibrium
+    # below the bound the warning goes and the desired shape is an equilibrium
+    ok = parse_scenario(THIN.format(h=0.2, theta=0.19, orientation=orientation))
+    assert not [w for w in ok.warnings if "restrictions" in w]
+    np.testing.assert_allclose(ok.law.control(ok.formation, target), 0.0, atol=1e-12)

@@ -22,7 +22,14 @@ from .graphs import build_edges, nearest_gap, overlapping_pairs
 from .spec import AlphaValues, Formation
 from .templates import lattice
 
-__all__ = ["DENSE_CHECK_MAX", "FIXED", "build_formation", "initial_positions", "stem"]
+__all__ = [
+    "DENSE_CHECK_MAX",
+    "FIXED",
+    "build_formation",
+    "initial_positions",
+    "restrictions_on_at_target",
+    "stem",
+]
 
 #: Up to this many robots the start is checked by ``Formation.check_positions`` (all pairs);
 #: above, by a k-d tree (:func:`formationlab.graphs.overlapping_pairs`).
@@ -226,6 +233,42 @@ def _sigma_hint(formation: Formation, sigma: float) -> str:
     good = 10.0 ** np.floor(np.log10(gap / (8.0 * np.sqrt(2.0))))
     good = min(good * np.floor(gap / (8.0 * np.sqrt(2.0)) / good), sigma / 2)
     return f"use a smaller sigma (e.g. sigma = {good:.2g}) or another seed"
+
+
+def restrictions_on_at_target(formation: Formation, law: Any) -> str | None:
+    """A warning when restrictions of a switching law are on at the desired shape, else ``None``.
+
+    The restriction of eq. (14) is on while ``alpha_ijk c_ijk + theta >= 0``. At the
+    template (or its mirror image) ``alpha_ijk c_ijk = -|c_ijk|`` for sign-valued alpha, so
+    a template triangle with ``|c_ijk| <= theta`` (thinner than theta: nearly collinear
+    neighbours) keeps its restriction on, its angular term pushes, and the desired shape is
+    not an equilibrium of the law: random starts then almost never reach it.
+    """
+    switching = getattr(law, "switching", None)
+    theta = getattr(law, "theta", None)
+    if switching is None or theta is None or formation.alpha is None:
+        return None
+    if formation.template is None or formation.orientation not in ("template", "mirror"):
+        return None
+    shape = formation.template
+    if formation.orientation == "mirror":
+        shape = shape * np.array([-1.0, 1.0])
+    sigma = np.asarray(switching(formation, shape))
+    on = np.flatnonzero(sigma >= 0)
+    if on.size == 0:
+        return None
+    tris, beta, _ = formation.surfaces
+    worst = on[np.argmax(sigma[on])]
+    a, b, c = (int(x) + 1 for x in tris[worst])
+    area = abs(float(sigma[worst] - theta) / float(beta[worst]))  # |c_abc|
+    bound = float(np.min(theta - sigma))  # the smallest |beta_s c_abc| at the desired shape
+    tip = f"use theta below {bound:.3g} (the thinnest restricted triangle), " if bound > 0 else ""
+    return (
+        f"{on.size} of the {sigma.size} restrictions of law {law.name!r} are on at the desired "
+        f"shape (e.g. robots {a}, {b}, {c}: |c_{a}{b}{c}| = {area:.3g} <= theta = {theta:g}, a "
+        "triangle thinner than theta), so the desired formation is not an equilibrium of the "
+        f"law; {tip}a template without such thin triangles, or a graph without these triples"
+    )
 
 
 #: Scenario keys of the formation builders' parameters (``FormationError.key``).

@@ -35,7 +35,13 @@ import tomli_w
 from numpy.typing import NDArray
 from pydantic import ValidationError
 
-from ._scenario_build import FIXED, build_formation, initial_positions, stem
+from ._scenario_build import (
+    FIXED,
+    build_formation,
+    initial_positions,
+    restrictions_on_at_target,
+    stem,
+)
 from ._scenario_models import SECTIONS, ScenarioModel
 from ._scenario_parts import build_entry
 from .controllers import LAWS, Law
@@ -258,6 +264,9 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
             f"law {law.name!r} has an angular term but the orientation is free, so it acts as "
             'the distance law; set formation.orientation (e.g. "template") to use it'
         )
+    thin = restrictions_on_at_target(formation, law)
+    if thin:
+        warnings.append(thin)
     integrator, ignored_integrator = build_entry(
         INTEGRATORS,
         LAWS,
