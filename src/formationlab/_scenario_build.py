@@ -242,7 +242,9 @@ def restrictions_on_at_target(formation: Formation, law: Any) -> str | None:
     template (or its mirror image) ``alpha_ijk c_ijk = -|c_ijk|`` for sign-valued alpha, so
     a template triangle with ``|c_ijk| <= theta`` (thinner than theta: nearly collinear
     neighbours) keeps its restriction on, its angular term pushes, and the desired shape is
-    not an equilibrium of the law: random starts then almost never reach it.
+    not an equilibrium of the law: with a rigid graph, random starts then almost never reach
+    it (docs/swarms.md); with a graph that is not rigid, another shape with the same
+    distances may still be reached.
     """
     switching = getattr(law, "switching", None)
     theta = getattr(law, "theta", None)
@@ -263,11 +265,17 @@ def restrictions_on_at_target(formation: Formation, law: Any) -> str | None:
     area = abs(float(sigma[worst] - theta) / float(beta[worst]))  # |c_abc|
     bound = float(np.min(theta - sigma))  # the smallest |beta_s c_abc| at the desired shape
     tip = f"use theta below {bound:.3g} (the thinnest restricted triangle), " if bound > 0 else ""
+    what = (
+        "the desired formation is not an equilibrium of the law"
+        if formation.is_rigid
+        else "the template itself is not an equilibrium of the law (the graph is not rigid: "
+        "another shape with the same distances may be)"
+    )
     return (
         f"{on.size} of the {sigma.size} restrictions of law {law.name!r} are on at the desired "
         f"shape (e.g. robots {a}, {b}, {c}: |c_{a}{b}{c}| = {area:.3g} <= theta = {theta:g}, a "
-        "triangle thinner than theta), so the desired formation is not an equilibrium of the "
-        f"law; {tip}a template without such thin triangles, or a graph without these triples"
+        f"triangle thinner than theta), so {what}; {tip}a template without such thin "
+        "triangles, or a graph without these triples"
     )
 
 
