@@ -280,3 +280,30 @@ def test_rigidity_at_ten_thousand_robots() -> None:
     tree = np.stack([np.arange(1, 10_000) // 2, np.arange(1, 10_000)], axis=1)
     assert edges_connected(tree, 10_000) and not is_rigid(tree, 10_000)
     assert not edges_connected(e[np.all(e != 0, axis=1)], 10_000)  # robot 1 cut off
+
+
+def _hinged(pts: np.ndarray) -> np.ndarray:
+    """Two minimally rigid halves joined by two bars plus one redundant edge in a half."""
+    e = delaunay_edges(pts)
+    left = pts[:, 0] < 0
+    parts = []
+    for side in (left, ~left):
+        idx = np.flatnonzero(side)
+        parts.append(idx[henneberg_edges(pts[idx])])
+    across = e[left[e[:, 0]] != left[e[:, 1]]][:2]
+    have = {tuple(x) for x in parts[0].tolist()}
+    extra = next(x for x in e[left[e[:, 0]] & left[e[:, 1]]].tolist() if tuple(x) not in have)
+    return np.unique(np.sort(np.concatenate([*parts, across, [extra]]), axis=1), axis=0)
+
+
+@pytest.mark.parametrize("n", [40, 10_000])
+def test_enough_edges_yet_hinged(n: int) -> None:
+    # 2n - 3 edges, so counting does not decide; the halves turn about a point
+    pts = lattice("triangular", n, 1.0)
+    g = _hinged(pts)
+    assert len(g) == 2 * n - 3
+    assert not is_rigid(g, n, method="pebble") and generic_rank_deficit(g, n) == 1
+    more = np.unique(np.concatenate([g, delaunay_edges(pts)]), axis=0)  # the triangulation
+    assert is_rigid(more, n, method="pebble") and generic_rank_deficit(more, n) == 0
+    if n <= 50:
+        assert not is_rigid(g, n, method="dense") and is_rigid(more, n, method="dense")

@@ -14,15 +14,18 @@ trustworthy zero pivot in floating point, the smallest singular values of a
 reliably, and an exact rank over a finite field needs sparse elimination
 whose fill-in or black-box cost (Wiedemann: ``O(n m)``) is out of reach.
 
-:func:`generic_rank_deficit` first grows rigid bodies (:func:`rigid_bodies`):
-from an unclaimed edge, it adds every vertex joined to the body by two
-unclaimed edges (a Henneberg type-I step, which keeps a body rigid) until none
-is left. A body is then replaced by a minimally rigid fan on the vertices it
-shares with the rest of the graph, and its other vertices are dropped (each
-carried exactly two independent edges): the rank changes by a known amount
-and rigidity is unchanged. Triangulated graphs (Delaunay, k-nearest on a
-lattice) collapse to one body in ``O(m)``; what is left goes through the
-pebble game, compiled with numba.
+:func:`generic_rank_deficit` first removes vertices of degree at most two one
+by one (each carries exactly its degree in rank; this undoes Henneberg type-I
+steps in any order). On what is left it grows rigid bodies
+(:func:`rigid_bodies`): from an unclaimed edge, it adds every vertex joined to
+the body by two unclaimed edges (a type-I step, which keeps a body rigid) until
+none is left. A body is then replaced by a minimally rigid fan on the vertices
+it shares with the rest of the graph, and its other vertices are dropped (each
+carried exactly two independent edges): the rank changes by a known amount and
+rigidity is unchanged. Henneberg graphs vanish in the first step and
+triangulated graphs (Delaunay, k-nearest on a lattice) collapse to one body,
+both in ``O(m)``; what is left goes through the pebble game, compiled with
+numba.
 
 Robots are 0-based here; edges ``(m, 2)`` with ``i != j``.
 """
@@ -210,17 +213,67 @@ def _bfs_edge_order(
     return np.lexsort((lo, hi))
 
 
+def _peel(edges: NDArray[np.int64], n: int) -> tuple[NDArray[np.int64], int, int, bool]:
+    """Remove vertices of degree <= 2 one by one: ``(core edges, core size, rank, low)``.
+
+    A vertex of degree ``d <= 2`` (with at least two other vertices left) carries
+    exactly ``d`` independent edges at a generic realisation, so the rank of the
+    graph is the rank removed plus the core's; this undoes Henneberg type-I steps
+    in any order. ``low`` tells whether a removed vertex had degree < 2 (then the
+    graph is not rigid). The core's vertices are renumbered from 0 in order.
+    """
+    m = len(edges)
+    start, half = _adjacency(edges, n)
+    nbr, eid, st = half[:, 0].tolist(), half[:, 1].tolist(), start.tolist()
+    deg = np.diff(start).tolist()
+    vertex_on, edge_on = [True] * n, [True] * m
+    left, carried, low = n, 0, False
+    queue = [v for v in range(n) if deg[v] <= 2]
+    while queue and left > 2:
+        v = queue.pop()
+        if not vertex_on[v] or deg[v] > 2:
+            continue
+        low = low or deg[v] < 2
+        carried += deg[v]
+        vertex_on[v] = False
+        left -= 1
+        for h in range(st[v], st[v + 1]):
+            e = eid[h]
+            if edge_on[e]:
+                edge_on[e] = False
+                w = nbr[h]
+                deg[w] -= 1
+                if deg[w] <= 2:
+                    queue.append(w)
+    keep = np.asarray(vertex_on, dtype=bool)
+    number = np.cumsum(keep) - 1
+    core = number[edges[np.asarray(edge_on, dtype=bool)]].reshape(-1, 2).astype(np.int64)
+    return core, int(left), carried, low
+
+
+def _core_rank(core: NDArray[np.int64], n: int, *, exact: bool) -> int | None:
+    """Generic rank of a graph with no vertex of degree <= 2 (see :func:`_reduce`).
+
+    ``None`` when ``exact`` is false and a body is hinged at one vertex (not rigid).
+    """
+    if n <= 2 or len(core) == 0:
+        return len(core)
+    reduced = _reduce(core, n)
+    if reduced is None:
+        return independent_edges(core, n) if exact else None
+    red, n_red, carried = reduced
+    return carried + (independent_edges(red, n_red) if len(red) else 0)
+
+
 def generic_rank_deficit(edges: NDArray[np.int64], n: int) -> int:
     """``2n - 3`` minus the generic rank of the rigidity matrix: 0 when rigid (n >= 2)."""
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
-    full = 2 * n - 3
     if len(edges) == 0:
-        return full
-    reduced = _reduce(edges, n)
-    if reduced is None:
-        return full - independent_edges(edges, n)
-    red, n_red, carried = reduced
-    return full - carried - (independent_edges(red, n_red) if len(red) else 0)
+        return 2 * n - 3
+    core, n_core, carried, _ = _peel(edges, n)
+    rank = _core_rank(core, n_core, exact=True)
+    assert rank is not None
+    return 2 * n - 3 - carried - rank
 
 
 def is_generically_rigid(edges: NDArray[np.int64], n: int) -> bool:
@@ -241,9 +294,8 @@ def is_generically_rigid(edges: NDArray[np.int64], n: int) -> bool:
     graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
     if connected_components(graph, directed=False, return_labels=False) != 1:
         return False
-    reduced = _reduce(edges, n)
-    if reduced is None:
+    core, n_core, carried, low = _peel(edges, n)
+    if low:
         return False
-    red, n_red, carried = reduced
-    rank = carried + (independent_edges(red, n_red) if len(red) else 0)
-    return rank == 2 * n - 3
+    rank = _core_rank(core, n_core, exact=False)
+    return rank is not None and carried + rank == 2 * n - 3
