@@ -472,7 +472,9 @@ def test_square_sliding_mode_equilibrium():
         assert res.outcome[0] == "incorrect" and res.net_speed[0] <= 1e-3
         assert res.max_distance_error[0] > 0.9  # far from the square
     assert a.steps[0] == b.steps[0] == 4000  # the second test of the 2 s window
-    sim = fl.simulate(f, law, q0[0], duration=b.steps[0] * DT, integrator=fl.Euler(dt=DT))
+    sim = fl.simulate(
+        f, law, q0[0], duration=b.steps[0] * DT, integrator=fl.Euler(dt=DT), backend="numpy"
+    )
     np.testing.assert_allclose(sim.q[-1], b.q_final[0], rtol=0, atol=1e-9)
     # chattering amplifies rounding: the kernel's different order of operations ends
     # elsewhere in the chattering band (about dt |u|), not on the reference's state

@@ -341,7 +341,7 @@ def test_a_failed_write_leaves_the_previous_file_intact(
         raise OSError("disk full")
 
     monkeypatch.setattr(xr.Dataset, "to_netcdf", broken)
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(OSError, match=f"cannot write trajectory.nc in {tmp_path}: disk full"):
         write_trajectory(res, target)
     assert target.read_bytes() == b"previous results"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["trajectory.nc"]

@@ -8,7 +8,8 @@ must reproduce them bit for bit: the same arithmetic, step by step.
 import numpy as np
 import pytest
 
-from formationlab.paper import PaperSetup
+import formationlab as fl
+from formationlab.paper import PaperSetup, paper_formation, paper_law
 
 BEFORE = {
     (1, 0.0): [
@@ -28,6 +29,13 @@ BEFORE = {
 
 @pytest.mark.parametrize(("simulation", "perturbation"), list(BEFORE))
 def test_paper_runs_are_unchanged_to_the_last_bit(simulation, perturbation):
-    result = PaperSetup().run(simulation, perturbation=perturbation)
+    setup = PaperSetup()
+    args = (paper_formation(simulation), paper_law(), setup.initial(perturbation))
+    result = fl.simulate(*args, duration=setup.duration, backend="numpy")
     np.testing.assert_array_equal(result.q[-1].ravel(), np.array(BEFORE[simulation, perturbation]))
     assert result.status == "success"
+    compiled = fl.simulate(*args, duration=setup.duration, backend="numba")
+    assert compiled.stats["backend"] == "numba" and compiled.status == "success"
+    np.testing.assert_allclose(compiled.q, result.q, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(compiled.u, result.u, rtol=0, atol=1e-9)
+    assert compiled.summary()["outcome"] == result.summary()["outcome"]

@@ -15,7 +15,8 @@ import formationlab.templates
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_readme_python_example_runs(capsys):
+def test_readme_python_example_runs(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # the example saves its figure in the current folder
     text = (ROOT / "README.md").read_text()
     block = re.search(r"## Python API\s+```python\n(.*?)```", text, re.S)
     assert block, "README has no Python API example"
@@ -24,6 +25,7 @@ def test_readme_python_example_runs(capsys):
     exec(compile(code, "README.md", "exec"), {})
     out = capsys.readouterr().out.split()
     assert out[0] == "desired" and float(out[1]) < 1e-3
+    assert (tmp_path / "trajectories.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 @pytest.mark.parametrize(

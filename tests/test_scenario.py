@@ -92,11 +92,6 @@ def test_example_trajectories_agree_with_the_paper_command(simulation: int) -> N
     np.testing.assert_array_equal(got.q, ref.q)
 
 
-#: Examples whose orientation comes from a large lattice template: they need the sparse
-#: orientation data of issue 11 (collinear triples skipped, no n x n x n alpha array).
-NEEDS_SPARSE_ORIENTATION = {"lattice-1000-angle"}
-
-
 def test_every_example_validates() -> None:
     files = sorted(EXAMPLES.glob("*.toml"))
     names = {p.stem for p in files}
@@ -108,8 +103,6 @@ def test_every_example_validates() -> None:
         "ten-robots",
     } <= names
     for p in files:
-        if p.stem in NEEDS_SPARSE_ORIENTATION:
-            continue
         sc = load_scenario(p)
         assert edges_connected(sc.formation.edges, sc.n)
         assert sc.q0.shape == (sc.n, 2)

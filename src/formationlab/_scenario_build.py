@@ -19,11 +19,11 @@ from ._scenario_parts import Fail
 from .errors import UserInputError
 from .graph import edges_connected
 from .graphs import build_edges, nearest_gap, overlapping_pairs
+from .realisability import realisability_problems
 from .spec import AlphaValues, Formation
 from .templates import lattice
 
 __all__ = [
-    "DENSE_CHECK_MAX",
     "FIXED",
     "build_formation",
     "initial_positions",
@@ -31,9 +31,6 @@ __all__ = [
     "stem",
 ]
 
-#: Up to this many robots the start is checked by ``Formation.check_positions`` (all pairs);
-#: above, by a k-d tree (:func:`formationlab.graphs.overlapping_pairs`).
-DENSE_CHECK_MAX = 2000
 
 #: The keys of ``[controller]`` and ``[simulation]`` that are not the class's parameters.
 FIXED = {"controller": ("law", "alpha_values"), "simulation": ("integrator", "duration")}
@@ -156,6 +153,12 @@ def build_formation(
             "the graph is not rigid: the distances do not fix the shape (add edges to make "
             f"it rigid; {n} robots need at least {2 * n - 3} well-placed edges)"
         )
+    if template is None:  # a template realises its own distances
+        warnings.extend(
+            f"formation.distances cannot all be met: {p}; runs will not reach the desired "
+            "shape, check the distances"
+            for p in realisability_problems(formation)
+        )
     return formation
 
 
@@ -181,43 +184,30 @@ def _edges_text(edges: Any) -> str:
 def initial_positions(rob: Any, formation: Formation, fail: Fail) -> NDArray[np.float64]:
     """The start ``q0`` (n, 2) of ``[robots] positions``: the list, or around the template.
 
-    Checked for overlapping robots (all pairs up to :data:`DENSE_CHECK_MAX`
-    robots, a k-d tree above); a perturbed start that overlaps names the robots
-    and suggests a smaller ``sigma`` or another ``seed``.
+    Checked for overlapping robots (``Formation.check_positions``); a start drawn around
+    the template that overlaps names the first pair, counts the pairs and suggests a
+    smaller ``sigma`` or another ``seed``.
     """
     start = rob.positions
-    if isinstance(start, StartAround):
-        assert formation.template is not None  # build_formation requires it
-        rng = np.random.default_rng(start.seed)
-        noise = rng.normal(scale=start.sigma, size=formation.template.shape)
-        q0 = formation.template + noise
-    else:
-        q0 = np.asarray(start, dtype=float)
-    if not isinstance(start, StartAround) and formation.n <= DENSE_CHECK_MAX:
+    if not isinstance(start, StartAround):
         try:
-            return formation.check_positions(q0)
+            return formation.check_positions(np.asarray(start, dtype=float))
         except UserInputError as exc:
             raise fail("robots.positions", str(exc)) from None
-    if not np.all(np.isfinite(q0)):
-        raise fail("robots.positions", "initial positions hold NaN or infinite numbers")
+    assert formation.template is not None  # build_formation requires it
+    rng = np.random.default_rng(start.seed)
+    q0 = formation.template + rng.normal(scale=start.sigma, size=formation.template.shape)
     pairs = overlapping_pairs(q0, formation.diameters)
     if len(pairs):
         i, j = pairs[0]
         r = float(np.linalg.norm(q0[j] - q0[i]))
         a = 0.5 * float(formation.diameters[i] + formation.diameters[j])
-        what = f"robots {i + 1} and {j + 1} overlap"
-        if isinstance(start, StartAround):
-            tip = _sigma_hint(formation, start.sigma)
-            raise fail(
-                "robots.positions",
-                f"{what} in the start drawn around the template (sigma = {start.sigma:g}, "
-                f"seed = {start.seed}): distance {r:g} <= a_{i + 1},{j + 1} = {a:g} "
-                f"({len(pairs)} overlapping pairs); {tip}",
-            )
         raise fail(
             "robots.positions",
-            f"{what} in the initial positions: distance {r:g} <= a_{i + 1}{j + 1} = {a:g}; "
-            "move them apart or use smaller diameters",
+            f"robots {i + 1} and {j + 1} overlap in the start drawn around the template "
+            f"(sigma = {start.sigma:g}, seed = {start.seed}): distance {r:g} <= "
+            f"a_{i + 1},{j + 1} = {a:g} ({len(pairs)} overlapping pairs); "
+            + _sigma_hint(formation, start.sigma),
         )
     return q0
 

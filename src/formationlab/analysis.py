@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import ParameterError
-from .potentials import triple_products
+from .geometry import cross
 from .spec import Formation
 
 __all__ = [
@@ -109,11 +109,11 @@ def orientation_agreement(formation: Formation, q: ArrayLike) -> tuple[int, int]
 
     Counts ordered triples ``(i, j, k)``; a state with no restriction returns ``(0, 0)``.
     """
-    if formation.alpha is None:
-        return 0, 0
-    s = np.sign(triple_products(q)) * formation.desired_sign
-    mask = formation.restricted
-    return int(np.sum((s > 0) & mask)), int(np.sum((s <= 0) & mask))
+    q = np.asarray(q, dtype=float)
+    i, j, k = formation.restricted_triples.T
+    s = np.sign(cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :]))
+    s = s * formation.restricted_sign
+    return int(np.sum(s > 0)), int(np.sum(s <= 0))
 
 
 def classify(

@@ -142,8 +142,8 @@ def classify_batch(
     labels = np.array(OUTCOMES)
     code = {name: m for m, name in enumerate(OUTCOMES)}
     iu, ju = np.triu_indices(formation.n, k=1)
-    tri = np.argwhere(formation.restricted)  # (T, 3)
-    want = formation.desired_sign[tuple(tri.T)]
+    tri = formation.restricted_triples  # (T, 3)
+    want = formation.restricted_sign
     out = np.empty(n_trials, dtype=labels.dtype)
     for lo in range(0, n_trials, CLASSIFY_BLOCK):
         sl = slice(lo, min(n_trials, lo + CLASSIFY_BLOCK))

@@ -17,13 +17,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
+from itertools import pairwise
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .controllers import Law
 from .models import RobotModel, SingleIntegrator
-from .spec import Formation
+from .spec import DENSE_LIMIT, Formation
 from .status import Status
 
 __all__ = ["System"]
@@ -58,26 +59,54 @@ class System:
         return self.model.positions(np.asarray(x, dtype=float))
 
     @cached_property
-    def _pairs(self) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
+    def _all_pairs(self) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
         iu, ju = np.triu_indices(self.formation.n, k=1)
         return iu, ju, self.formation.contact_matrix[iu, ju]
 
+    def _pairs(self, *states: NDArray[np.float64]) -> tuple[NDArray, NDArray, NDArray, float]:
+        """The pairs whose clearance can matter at ``states``, with ``a_ij`` and a floor.
+
+        Every pair for small formations (floor ``inf``); beyond ``DENSE_LIMIT`` robots
+        the pairs closer than ``max a + max(max a, 2 * largest move between the states)``
+        in some state (a k-d tree query), and the floor below which no other pair's
+        clearance can be.
+        """
+        f = self.formation
+        if f.n <= DENSE_LIMIT:
+            return (*self._all_pairs, np.inf)
+        from .neighbours import close_pairs
+
+        qs = [np.asarray(self.positions(x), dtype=float) for x in states]
+        move = max((float(np.nanmax(np.abs(b - a))) for a, b in pairwise(qs)), default=0.0)
+        top = float(f.diameters.max())
+        cutoff = top + max(top, 2.0 * 1.5 * move)  # 1.5 > sqrt(2): the move's norm
+        p = close_pairs(np.stack(qs), cutoff)
+        a = 0.5 * (f.diameters[p[:, 0]] + f.diameters[p[:, 1]])
+        return p[:, 0], p[:, 1], a, cutoff - top
+
     def pair_clearances(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
-        """``r_ij - a_ij`` of every pair ``i < j``; ``(..., n, k) -> (..., n (n - 1) / 2)``."""
-        iu, ju, a = self._pairs
+        """``r_ij - a_ij`` of the pairs ``i < j`` (all, or the close ones: :meth:`_pairs`)."""
+        return self._clearances(x, *self._pairs(x)[:3])
+
+    def _clearances(self, x: NDArray, iu: NDArray, ju: NDArray, a: NDArray) -> NDArray:
         q = self.positions(x)
         d = q[..., ju, :] - q[..., iu, :]
         return np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) - a
 
     def clearance(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Least ``r_ij - a_ij`` over all pairs; shape ``(...)``."""
-        return np.min(self.pair_clearances(x), axis=-1)
+        """Least ``r_ij - a_ij`` over all pairs; shape ``(...)``.
+
+        For large formations the pairs a k-d tree finds close; when none is, a floor
+        (every clearance is at least that).
+        """
+        iu, ju, a, floor = self._pairs(x)
+        return np.min(self._clearances(x, iu, ju, a), axis=-1, initial=floor)
 
     def pair_swept_clearances(
         self, x0: NDArray[np.float64], x1: NDArray[np.float64]
     ) -> NDArray[np.float64]:
         """Least ``r_ij - a_ij`` of each pair along the straight step ``x0 -> x1``; ``(..., P)``."""
-        iu, ju, a = self._pairs
+        iu, ju, a, _ = self._pairs(x0, x1)
         q0, q1 = self.positions(x0), self.positions(x1)
         r0 = q0[..., ju, :] - q0[..., iu, :]
         dr = (q1[..., ju, :] - q1[..., iu, :]) - r0
@@ -94,7 +123,8 @@ class System:
         Catches a step that carries two robots through each other, which the
         clearance at the end of the step alone would miss.
         """
-        return np.min(self.pair_swept_clearances(x0, x1), axis=-1)
+        floor = self._pairs(x0, x1)[3]
+        return np.min(self.pair_swept_clearances(x0, x1), axis=-1, initial=floor)
 
     def step_verdict(
         self, x0: NDArray[np.float64], x1: NDArray[np.float64]
@@ -118,7 +148,7 @@ class System:
 
     def closest_pair(self, x: NDArray[np.float64]) -> tuple[int, int, float]:
         """The 1-based robots ``i < j`` of least clearance in one state ``(n, k)``, and ``a_ij``."""
-        iu, ju, a = self._pairs
+        iu, ju, a, _ = self._pairs(x)
         p = int(np.argmin(self.pair_clearances(x)))
         return int(iu[p]) + 1, int(ju[p]) + 1, float(a[p])
 
@@ -131,7 +161,7 @@ class System:
                 f"the step to t = {t:g} s produced NaN or infinite positions; reduce dt "
                 f"(now {dt:g} s), e.g. to {dt / 10:g} s"
             )
-        iu, ju, a = self._pairs
+        iu, ju, a, _ = self._pairs(x0, x1)
         q0, q1 = self.positions(x0), self.positions(x1)
         jump = float(np.max(np.linalg.norm(q1 - q0, axis=-1)))
         if status is Status.COLLISION:

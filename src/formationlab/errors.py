@@ -21,6 +21,7 @@ __all__ = [
     "FormationlabWarning",
     "IgnoredKeyWarning",
     "ObstacleError",
+    "OutputError",
     "OutputExistsError",
     "ParameterError",
     "ScenarioError",
@@ -83,3 +84,11 @@ class FormationlabWarning(UserWarning):
 
 class IgnoredKeyWarning(FormationlabWarning):
     """A parameter that belongs to another law, integrator or model, so it has no effect."""
+
+
+class OutputError(UserInputError, OSError):
+    """An output file or folder cannot be written (permission, disk full, a path under a file).
+
+    Also an ``OSError``, so that code catching the writer's own errors still catches it;
+    the message names the folder, the reason and what to do.
+    """

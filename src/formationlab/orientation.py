@@ -12,7 +12,14 @@ from numpy.typing import NDArray
 from .errors import FormationError
 from .geometry import cross, parity
 
-__all__ = ["BETA_RTOL", "COLLINEAR_SIN", "alpha_from_shape", "signed_angle", "switching_surfaces"]
+__all__ = [
+    "BETA_RTOL",
+    "COLLINEAR_SIN",
+    "alpha_from_shape",
+    "neighbour_triples",
+    "signed_angle",
+    "switching_surfaces",
+]
 
 #: A template triple whose |sin| of the angle at i is below this counts as collinear.
 COLLINEAR_SIN = 1e-6
@@ -27,59 +34,115 @@ def signed_angle(u: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.f
     return np.arctan2(cross(u, v), dot)
 
 
+def neighbour_triples(edges: NDArray[np.int64], n: int) -> NDArray[np.int64]:
+    """Every ordered ``(i, j, k)`` with ``j != k`` both neighbours of ``i`` (the sum of eq. 13).
+
+    Shape ``(t, 3)``, sorted lexicographically; ``t = sum_i deg_i (deg_i - 1)``, so
+    the cost grows with the edges, not with ``n^3``.
+    """
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    src = np.concatenate([e[:, 0], e[:, 1]])
+    dst = np.concatenate([e[:, 1], e[:, 0]])
+    order = np.lexsort((dst, src))
+    src, dst = src[order], dst[order]
+    deg = np.bincount(src, minlength=n)
+    ptr = np.concatenate([[0], np.cumsum(deg)])
+    reps = deg[src]  # each half-edge (i, j) pairs with every neighbour k of i
+    first = np.repeat(np.arange(src.size), reps)
+    offset = np.arange(first.size) - np.repeat(np.cumsum(reps) - reps, reps)
+    k = dst[ptr[src[first]] + offset]
+    t = np.stack([src[first], dst[first], k], axis=1)
+    return t[t[:, 1] != t[:, 2]]
+
+
 def alpha_from_shape(
     shape: NDArray[np.float64], edges: NDArray[np.int64], alpha_values: str
-) -> NDArray[np.float64]:
+) -> tuple[NDArray[np.int64], NDArray[np.float64], int]:
     """``alpha_ijk`` that drive towards ``shape`` (paper's sign convention, eq. 2).
 
     ``alpha_ijk = -angle(r_ij -> r_ik)`` (angles) or its sign, for every ordered
-    pair ``j != k`` of neighbours of ``i``. Collinear triples have no orientation
-    and are rejected.
+    pair ``j != k`` of neighbours of ``i``. A collinear triple (a lattice has
+    neighbours on opposite sides) has no orientation and is skipped; the
+    formation is refused only when a connected component of three or more
+    robots is left with no triple to fix its orientation.
+
+    Returns
+    -------
+    triples : ndarray of int, shape (t, 3)
+        The restricted triples, sorted.
+    alpha : ndarray, shape (t,)
+        Their ``alpha_ijk``.
+    skipped : int
+        Ordered triples skipped as collinear.
     """
-    n = shape.shape[0]
-    adj = np.zeros((n, n), bool)
-    adj[edges[:, 0], edges[:, 1]] = adj[edges[:, 1], edges[:, 0]] = True
-    r = shape[None, :, :] - shape[:, None, :]  # r[i, j] = q_j - q_i
-    ang = signed_angle(r[:, :, None, :], r[:, None, :, :])  # ccw angle r_ij -> r_ik
-    length = np.linalg.norm(r, axis=-1)
-    sin = np.abs(np.sin(ang))
-    mask = adj[:, :, None] & adj[:, None, :] & ~np.eye(n, dtype=bool)[None]
-    coincident = mask & ((length[:, :, None] == 0) | (length[:, None, :] == 0))
-    collinear = mask & ((sin < COLLINEAR_SIN) | coincident)
-    if np.any(collinear):
-        i, j, k = np.argwhere(collinear)[0] + 1
+    t = neighbour_triples(edges, shape.shape[0])
+    r_ij = shape[t[:, 1]] - shape[t[:, 0]]
+    r_ik = shape[t[:, 2]] - shape[t[:, 0]]
+    ang = signed_angle(r_ij, r_ik)  # ccw angle r_ij -> r_ik
+    coincident = (np.hypot(*r_ij.T) == 0) | (np.hypot(*r_ik.T) == 0)
+    collinear = (np.abs(np.sin(ang)) < COLLINEAR_SIN) | coincident
+    keep = ~collinear
+    _check_oriented(t, keep, edges, shape.shape[0])
+    alpha = -ang[keep]  # paper's sign: opposite to the ccw angle
+    return t[keep], (np.sign(alpha) if alpha_values == "sign" else alpha), int(collinear.sum())
+
+
+def _check_oriented(
+    t: NDArray[np.int64], keep: NDArray[np.bool_], edges: NDArray[np.int64], n: int
+) -> None:
+    """Refuse a component of >= 3 robots whose triples are all collinear."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    size = np.bincount(label)
+    oriented = np.zeros(size.size, bool)
+    oriented[label[t[keep, 0]]] = True
+    bad = np.flatnonzero((size >= 3) & ~oriented & np.isin(np.arange(size.size), label[t[:, 0]]))
+    if bad.size:
+        i, j, k = t[label[t[:, 0]] == bad[0]][0] + 1
         raise FormationError(
-            f"robots {i}, {j} and {k} are collinear in the template, so the triple has no "
-            'orientation; move one of them off the line or use orientation = "free"',
+            f"robots {i}, {j} and {k} are collinear in the template, and so is every other "
+            "triple of their component: nothing fixes its orientation; move a robot off the "
+            'line or use orientation = "free"',
             key="template",
         )
-    alpha = np.where(mask, -ang, 0.0)  # paper's sign: opposite to the ccw angle
-    return np.sign(alpha) if alpha_values == "sign" else alpha
 
 
 def switching_surfaces(
-    alpha: NDArray[np.float64], restricted: NDArray[np.bool_]
+    triples: NDArray[np.int64], alpha: NDArray[np.float64]
 ) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.int64]]:
-    """Distinct switching surfaces ``beta c_abc + theta = 0`` (see ``Formation.surfaces``)."""
-    n = alpha.shape[0]
-    index = np.full((n, n, n), -1, dtype=np.int64)
-    tris: list[tuple[int, int, int]] = []
-    betas: list[float] = []
-    for i, j, k in np.argwhere(restricted):
-        tri = (int(i), int(j), int(k))
-        srt = tuple(sorted(tri))
-        beta = float(alpha[i, j, k]) * float(parity(i, j, k))
-        # the same surface when beta agrees to round-off (angles of a template carry it)
-        for s, (t, b) in enumerate(zip(tris, betas, strict=True)):
-            if t == srt and abs(b - beta) <= BETA_RTOL * max(1.0, abs(b)):
-                index[i, j, k] = s
-                break
-        else:
-            index[i, j, k] = len(tris)
-            tris.append(srt)  # type: ignore[arg-type]
-            betas.append(beta)
-    tri_arr = np.array(tris, dtype=np.int64).reshape(-1, 3)
-    beta_arr = np.array(betas, dtype=float)
-    for arr in (tri_arr, beta_arr, index):
+    """Distinct switching surfaces ``beta c_abc + theta = 0`` (see ``Formation.surfaces``).
+
+    ``triples`` ``(t, 3)`` sorted lexicographically and their ``alpha`` ``(t,)``.
+    Triples of one sorted triangle whose ``beta`` agree to ``BETA_RTOL`` share a
+    surface, whose ``beta`` is that of its first triple; surfaces are numbered in
+    the order of their first triple. Returns the triangles ``(s, 3)``, ``beta``
+    ``(s,)`` and the surface of each triple ``(t,)``.
+    """
+    t = np.asarray(triples, dtype=np.int64).reshape(-1, 3)
+    srt = np.sort(t, axis=1)
+    beta = np.asarray(alpha, dtype=float) * parity(t[:, 0], t[:, 1], t[:, 2])
+    if len(t) == 0:
+        empty = (np.zeros((0, 3), np.int64), np.zeros(0), np.zeros(0, np.int64))
+        for arr in empty:
+            arr.setflags(write=False)
+        return empty
+    order = np.lexsort((beta, srt[:, 2], srt[:, 1], srt[:, 0]))
+    st, sb = srt[order], beta[order]
+    new_triangle = np.any(st[1:] != st[:-1], axis=1)
+    new_beta = np.abs(sb[1:] - sb[:-1]) > BETA_RTOL * np.maximum(1.0, np.abs(sb[:-1]))
+    group = np.empty(len(t), dtype=np.int64)
+    group[order] = np.cumsum(np.concatenate([[True], new_triangle | new_beta])) - 1
+    first = np.full(group.max() + 1, len(t), dtype=np.int64)
+    np.minimum.at(first, group, np.arange(len(t)))
+    rank = np.empty(first.size, dtype=np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(first.size)
+    surface = rank[group]
+    firsts = np.sort(first)
+    tri_arr, beta_arr = srt[firsts], beta[firsts]
+    for arr in (tri_arr, beta_arr, surface):
         arr.setflags(write=False)
-    return tri_arr, beta_arr, index
+    return tri_arr, beta_arr, surface

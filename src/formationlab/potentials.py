@@ -25,6 +25,7 @@ __all__ = [
     "perp",
     "phi",
     "psi",
+    "scatter_rows",
     "triangle_products",
     "triple_products",
     "upsilon",
@@ -99,6 +100,23 @@ def triangle_products(q: ArrayLike, triangles: ArrayLike) -> NDArray[np.float64]
     t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
     a, b, c = (q[..., t[:, m], :] for m in range(3))
     return cross(b - a, c - a)
+
+
+def scatter_rows(values: ArrayLike, rows: ArrayLike, n: int) -> NDArray[np.float64]:
+    """Sum ``values`` ``(..., m, 2)`` into ``n`` rows by ``rows`` ``(m,)``: ``(..., n, 2)``.
+
+    ``out[..., rows[p], :] += values[..., p, :]``: the sum of per-edge or per-triple
+    terms into per-robot controls, without dense pair arrays.
+    """
+    v = np.asarray(values, dtype=float)
+    idx = np.asarray(rows, dtype=np.int64)
+    batch = int(np.prod(v.shape[:-2], dtype=np.int64))
+    flat = v.reshape(batch, -1, 2)
+    where = (np.arange(batch)[:, None] * n + idx[None, :]).ravel()
+    out = np.empty((batch * n, 2))
+    for d in range(2):
+        out[:, d] = np.bincount(where, weights=flat[..., d].ravel(), minlength=batch * n)
+    return out.reshape(*v.shape[:-2], n, 2)
 
 
 def upsilon(x: ArrayLike) -> NDArray[np.float64]:

@@ -259,7 +259,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         text=text,
         fail=fail,
     )
-    if formation.alpha is None and "k_a" in _fields(type(law)):
+    if not formation.has_orientation and "k_a" in _fields(type(law)):
         warnings.append(
             f"law {law.name!r} has an angular term but the orientation is free, so it acts as "
             'the distance law; set formation.orientation (e.g. "template") to use it'

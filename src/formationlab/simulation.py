@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -29,7 +29,8 @@ from .analysis import (
 from .controllers import LAWS, Law
 from .dynamics import System
 from .errors import ParameterError
-from .integrators import INTEGRATORS, Euler, Integrator, RawSolution
+from .integrators import INTEGRATORS, Euler, Integrator
+from .integrators.compiled import compiled_terms, run_euler_compiled
 from .registry import resolve
 from .spec import Formation
 from .status import Status
@@ -96,12 +97,7 @@ class SimulationResult:
         """
         if self.sigma.shape[-1] == 0:
             return []
-        tris, _, index = self.formation.surfaces
-        labels = []
-        for s in range(len(tris)):
-            i, j, k = np.argwhere(index == s)[0] + 1
-            labels.append(f"alpha_{i}{j}{k}")
-        return labels
+        return self.formation.surface_labels
 
     @property
     def final(self) -> NDArray[np.float64]:
@@ -203,6 +199,7 @@ def simulate(
     save_every: int = 1,
     progress: Callable[[float], None] | None = None,
     interruptible: bool = False,
+    backend: Literal["auto", "numpy", "numba"] = "auto",
 ) -> SimulationResult:
     """Simulate ``q_dot_i = u_i`` (eq. 1) under ``law`` from ``q0``.
 
@@ -226,6 +223,12 @@ def simulate(
     interruptible : bool
         On Ctrl-C, return the run so far with status ``"interrupted"`` instead of
         raising ``KeyboardInterrupt`` (fixed-step integrators).
+    backend : {"auto", "numpy", "numba"}
+        ``"numba"``: the compiled single-run path (:mod:`formationlab.integrators.compiled`:
+        explicit Euler, single integrators, a law with kernel data; any size, no ``n x n``
+        arrays); ``"numpy"``: the integrator's own ``run`` (the stepping driver);
+        ``"auto"`` (default) takes the compiled path wherever it applies. The two agree
+        to rounding (tested).
 
     Returns
     -------
@@ -246,10 +249,22 @@ def simulate(
     save_every = whole(save_every, "save_every")
     law, integrator = resolve(LAWS, law), resolve(INTEGRATORS, integrator or Euler(dt=1e-3))
     system = System(formation=formation, law=law)
-    raw: RawSolution = integrator.run(
-        system, q0, float(duration), save_every=int(save_every), progress=progress,
-        interruptible=interruptible,
-    )  # fmt: skip
+    terms = compiled_terms(system, integrator) if backend != "numpy" else None
+    if backend == "numba" and terms is None:
+        raise ParameterError(
+            'backend="numba" runs explicit Euler on single integrators with a law that has '
+            f'kernel data; got {integrator.name!r} and {law.name!r}: use backend="auto"'
+        )
+    if terms is not None:
+        raw = run_euler_compiled(
+            terms, system, q0, dt=integrator.dt, duration=float(duration),  # type: ignore[attr-defined]
+            save_every=int(save_every), progress=progress, interruptible=interruptible,
+        )  # fmt: skip
+    else:
+        raw = integrator.run(
+            system, q0, float(duration), save_every=int(save_every), progress=progress,
+            interruptible=interruptible,
+        )  # fmt: skip
     points = system.model.points(raw.x)
     return SimulationResult(
         formation=formation,

@@ -34,9 +34,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import FormationError
 from .graph import as_edges, complete_edges, is_connected, is_rigid
-from .orientation import alpha_from_shape, switching_surfaces
+from .orientation import alpha_from_shape, neighbour_triples, switching_surfaces
 
 __all__ = [
+    "DENSE_LIMIT",
     "AlphaValues",
     "Formation",
     "FormationError",
@@ -45,6 +46,11 @@ __all__ = [
 ]
 
 Orientation = Literal["free", "template", "mirror", "table"]
+
+#: Formations of at most this many robots also carry the dense ``(n, n, n)`` views of
+#: their orientation (``alpha``, ``restricted``, ``desired_sign``); larger ones only the
+#: lists of restricted triples, which every computation of the package uses.
+DENSE_LIMIT = 64
 AlphaValues = Literal["sign", "angle"]
 
 
@@ -79,7 +85,16 @@ class Formation:
         Desired distances ``d_ij`` per edge.
     alpha : ndarray, shape (n, n, n), optional
         ``alpha_ijk`` in the paper's sign convention (module docstring); zero
-        where no restriction applies. ``None`` when the orientation is free.
+        where no restriction applies. ``None`` when the orientation is free, and
+        for formations of more than :data:`DENSE_LIMIT` robots (which give their
+        orientation as ``restricted_triples`` and ``restricted_alpha``). Either
+        form may be given; the other is derived.
+    restricted_triples : ndarray of int, shape (t, 3), optional
+        The triples ``(i, j, k)`` with a non-zero ``alpha_ijk``, 0-based, sorted;
+        both ``(i, j, k)`` and ``(i, k, j)``. What every computation uses: its size
+        grows with the edges, not with ``n^3``.
+    restricted_alpha : ndarray, shape (t,), optional
+        ``alpha_ijk`` of those triples.
     orientation : {"free", "template", "mirror", "table"}
         Where ``alpha`` came from.
     alpha_values : {"sign", "angle"}
@@ -87,12 +102,19 @@ class Formation:
         eq. (25) is 3 for signs and pi for angles.
     template : ndarray, shape (n, 2), optional
         The template shape the distances (and orientation) came from.
+    collinear_skipped : int
+        Ordered triples of the template left without a restriction because their
+        robots are collinear in it.
     """
 
     diameters: NDArray[np.float64]
     edges: NDArray[np.int64]
     distances: NDArray[np.float64]
     alpha: NDArray[np.float64] | None = None
+    #: (given or derived in ``__post_init__``: never None on a built formation)
+    restricted_triples: NDArray[np.int64] = None  # type: ignore[assignment]
+    restricted_alpha: NDArray[np.float64] = None  # type: ignore[assignment]
+    collinear_skipped: int = 0
     orientation: Orientation = "free"
     alpha_values: AlphaValues = "sign"
     template: NDArray[np.float64] | None = field(default=None)
@@ -132,31 +154,16 @@ class Formation:
                 f'alpha_values must be "sign" or "angle", got {self.alpha_values!r}',
                 key="alpha_values",
             )
-        alpha = None
-        if self.alpha is not None:
-            alpha = np.asarray(self.alpha, dtype=float)
-            if alpha.shape != (n, n, n) or not np.all(np.isfinite(alpha)):
-                raise FormationError(f"alpha must be a finite ({n}, {n}, {n}) array", key="alpha")
-            if not np.allclose(alpha, -alpha.transpose(0, 2, 1)):
-                raise FormationError(
-                    "alpha must satisfy alpha_ikj = -alpha_ijk (eq. 3)", key="alpha"
-                )
-            adj = np.zeros((n, n), bool)
-            adj[edges[:, 0], edges[:, 1]] = adj[edges[:, 1], edges[:, 0]] = True
-            allowed = adj[:, :, None] & adj[:, None, :]
-            stray = np.argwhere((alpha != 0) & ~allowed)
-            if stray.size:
-                i, j, k = stray[0] + 1
-                raise FormationError(
-                    f"alpha_{i}{j}{k} is given but robots {j} and {k} are not both "
-                    f"neighbours of robot {i}; add the edges or drop the entry",
-                    key="alpha",
-                )
-            alpha.setflags(write=False)
-        elif self.orientation != "free":
+        triples, values = self._restrictions(n, edges)
+        if len(triples) == 0 and self.orientation != "free":
             raise FormationError(
                 f"orientation {self.orientation!r} needs alpha values", key="orientation"
             )
+        alpha = None
+        if n <= DENSE_LIMIT and len(triples):
+            alpha = np.zeros((n, n, n))
+            alpha[tuple(triples.T)] = values
+            alpha.setflags(write=False)
         template = None
         if self.template is not None:
             template = np.asarray(self.template, dtype=float)
@@ -169,7 +176,61 @@ class Formation:
         object.__setattr__(self, "edges", edges)
         object.__setattr__(self, "distances", dist)
         object.__setattr__(self, "alpha", alpha)
+        object.__setattr__(self, "restricted_triples", triples)
+        object.__setattr__(self, "restricted_alpha", values)
         object.__setattr__(self, "template", template)
+
+    def _restrictions(self, n: int, edges: NDArray[np.int64]) -> tuple[NDArray, NDArray]:
+        """The restricted triples and their alpha from either form, validated (eq. 3)."""
+        if self.alpha is not None:
+            alpha = np.asarray(self.alpha, dtype=float)
+            if alpha.shape != (n, n, n) or not np.all(np.isfinite(alpha)):
+                raise FormationError(f"alpha must be a finite ({n}, {n}, {n}) array", key="alpha")
+            t = np.argwhere(alpha != 0).astype(np.int64)
+            v = alpha[tuple(t.T)]
+        elif self.restricted_triples is not None:
+            t = np.asarray(self.restricted_triples, dtype=np.int64).reshape(-1, 3)
+            v = np.asarray(self.restricted_alpha, dtype=float).reshape(-1)
+            if v.shape != (len(t),) or not np.all(np.isfinite(v)) or np.any(v == 0):
+                raise FormationError(
+                    "restricted_alpha must hold one finite non-zero number per restricted triple",
+                    key="alpha",
+                )
+            if np.any((t < 0) | (t >= n)) or np.any(
+                (t[:, 0] == t[:, 1]) | (t[:, 0] == t[:, 2]) | (t[:, 1] == t[:, 2])
+            ):
+                raise FormationError(
+                    f"restricted triples must name three different robots in 0..{n - 1}",
+                    key="alpha",
+                )
+            order = np.lexsort((t[:, 2], t[:, 1], t[:, 0]))
+            t, v = t[order], v[order]
+        else:
+            return np.zeros((0, 3), np.int64), np.zeros(0)
+        key = (t[:, 0] * n + t[:, 1]) * n + t[:, 2]
+        mirror = (t[:, 0] * n + t[:, 2]) * n + t[:, 1]
+        at = np.searchsorted(key, mirror)
+        found = at < len(key)
+        found[found] = key[at[found]] == mirror[found]
+        if not np.all(found) or not np.allclose(v[np.minimum(at, len(v) - 1)][found], -v[found]):
+            raise FormationError("alpha must satisfy alpha_ikj = -alpha_ijk (eq. 3)", key="alpha")
+        pair = np.sort(edges, axis=1)
+        edge_key = np.sort(pair[:, 0] * n + pair[:, 1])
+        for col in (1, 2):
+            lo, hi = np.minimum(t[:, 0], t[:, col]), np.maximum(t[:, 0], t[:, col])
+            want = lo * n + hi
+            pos = np.minimum(np.searchsorted(edge_key, want), max(len(edge_key) - 1, 0))
+            ok = (edge_key[pos] == want) if len(edge_key) else np.zeros(len(t), bool)
+            if not np.all(ok):
+                i, j, k = t[np.argmin(ok)] + 1
+                raise FormationError(
+                    f"alpha_{i}{j}{k} is given but robots {j} and {k} are not both "
+                    f"neighbours of robot {i}; add the edges or drop the entry",
+                    key="alpha",
+                )
+        for arr in (t, v):
+            arr.setflags(write=False)
+        return t, v
 
     # ------------------------------------------------------------------ builders
     @classmethod
@@ -248,15 +309,19 @@ class Formation:
         e = as_edges(edges, n, one_based=one_based)
         dist = np.linalg.norm(tpl[e[:, 1]] - tpl[e[:, 0]], axis=-1)
         diam = _per_item(diameters, n, "diameters", "robot")
-        alpha = None
+        triples: NDArray[np.int64] | None = None
+        values: NDArray[np.float64] | None = None
+        skipped = 0
         if orientation != "free":
             shape = tpl if orientation == "template" else tpl * np.array([-1.0, 1.0])
-            alpha = alpha_from_shape(shape, e, alpha_values)
+            triples, values, skipped = alpha_from_shape(shape, e, alpha_values)
         return cls(
             diameters=diam,
             edges=e,
             distances=dist,
-            alpha=alpha,
+            restricted_triples=triples,  # type: ignore[arg-type]
+            restricted_alpha=values,  # type: ignore[arg-type]
+            collinear_skipped=skipped,
             orientation=orientation,
             alpha_values=alpha_values,
             template=tpl,
@@ -348,7 +413,9 @@ class Formation:
             diameters=_per_item(diameters, self.n, "diameters", "robot"),
             edges=self.edges,
             distances=self.distances,
-            alpha=self.alpha,
+            restricted_triples=self.restricted_triples,
+            restricted_alpha=self.restricted_alpha,
+            collinear_skipped=self.collinear_skipped,
             orientation=self.orientation,
             alpha_values=self.alpha_values,
             template=self.template,
@@ -385,30 +452,54 @@ class Formation:
         a.setflags(write=False)
         return a
 
+    def _dense(self, what: str) -> None:
+        if self.n > DENSE_LIMIT:
+            raise FormationError(
+                f"{what} is an (n, n, n) view, kept for formations of at most {DENSE_LIMIT} "
+                f"robots (this one has {self.n}); use restricted_triples and restricted_alpha"
+            )
+
     @cached_property
     def triples(self) -> NDArray[np.bool_]:
-        """``T[i, j, k]``: ordered pair ``j != k`` of neighbours of ``i`` (the sum of eq. 13)."""
-        adj = self.adjacency
-        t = adj[:, :, None] & adj[:, None, :] & ~np.eye(self.n, dtype=bool)[None, :, :]
+        """``T[i, j, k]``: ordered pair ``j != k`` of neighbours of ``i`` (the sum of eq. 13).
+
+        A dense view for small formations; :func:`orientation.neighbour_triples` lists them.
+        """
+        self._dense("Formation.triples")
+        t = np.zeros((self.n,) * 3, bool)
+        t[tuple(neighbour_triples(self.edges, self.n).T)] = True
         t.setflags(write=False)
         return t
 
     @cached_property
     def restricted(self) -> NDArray[np.bool_]:
-        """Triples ``(i, j, k)`` with a non-zero ``alpha_ijk``; shape ``(n, n, n)``."""
-        if self.alpha is None:
-            r = np.zeros((self.n,) * 3, bool)
-        else:
-            r = self.alpha != 0
+        """Triples ``(i, j, k)`` with a non-zero ``alpha_ijk``; dense view ``(n, n, n)``."""
+        self._dense("Formation.restricted")
+        r = np.zeros((self.n,) * 3, bool)
+        r[tuple(self.restricted_triples.T)] = True
         r.setflags(write=False)
         return r
 
     @cached_property
-    def desired_sign(self) -> NDArray[np.float64]:
-        """Desired ``sign(c_ijk)`` on restricted triples, 0 elsewhere: ``-sign(alpha_ijk)``."""
-        s = np.zeros((self.n,) * 3) if self.alpha is None else -np.sign(self.alpha)
+    def restricted_sign(self) -> NDArray[np.float64]:
+        """Desired ``sign(c_ijk)`` of each restricted triple, ``-sign(alpha_ijk)``; ``(t,)``."""
+        s = -np.sign(self.restricted_alpha)
         s.setflags(write=False)
         return s
+
+    @cached_property
+    def desired_sign(self) -> NDArray[np.float64]:
+        """Desired ``sign(c_ijk)`` on restricted triples, 0 elsewhere; dense view ``(n, n, n)``."""
+        self._dense("Formation.desired_sign")
+        s = np.zeros((self.n,) * 3)
+        s[tuple(self.restricted_triples.T)] = self.restricted_sign
+        s.setflags(write=False)
+        return s
+
+    @property
+    def has_orientation(self) -> bool:
+        """Whether some triple is restricted (the orientation is not free)."""
+        return len(self.restricted_triples) > 0
 
     @cached_property
     def surfaces(self) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.int64]]:
@@ -425,11 +516,17 @@ class Formation:
             Sorted 0-based robots of each surface's triangle.
         beta : ndarray, shape (s,)
             Coefficient of ``c_abc`` in the switching function.
-        index : ndarray of int, shape (n, n, n)
-            Surface of each restricted triple ``(i, j, k)``; -1 elsewhere.
+        surface : ndarray of int, shape (t,)
+            Surface of each restricted triple (``restricted_triples[m]``).
         """
-        alpha = np.zeros((self.n,) * 3) if self.alpha is None else self.alpha
-        return switching_surfaces(alpha, self.restricted)
+        return switching_surfaces(self.restricted_triples, self.restricted_alpha)
+
+    @cached_property
+    def surface_labels(self) -> list[str]:
+        """1-based label of each switching surface, ``"alpha_ijk"`` of its first triple."""
+        _, _, surface = self.surfaces
+        first = np.unique(surface, return_index=True)[1]
+        return ["alpha_{}{}{}".format(*(self.restricted_triples[m] + 1)) for m in first]
 
     @property
     def kappa(self) -> float:
@@ -459,19 +556,25 @@ class Formation:
             )
         if not np.all(np.isfinite(arr)):
             raise FormationError(f"{what} hold NaN or infinite numbers", key="positions")
-        diff = arr[..., None, :, :] - arr[..., :, None, :]
-        r = np.linalg.norm(diff, axis=-1)
-        iu = np.triu_indices(self.n, k=1)
-        gap = r[..., iu[0], iu[1]] - self.contact_matrix[iu]
+        if self.n <= DENSE_LIMIT:
+            iu = np.triu_indices(self.n, k=1)
+            pi, pj = iu
+        else:  # only pairs that could touch
+            from .neighbours import close_pairs
+
+            pi, pj = close_pairs(arr, float(self.diameters.max())).T
+        diff = arr[..., pj, :] - arr[..., pi, :]
+        r = np.sqrt(diff[..., 0] * diff[..., 0] + diff[..., 1] * diff[..., 1])
+        gap = r - 0.5 * (self.diameters[pi] + self.diameters[pj])
         if np.any(gap <= 0):
             flat = np.argwhere(gap <= 0)[0]
             p = flat[-1]
-            i, j = iu[0][p], iu[1][p]
-            rr = r[(*flat[:-1], i, j)]
+            i, j = int(pi[p]), int(pj[p])
+            rr = r[tuple(flat)]
+            a = 0.5 * (self.diameters[i] + self.diameters[j])
             raise FormationError(
                 f"robots {i + 1} and {j + 1} overlap in the {what}: distance {rr:g} <= "
-                f"a_{i + 1}{j + 1} = {self.contact_matrix[i, j]:g}; move them apart or "
-                "use smaller diameters",
+                f"a_{i + 1}{j + 1} = {a:g}; move them apart or use smaller diameters",
                 key="positions",
             )
         return arr

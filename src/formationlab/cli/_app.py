@@ -1,14 +1,30 @@
-"""The typer application, and the error and warning handling every command shares.
+"""The typer application and the error handling every command shares.
 
-User errors become one ``error:`` line and exit status 2; formationlab's own
-warnings (:class:`~formationlab.errors.FormationlabWarning`, e.g. a scenario key
-that has no effect) become one ``warning:`` line each, whatever the warning
-filters of the caller say, and never stop the command.
+Every command is registered through :func:`command`, which turns what a user
+can cause into one ``error:`` line on standard error and an exit status,
+never a traceback; formationlab's own warnings
+(:class:`~formationlab.errors.FormationlabWarning`, e.g. a scenario key that
+has no effect) become one ``warning:`` line each, whatever the warning filters
+of the caller say, and never stop the command:
+
+============================================  ======  =========================================
+cause                                         status  message
+============================================  ======  =========================================
+bad input (:class:`~formationlab.errors.      2       the problem and the fix
+UserInputError`), a missing file
+a file or folder that cannot be read or       2       the path and the reason ("permission
+written (any ``OSError``: permission, disk            denied", "no space left on device",
+full, a path under a regular file)                    "not a directory", ...)
+an optional part that is not installed        2       the extra to install
+Ctrl-C                                        130     ``interrupted`` (and what was kept)
+============================================  ======  =========================================
 """
 
 from __future__ import annotations
 
 import functools
+import os
+import subprocess
 import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -17,21 +33,18 @@ from typing import Any, NoReturn, TypeVar
 import typer
 from rich.console import Console
 from rich.markup import escape
+from typer.core import TyperArgument, TyperCommand, TyperGroup, TyperOption
 
 from ..errors import FormationlabWarning, UserInputError
 
-__all__ = ["app", "command", "err_console", "fail", "warn"]
+__all__ = ["app", "command", "describe_os_error", "err_console", "fail", "warn"]
 
-app = typer.Typer(
-    name="formationlab",
-    help="Multi-robot formation control: reproduce the paper, run scenarios, study outcomes.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-)
 err_console = Console(stderr=True)
 
 F = TypeVar("F", bound=Callable[..., Any])
+
+#: exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells report it)
+INTERRUPTED = 130
 
 
 def fail(message: str, code: int = 2) -> NoReturn:
@@ -72,8 +85,27 @@ def _warnings_as_lines() -> Iterator[None]:
         yield
 
 
+def describe_os_error(exc: OSError) -> str:
+    """One line naming the path of a failed read or write and the reason.
+
+    ``"cannot write to runs/a: permission denied"``; the path is the folder
+    of the file that failed when the file itself is a temporary one.
+    """
+    reason = (exc.strerror or str(exc) or type(exc).__name__).rstrip(".")
+    reason = reason[:1].lower() + reason[1:]
+    path = exc.filename
+    if path is None:
+        return f"input/output error: {reason}"
+    path = os.fspath(path)
+    name = os.path.basename(path)
+    if name.startswith(".") and os.path.dirname(path):  # an atomic write's temporary file
+        path = os.path.dirname(path)
+    return f"cannot use {path}: {reason}"
+
+
 def command(*args: Any, **kwargs: Any) -> Callable[[F], F]:
-    """``app.command`` that turns user errors into a message and exit status 2."""
+    """``app.command`` that turns user errors into a message and an exit status (module doc)."""
+    kwargs.setdefault("cls", _Command)
 
     def deco(fn: F) -> F:
         @functools.wraps(fn)
@@ -85,13 +117,68 @@ def command(*args: Any, **kwargs: Any) -> Callable[[F], F]:
                 fail(str(exc))
             except FileNotFoundError as exc:
                 fail(f"file not found: {exc.filename or exc}")
+            except OSError as exc:
+                fail(describe_os_error(exc))
+            except subprocess.CalledProcessError as exc:  # ffmpeg died (e.g. killed by Ctrl-C)
+                fail(f"{os.path.basename(str(exc.cmd[0]))} failed (exit status {exc.returncode})")
             except KeyboardInterrupt:
-                fail("interrupted", code=130)
+                fail("interrupted", code=INTERRUPTED)
 
         app.command(*args, **kwargs)(wrapper)
         return fn
 
     return deco
+
+
+class _Flag(TyperOption):
+    """An on/off option: its help shows no value type (a flag takes no value)."""
+
+    def display_type_rich(self, ctx: Any) -> str | None:
+        return None
+
+
+class _Argument(TyperArgument):
+    """A positional argument: ``SCENARIO`` in the usage line (not ``{scenario}``)."""
+
+    def _usage_display_name(self) -> str:
+        name = (self.metavar or self.name or "").upper()
+        if self.nargs != 1:
+            name += "..."
+        return name if self.required else f"[{name}]"
+
+
+def _conventional(params: list[Any]) -> list[Any]:
+    """Give typer's parameters the help display of :class:`_Flag` and :class:`_Argument`."""
+    for p in params:
+        if type(p) is TyperOption and p.is_flag:
+            p.__class__ = _Flag
+        elif type(p) is TyperArgument:
+            p.__class__ = _Argument
+    return params
+
+
+class _Command(TyperCommand):
+    """typer's command with conventional help: ``SCENARIO`` in usage, no ``<bool>`` on flags."""
+
+    def get_params(self, ctx: Any) -> list[Any]:
+        return _conventional(super().get_params(ctx))
+
+
+class _Group(TyperGroup):
+    """The root command, with the help display of :class:`_Command`."""
+
+    def get_params(self, ctx: Any) -> list[Any]:
+        return _conventional(super().get_params(ctx))
+
+
+app = typer.Typer(
+    name="formationlab",
+    help="Multi-robot formation control: reproduce the paper, run scenarios, study outcomes.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    cls=_Group,
+)
 
 
 def _print_version(value: bool) -> None:

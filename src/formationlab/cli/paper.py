@@ -44,6 +44,7 @@ def paper(
     positions, distance errors and orientation of each run (docs/paper.md).
     """
     from ..io import atomic_write_json, prepare_output_dir, save_figure
+    from ..io.files import MANIFEST, earlier_files, remove_stale
     from ..paper import PaperSetup, reproduce
     from ..plotting import paper_figures
 
@@ -55,12 +56,16 @@ def paper(
         perturbation=perturbation,
     )
     folder = prepare_output_dir(out, force=force)
+    earlier = earlier_files(folder, ("summary.json", "*.png")) if force else []
     with err_console.status("reproducing section 4") as status:
         rep = reproduce(setup, progress=lambda msg: status.update(f"running {msg}"))
-    for stem, fig in paper_figures(rep).items():
-        save_figure(fig, folder / f"{stem}.png")
+    figures = [
+        save_figure(fig, folder / f"{stem}.png").name for stem, fig in paper_figures(rep).items()
+    ]
     summary = rep.summary()
-    atomic_write_json(folder / "summary.json", summary)
+    manifest = [*figures, "summary.json"]
+    atomic_write_json(folder / "summary.json", {**summary, MANIFEST: manifest})
+    remove_stale(folder, earlier, manifest)
     for key in ("simulation_1", "simulation_2", "simulation_2_unperturbed"):
         s = summary[key]
         err_console.print(

@@ -1,27 +1,36 @@
-"""Commands ``run``, ``validate``, ``animate``: scenario files in; data, plots, animations out."""
+"""Commands ``run`` and ``validate``: scenario files in; data, plots (and animations) out."""
 
 from __future__ import annotations
 
 import json
+import subprocess
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 from rich.markup import escape
 
-from ..errors import OutputExistsError, UserInputError
-from ._app import command, err_console, fail, warn
+from ..errors import ParameterError, UserInputError
+from ._app import INTERRUPTED, command, err_console, fail, warn
+from ._plan import RunPlan, check_plan, plan_run
+from .animate import ANIMATION_STEM, FORMATS_ALL, usable_formats, write_animation
 
 __all__: list[str] = []
 
 #: Files ``run`` writes besides the plots (summary.json last: it marks a finished run).
 RUN_FILES = ("scenario.toml", "trajectory.nc", "summary.json")
-ANIMATION_STEM = "animation"
+#: files of an earlier run (without a manifest) that ``run --force`` replaces
+EARLIER_PATTERNS = (*RUN_FILES, "*.png", f"{ANIMATION_STEM}.*")
 
 
 def _say(message: str, quiet: bool) -> None:
     if not quiet:
         typer.echo(message)
+
+
+def _note(message: str, quiet: bool) -> None:
+    if not quiet:
+        err_console.print(message, highlight=False, soft_wrap=True)
 
 
 @command(
@@ -31,6 +40,7 @@ def _say(message: str, quiet: bool) -> None:
     ),
 )
 def run(
+    ctx: typer.Context,
     scenario: Annotated[Path, typer.Argument(help="Scenario file (TOML), see docs/scenarios.md.")],
     out: Annotated[
         Path, typer.Option("--out", "-o", help="Output folder (created; must be empty).")
@@ -45,7 +55,12 @@ def run(
         int, typer.Option(min=2, help="Most frames in the animation (the run is thinned).")
     ] = 150,
     force: Annotated[
-        bool, typer.Option("--force", help="Replace the files of an earlier run in --out.")
+        bool,
+        typer.Option(
+            "--force",
+            help="Replace the files of an earlier run in --out (and run even if the saved "
+            "trajectory looks too large for memory or disk).",
+        ),
     ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress, no report.")] = False,
 ) -> None:
@@ -55,66 +70,184 @@ def run(
     functions sigma) goes to DIR/trajectory.nc (netCDF, open it with
     xarray.open_dataset), the outcome and final distance errors to
     DIR/summary.json, and PNG plots of trajectories, controls, V and distance
-    errors beside them. Exit status: 0 when the run finished, 1 when the
-    integrator stopped early (results up to then are written), 2 on bad input.
+    errors beside them. Before it starts, the run prints its step count and
+    the memory and disk it will need, and refuses (unless --force) a run that
+    would not fit: store fewer steps with --save-every. Ctrl-C stops the run
+    and writes the trajectory so far, with status "interrupted". Exit status:
+    0 when the run finished, 1 when the integrator stopped early (results up
+    to then are written), 2 on bad input or a folder that cannot be written,
+    130 when interrupted (results up to then are written).
     """
-    from .. import __version__, simulate
-    from ..io.figures import save_figure
-    from ..io.files import atomic_write_json, atomic_write_text, prepare_output_dir
-    from ..io.netcdf import write_trajectory
     from ..io.scenario import load_scenario
 
     sc = load_scenario(scenario)
     for w in sc.warnings:
         warn(w)
+    formats = usable_formats(FORMATS_ALL, explicit=False) if animate else ()
+    plan = _plan(sc, save_every)
+    if plan is not None:
+        _note(f"{sc.name}: {plan.describe()}", quiet)
+        source = ctx.get_parameter_source("save_every")
+        given = getattr(source, "name", "") == "COMMANDLINE"
+        problem = check_plan(plan, out, save_every_given=given)
+        if problem and not force:
+            raise ParameterError(problem)
+        if problem:
+            warn(problem.split("; ")[0] + "; running it anyway (--force)")
+    _note_glyphs(sc.name, quiet)
+    _run(sc, scenario, out, save_every, formats, frames, force, quiet)
+
+
+def _note_glyphs(name: str, quiet: bool) -> None:
+    """Say once which characters of the name the figures cannot show (no font has them)."""
+    from ..plotting.fonts import missing_characters
+
+    missing = missing_characters(name)
+    if missing:
+        _note(
+            f"note: the figures show ? for {missing}: no installed font has these characters "
+            "(a font such as Noto Sans CJK would)",
+            quiet,
+        )
+
+
+def _plan(sc: Any, save_every: int) -> RunPlan | None:
+    """The run's size, or None for an event-driven integrator (no fixed step count)."""
+    try:
+        return plan_run(sc, save_every)
+    except ParameterError:
+        return None
+
+
+def _run(
+    sc: Any,
+    scenario: Path,
+    out: Path,
+    save_every: int,
+    formats: tuple[str, ...],
+    frames: int,
+    force: bool,
+    quiet: bool,
+) -> None:
+    """Simulate, write the results, then animate (so that Ctrl-C while animating keeps them)."""
+    from .. import simulate
+    from ..io.files import earlier_files, prepare_output_dir, remove_stale
+
     folder = prepare_output_dir(out, force=force)
+    earlier = earlier_files(folder, EARLIER_PATTERNS) if force else []
     result = _simulate(simulate, sc, save_every, quiet)
+    interrupted = result.status == "interrupted"
+    summary = result.summary()
+    written = _write_results(folder, sc, scenario, result, summary, save_every)
+    if formats and not interrupted:
+        _note(f"animating ({frames} frames at most) ...", quiet)
+        done: list[Path] = []
+        try:
+            write_animation(folder, result, sc.name, frames, formats, done)
+        except (KeyboardInterrupt, subprocess.CalledProcessError):
+            # Ctrl-C reaches ffmpeg too, which then fails: the simulation's results stay
+            written = [*written, *(p.name for p in done)]
+            _write_summary(folder, sc, scenario, summary, save_every, written)
+            remove_stale(folder, earlier, written)
+            _say(f"{sc.name}: {_verdict(summary)}; wrote {folder}/", quiet)
+            fail(
+                f"interrupted while animating; the run's results are in {folder} "
+                f"(animate them with `formationlab animate {folder} --force`)",
+                INTERRUPTED,
+            )
+        written = [*written, *(p.name for p in done)]
+        _write_summary(folder, sc, scenario, summary, save_every, written)
+    removed = remove_stale(folder, earlier, written)
+    if removed:
+        _note(f"removed {', '.join(removed)} of the earlier run in {folder}", quiet)
+    _say(f"{sc.name}: {_verdict(summary)}; wrote {folder}/", quiet)
+    if interrupted:
+        fail(f"{result.message}; the results up to then are in {folder}", INTERRUPTED)
+    if result.status != "success":
+        fail(f"the run stopped early: {result.message} (results up to then are in {folder})", 1)
+
+
+def _write_results(
+    folder: Path, sc: Any, scenario: Path, result: Any, summary: dict[str, Any], save_every: int
+) -> list[str]:
+    """Write scenario.toml, trajectory.nc, the plots and summary.json (last, atomically:
+    it marks the folder as holding a run); returns the manifest, the names written."""
+    from ..io.figures import save_figure
+    from ..io.files import atomic_write_text
+    from ..io.netcdf import write_trajectory
+    from ..plotting.runs import run_figures
+
     atomic_write_text(folder / "scenario.toml", sc.text)
     write_trajectory(
         result,
         folder / "trajectory.nc",
         attrs={"scenario": sc.text, "scenario_name": sc.name, "save_every": save_every},
     )
-    from ..plotting.runs import run_figures
+    pictures = [
+        save_figure(fig, folder / f"{name}.png").name
+        for name, fig in run_figures(result, prefix=sc.name).items()
+    ]
+    return _write_summary(folder, sc, scenario, summary, save_every, [*RUN_FILES, *pictures])
 
-    pictures = []
-    for name, fig in run_figures(result, prefix=sc.name).items():
-        pictures.append(save_figure(fig, folder / f"{name}.png").name)
-    if animate:
-        if not quiet:
-            err_console.print(f"animating ({frames} frames at most) ...", highlight=False)
-        pictures += [p.name for p in _animate(folder, result, sc.name, frames)]
-    summary: dict[str, Any] = {
+
+def _write_summary(
+    folder: Path,
+    sc: Any,
+    scenario: Path,
+    summary: dict[str, Any],
+    save_every: int,
+    manifest: list[str],
+) -> list[str]:
+    from .. import __version__
+    from ..io.files import MANIFEST, atomic_write_json
+
+    data: dict[str, Any] = {
         "scenario": sc.name,
         "description": sc.description,
         "source": str(scenario),
-        **result.summary(),
+        **summary,
         "parameters": sc.parameters,
         "n_robots": sc.n,
         "edges": [[int(i) + 1, int(j) + 1] for i, j in sc.formation.edges],
         "save_every": save_every,
         "warnings": list(sc.warnings),
         "formationlab_version": __version__,
-        "files": [*RUN_FILES, *pictures],
+        MANIFEST: manifest,
     }
-    atomic_write_json(folder / "summary.json", summary)
-    conv = summary["converged_time"]
-    _say(
-        f"{sc.name}: outcome {summary['outcome']}, max |r_ij - d_ij| = "
-        f"{summary['max_distance_error']:.3g}, "
-        + (f"converged at t = {conv:.3g} s" if conv is not None else "not converged")
-        + f"; wrote {folder}/",
-        quiet,
-    )
-    if result.status != "success":
-        fail(f"the run stopped early: {result.message} (results up to then are in {folder})", 1)
+    atomic_write_json(folder / "summary.json", data)
+    return manifest
+
+
+def _verdict(s: dict[str, Any]) -> str:
+    """The one-line verdict of a run's summary: the outcome, and whether the robots stopped.
+
+    ``outcome`` judges the final shape (analysis.classify); the robots may still
+    move within the distance tolerance, which the line says in the same breath
+    instead of a contradictory "not converged".
+    """
+    tol = s["tolerances"]
+    line = f"outcome {s['outcome']}, max |r_ij - d_ij| = {s['max_distance_error']:.3g}"
+    if s["converged_time"] is not None:
+        return line + f", stopped at t = {s['converged_time']:.3g} s"
+    speed = min(v for v in (s["final_speed"], s["net_speed"]) if v is not None)
+    if s["outcome"] in ("desired", "mirror"):
+        return line + (
+            f" (within the tolerance {tol['distance']:g}), still moving at the end "
+            f"({speed:.2g} m/s > {tol['speed']:g})"
+        )
+    return line + f", still moving at the end ({speed:.2g} m/s > {tol['speed']:g})"
 
 
 def _simulate(simulate: Any, sc: Any, save_every: int, quiet: bool) -> Any:
     """Run ``sc`` with a progress bar on a terminal (long runs only)."""
     steps = sc.duration / getattr(sc.integrator, "dt", 1e-3)
     show = not quiet and err_console.is_terminal and steps * sc.n**2 > 2e5
-    kwargs = {"duration": sc.duration, "integrator": sc.integrator, "save_every": save_every}
+    kwargs = {
+        "duration": sc.duration,
+        "integrator": sc.integrator,
+        "save_every": save_every,
+        "interruptible": True,  # Ctrl-C: keep the states so far (status "interrupted")
+    }
     if not show:
         return simulate(sc.formation, sc.law, sc.q0, **kwargs)
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
@@ -136,88 +269,6 @@ def _simulate(simulate: Any, sc: Any, save_every: int, quiet: bool) -> Any:
         )
 
 
-def _animate(
-    folder: Path,
-    result_or_ds: Any,
-    title: str,
-    frames: int,
-    formats: tuple[str, ...] = ("gif", "mp4", "html"),
-) -> list[Path]:
-    from ..io.animation import save_animation
-    from ..plotting.animation import animate_run
-
-    if hasattr(result_or_ds, "formation"):
-        r = result_or_ds
-        t, q, edges, diam = r.t, r.q, r.formation.edges, r.formation.diameters
-    else:
-        ds = result_or_ds
-        t, q = ds["time"].values, ds["q"].values
-        edges, diam = ds["edge_robots"].values - 1, ds["diameter"].values
-    anim = animate_run(t, q, edges=edges, diameters=diam, max_frames=frames, title=title)
-    return save_animation(anim, folder / ANIMATION_STEM, formats=formats)
-
-
-@command(
-    "animate",
-    epilog="Example:  formationlab animate runs/sim2 --frames 100 --format gif",
-)
-def animate_cmd(
-    folder: Annotated[Path, typer.Argument(help="Output folder of `formationlab run`.")],
-    frames: Annotated[
-        int, typer.Option(min=2, help="Most frames in the animation (the run is thinned).")
-    ] = 150,
-    fmt: Annotated[
-        list[str] | None,
-        typer.Option("--format", "-f", help="gif, mp4 or html; repeat for several (default: all)."),
-    ] = None,
-    force: Annotated[
-        bool, typer.Option("--force", help="Replace an existing animation in the folder.")
-    ] = False,
-) -> None:
-    """Animate a finished run: robots as discs of their diameters and the graph's edges.
-
-    Reads DIR/trajectory.nc and writes DIR/animation.gif (pillow),
-    DIR/animation.mp4 (ffmpeg from imageio-ffmpeg) and DIR/animation.html (a
-    self-contained player), with at most --frames frames evenly spaced in time.
-    """
-    from ..io.animation import FORMATS
-    from ..io.netcdf import load_trajectory
-
-    formats = tuple(dict.fromkeys(fmt or FORMATS))
-    bad = [f for f in formats if f not in FORMATS]
-    if bad:
-        raise UserInputError(
-            f"unknown animation format {bad[0]!r}; choose from {', '.join(FORMATS)}"
-        )
-    if not folder.is_dir():
-        raise UserInputError(
-            f"{folder} is not a folder; give the --out folder of `formationlab run`"
-        )
-    nc = folder / "trajectory.nc"
-    if not nc.is_file():
-        raise UserInputError(
-            f"{folder} holds no trajectory.nc; run `formationlab run SCENARIO --out {folder}` first"
-        )
-    existing = [
-        (folder / ANIMATION_STEM).with_suffix(FORMATS[f]).name
-        for f in formats
-        if (folder / ANIMATION_STEM).with_suffix(FORMATS[f]).exists()
-    ]
-    if existing and not force:
-        raise OutputExistsError(
-            f"{folder} already holds {', '.join(existing)}; pass --force to replace it"
-        )
-    try:
-        ds = load_trajectory(nc)
-    except (OSError, ValueError) as exc:
-        raise UserInputError(f"cannot read {nc} as netCDF: {exc}") from None
-    if "q" not in ds or "edge_robots" not in ds:
-        raise UserInputError(f"{nc} is not a formationlab trajectory (no q or edge_robots)")
-    title = str(ds.attrs.get("scenario_name", folder.name))
-    for p in _animate(folder, ds, title, frames, formats):
-        typer.echo(f"wrote {p}")
-
-
 @command(
     "validate",
     epilog="Example:  formationlab validate examples/*.toml",
@@ -227,9 +278,9 @@ def validate(
 ) -> None:
     """Check scenario files and say what is wrong, without running them.
 
-    Checks every table the other commands read ([study] and [equilibria] too).
     Prints one line per file: what it describes, or the problem (key, line,
     what was expected and what was given). Exit status 2 if any file is bad.
+    Checks every table the other commands read ([study] and [equilibria] too).
     """
     from ..equilibria.report import equilibria_scenario, parse_equilibria
     from ..io.scenario import load_scenario
@@ -257,9 +308,21 @@ def validate(
         f = sc.formation
         rigid = "rigid" if f.is_rigid else "not rigid"
         typer.echo(
-            f"ok: {path}: {sc.name!r}, {f.n} robots, {len(f.edges)} edges ({rigid}), "
+            f"ok: {path}: {sc.name!r}, {_count(f.n, 'robot')}, {_count(len(f.edges), 'edge')} "
+            f"({rigid}), "
             f"orientation {f.orientation}, law {sc.law.name}, integrator "
             f"{json.dumps(sc.parameters['integrator'])}, duration {sc.duration:g} s"
         )
+        plan = _plan(sc, 1)
+        if plan is not None:
+            typer.echo(f"    {plan.describe()}")
+            problem = check_plan(plan, Path.cwd(), save_every_given=False)
+            if problem:  # what `run` would refuse (disk: the current folder's)
+                warn(f"{path}: {problem}")
     if bad:
         raise typer.Exit(2)
+
+
+def _count(k: int, noun: str) -> str:
+    """``"1 edge"``, ``"3 edges"``."""
+    return f"{k} {noun}" if k == 1 else f"{k} {noun}s"

@@ -11,6 +11,9 @@ import typer
 
 from ._app import command, err_console, fail, warn
 
+#: files of an earlier study that ``study --force`` removes
+STUDY_PATTERNS = ("trials.parquet", "summary.json", "scenario.toml", "*.png")
+
 
 @command("study")
 def study(
@@ -108,6 +111,8 @@ def study(
         from ..io import prepare_output_dir
 
         prepare_output_dir(out, force=force)
+        if force:
+            _clear_earlier_study(out, store)
         store.start()
     if sc.integrator.name != "euler":
         err_console.print(
@@ -128,8 +133,23 @@ def study(
         workers=workers,
         store=store,
         resume=resume,
+        notify=lambda msg: err_console.print(msg, highlight=False),
     )
     _write_outputs(out, sc, result, identity)
+
+
+def _clear_earlier_study(out: Path, store: Any) -> None:
+    """Under --force: remove the files and chunks of an earlier study in ``out`` (its
+    figures may have other names than this study's, and its chunks are not resumable)."""
+    import shutil
+
+    from ..io.files import earlier_files, remove_stale
+
+    remove_stale(out, earlier_files(out, STUDY_PATTERNS), [])
+    if store.root.is_dir():
+        for old in store.root.iterdir():
+            if old.is_dir() and (old / "manifest.json").is_file():
+                shutil.rmtree(old)
 
 
 def _run_with_progress(run: Any, *args: Any, store: Any, **kwargs: Any) -> Any:
@@ -161,10 +181,16 @@ def _run_with_progress(run: Any, *args: Any, store: Any, **kwargs: Any) -> Any:
 def _write_outputs(out: Path, sc: Any, result: Any, identity: dict[str, Any]) -> None:
     from .. import __version__
     from ..io import atomic_write_json, atomic_write_text, save_figure
+    from ..io.files import MANIFEST
     from ..io.trials import write_trials
     from ..plotting.studies import study_figures
 
     write_trials(result.trials, out / "trials.parquet")
+    atomic_write_text(out / "scenario.toml", sc.text)
+    figures = [
+        save_figure(fig, out / f"{stem}.png", dpi=100).name
+        for stem, fig in study_figures(result.summary, result.trials, sc.formation.edges).items()
+    ]
     summary = {
         "scenario": sc.name,
         "scenario_file": sc.source,
@@ -172,25 +198,35 @@ def _write_outputs(out: Path, sc: Any, result: Any, identity: dict[str, Any]) ->
         "formationlab_version": __version__,
         "fingerprint": identity["fingerprint"],
         **result.summary,
+        MANIFEST: ["trials.parquet", "scenario.toml", *figures, "summary.json", "chunks"],
     }
     atomic_write_json(out / "summary.json", summary)
-    atomic_write_text(out / "scenario.toml", sc.text)
-    for stem, fig in study_figures(summary, result.trials, sc.formation.edges).items():
-        save_figure(fig, out / f"{stem}.png", dpi=100)
     _print_table(summary)
     err_console.print(f"wrote trials.parquet, summary.json and figures to {out}", highlight=False)
 
 
-def _cells(g: dict[str, Any], outs: list[str]) -> list[str]:
+def _cells(g: dict[str, Any], outs: list[str], sep: str = " ") -> list[str]:
+    """``"0.745 [0.718, 0.770]"`` per outcome; ``sep="\\n"``: the interval on a second line."""
     cells = []
     for o in outs:
         lo, hi = g["ci95"][o]
-        cells.append(f"{g['fractions'][o]:.3f} [{lo:.3f}, {hi:.3f}]")
+        interval = f"[{lo:.3f}, {hi:.3f}]" if sep == " " else f"{lo:.3f}-{hi:.3f}"
+        cells.append(f"{g['fractions'][o]:.3f}{sep}{interval}")
     return cells
 
 
-def _print_table(summary: dict[str, Any]) -> None:
-    from rich.console import Console
+def _rows(summary: dict[str, Any]) -> list[tuple[dict[str, Any], str]]:
+    """The table's rows: each group, and its settled outcomes (style ``dim``) when settled."""
+    rows = []
+    for g in summary["groups"]:
+        rows.append((g, ""))
+        if g.get("settled"):  # a second row: the outcomes after implicit-Euler settling
+            after = {"fractions": g["settled_fractions"], "ci95": g["settled_ci95"]}
+            rows.append(({**g, **after}, "dim"))
+    return rows
+
+
+def _wide_table(summary: dict[str, Any]) -> Any:
     from rich.table import Table
 
     outs = summary["outcomes"]
@@ -200,23 +236,67 @@ def _print_table(summary: dict[str, Any]) -> None:
     table.add_column("trials", justify="right")
     for o in outs:
         table.add_column(o, justify="right")
-    for g in summary["groups"]:
-        params = ", ".join(f"{k}={v:g}" for k, v in g["parameters"].items())
-        table.add_row(g["law"], params, str(g["trials"]), *_cells(g, outs))
-        if g.get("settled"):  # a second line: the outcomes after implicit-Euler settling
-            after = {"fractions": g["settled_fractions"], "ci95": g["settled_ci95"]}
-            table.add_row("", f"  settled {g['settled']}", "", *_cells(after, outs), style="dim")
-    Console(width=200).print(table)
+    for g, style in _rows(summary):
+        if style:
+            table.add_row("", f"  settled {g['settled']}", "", *_cells(g, outs), style=style)
+        else:
+            params = ", ".join(f"{k}={v:g}" for k, v in g["parameters"].items())
+            table.add_row(g["law"], params, str(g["trials"]), *_cells(g, outs))
+    return table
+
+
+def _narrow_table(summary: dict[str, Any]) -> Any:
+    """The table for a narrow terminal: a group's law, parameters and trials in one cell,
+    each fraction above its interval, and hyphenated outcome names on two lines."""
+    from rich import box
+    from rich.table import Table
+
+    outs = summary["outcomes"]
+    table = Table(
+        title=f"{summary['scenario']}: outcome fractions\n(95% Wilson interval below)",
+        box=box.SIMPLE_HEAD,
+        padding=0,
+        show_edge=False,
+    )
+    table.add_column("law", overflow="fold")
+    for o in outs:
+        table.add_column(o.replace("-", "-\n"), justify="right")
+    for g, style in _rows(summary):
+        if style:
+            label = f"  settled {g['settled']}"
+        else:
+            params = ", ".join(f"{k}={v:g}" for k, v in g["parameters"].items())
+            label = "\n".join([g["law"], *([params] if params else []), f"{g['trials']} trials"])
+        table.add_row(label, *_cells(g, outs, "\n"), style=style or None, end_section=True)
+    return table
+
+
+def _print_table(summary: dict[str, Any]) -> None:
+    from rich.console import Console
+    from rich.measure import Measurement
+
+    console = Console()  # the terminal's width (COLUMNS, else 80 when not a terminal)
+    table = _wide_table(summary)
+    natural = Measurement.get(console, console.options.update(width=10_000), table).maximum
+    if natural > console.width:
+        table = _narrow_table(summary)
+    console.print(table)
     if summary.get("settle", {}).get("enabled"):
-        Console().print(
+        console.print(
             f"settled with implicit Euler: {summary.get('settled_trials', 0):,} not-converged "
             "trials (rows 'settled N')",
             highlight=False,
         )
     steps, wall = summary["trial_steps"], summary["wall_time_s"]
     rate = summary.get("trial_steps_per_s")
-    Console().print(
+    compile_time = summary.get("compile_time_s") or 0.0
+    console.print(
         f"{steps:,} trial-steps in {wall:.1f} s"
-        + (f" ({rate:.3g} trial-steps/s)" if rate else " (resumed)"),
+        + (f" ({rate:.3g} trial-steps/s)" if rate else " (resumed)")
+        + (
+            f", after {compile_time:.1f} s preparing the compiled kernels"
+            if compile_time > 0.5
+            else ""
+        ),
         highlight=False,
     )

@@ -14,9 +14,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from ..geometry import perp
-from ..potentials import triangle_products, triple_products, upsilon
-from ..spec import Formation
+from ..geometry import cross, perp
+from ..potentials import scatter_rows, triangle_products, upsilon
+from ..spec import DENSE_LIMIT, Formation
 from ..validation import check_fields
 from .base import Law, Repulsion, register
 from .distance import grad_phi, pair_geometry, phi_sum
@@ -30,12 +30,6 @@ __all__ = [
     "switching_functions",
     "triple_steps",
 ]
-
-
-def _alpha(formation: Formation) -> NDArray[np.float64]:
-    if formation.alpha is None:
-        return np.zeros((formation.n,) * 3)
-    return formation.alpha
 
 
 def switching_functions(
@@ -54,24 +48,37 @@ def switching_functions(
 
 
 def triple_steps(formation: Formation, weights: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Per-surface weights ``(..., s)`` spread to the restricted triples, ``(..., n, n, n)``."""
-    _, _, index = formation.surfaces
+    """Per-surface weights ``(..., s)`` spread to the restricted triples, ``(..., t)``."""
+    _, _, surface = formation.surfaces
     w = np.asarray(weights, dtype=float)
     if w.shape[-1] == 0:
-        return np.zeros((*w.shape[:-1], *index.shape))
-    return np.where(index >= 0, np.take(w, np.maximum(index, 0), axis=-1), 0.0)
+        return np.zeros((*w.shape[:-1], len(surface)))
+    return np.take(w, surface, axis=-1)
 
 
 def _steps(formation: Formation, q: NDArray[np.float64], theta: float) -> NDArray[np.float64]:
-    """``Upsilon(sigma_s(q))`` spread to the triples (Upsilon(0) = 1)."""
+    """``Upsilon(sigma_s(q))`` of each restricted triple, ``(..., t)`` (Upsilon(0) = 1)."""
     return triple_steps(formation, upsilon(switching_functions(formation, q, theta)))
+
+
+def _dense(formation: Formation, per_triple: NDArray) -> NDArray:
+    """Values ``(..., t)`` of the restricted triples as an ``(..., n, n, n)`` array."""
+    out = np.zeros((*per_triple.shape[:-1], *(formation.n,) * 3), dtype=per_triple.dtype)
+    i, j, k = formation.restricted_triples.T
+    out[..., i, j, k] = per_triple
+    return out
 
 
 def active_restrictions(
     formation: Formation, q: NDArray[np.float64], theta: float
 ) -> NDArray[np.bool_]:
-    """Restricted triples whose step is on: ``alpha_ijk c_ijk + theta >= 0``; ``(..., n, n, n)``."""
-    return _steps(formation, q, theta) > 0
+    """Restricted triples whose step is on, ``alpha_ijk c_ijk + theta >= 0``; ``(..., n, n, n)``.
+
+    For formations of at most ``DENSE_LIMIT`` robots; :func:`switching_functions` tells
+    the same per surface for any size.
+    """
+    formation._dense("active_restrictions")
+    return _dense(formation, _steps(formation, q, theta) > 0)
 
 
 def grad_psi(
@@ -84,22 +91,31 @@ def grad_psi(
 
     ``grad_i psi_ijk = alpha_ijk Upsilon(.) k x r_jk`` (eq. 23); the step's own
     derivative is zero away from the switching surface and is left out, as in
-    the paper. ``steps`` (``(..., n, n, n)``, values in [0, 1]) replaces
-    ``Upsilon(alpha_ijk c_ijk + theta)``, for Filippov combinations.
+    the paper. ``steps`` (``(..., t)``, one per restricted triple, values in
+    [0, 1]) replaces ``Upsilon(alpha_ijk c_ijk + theta)``, for Filippov
+    combinations. Up to ``DENSE_LIMIT`` robots the sum runs over dense
+    ``(n, n, n)`` arrays (the arithmetic the paper's figures were made with);
+    beyond, over the list of triples.
     """
-    alpha = _alpha(formation)
-    r, _, _ = pair_geometry(q)
+    q = np.asarray(q, dtype=float)
     if steps is None:
         steps = _steps(formation, q, theta)
-    w = alpha * steps  # (..., n, n, n)
-    return np.einsum("...ijk,...jkd->...id", w, perp(r))  # eq. (23), summed as eq. (13)
+    w = formation.restricted_alpha * steps  # (..., t)
+    if formation.n <= DENSE_LIMIT:
+        r, _, _ = pair_geometry(q)
+        return np.einsum("...ijk,...jkd->...id", _dense(formation, w), perp(r))  # eq. (23)
+    i, j, k = formation.restricted_triples.T
+    terms = w[..., None] * perp(q[..., k, :] - q[..., j, :])  # eq. (23), summed as eq. (13)
+    return scatter_rows(terms, i, formation.n)
 
 
 def psi_sum(formation: Formation, q: NDArray[np.float64], theta: float) -> NDArray[np.float64]:
     """``sum_i psi_i`` over ordered pairs (eq. 13); shape ``(...)``."""
-    ac = _alpha(formation) * triple_products(q)
-    values = ac * _steps(formation, q, theta)  # eq. (14): alpha c Upsilon(alpha c + theta)
-    return np.sum(values * formation.restricted, axis=(-3, -2, -1))
+    q = np.asarray(q, dtype=float)
+    i, j, k = formation.restricted_triples.T
+    c = cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :])  # c_ijk
+    ac = formation.restricted_alpha * c
+    return np.sum(ac * _steps(formation, q, theta), axis=-1)  # eq. (14): alpha c Upsilon(.)
 
 
 @register
@@ -143,7 +159,7 @@ class AngleRestrictedLaw(Law):
 
     def _control(self, formation: Formation, q: NDArray, steps: NDArray) -> NDArray:
         u = -self.k_c * grad_phi(formation, q, self.repulsion)
-        if formation.alpha is not None and self.k_a > 0:
+        if formation.has_orientation and self.k_a > 0:
             u = u - self.k_a * grad_psi(formation, q, self.theta, steps)  # eq. (11)
         return u
 

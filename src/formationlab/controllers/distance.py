@@ -12,13 +12,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from ..potentials import dkhatib_ds, dphi_dr, khatib, pair_vectors, phi
-from ..spec import Formation
+from ..neighbours import close_pairs, non_edges
+from ..potentials import dkhatib_ds, dphi_dr, khatib, pair_vectors, phi, scatter_rows
+from ..spec import DENSE_LIMIT, Formation
 from ..validation import check_fields
 from .base import Law, Repulsion, register
 from .terms import LOG_BARRIER, KernelTerms, build_terms
 
-__all__ = ["DistanceLaw", "grad_phi", "pair_geometry", "phi_sum"]
+__all__ = ["DistanceLaw", "grad_phi", "pair_geometry", "phi_sum", "repulsion_pairs"]
 
 
 def pair_geometry(q: NDArray[np.float64]) -> tuple[NDArray, NDArray, NDArray]:
@@ -63,9 +64,59 @@ def grad_phi(
 
     ``grad_i phi_ij = phi'(r_ij) grad_i r_ij = -phi'(r_ij) r_ij / r_ij``.
     """
+    if formation.n > DENSE_LIMIT:  # over the edges and the close pairs only
+        return _grad_listed(formation, q, repulsion, edge_slope=_phi_slope)
     _, dist, unit = pair_geometry(q)
     slope = _pair_slopes(formation, dist, repulsion)
     return -np.einsum("...ij,...ijd->...id", slope, unit)
+
+
+def repulsion_pairs(
+    formation: Formation, q: NDArray[np.float64], repulsion: Repulsion
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The non-neighbour pairs ``i < j`` that Khatib's repulsion can reach at ``q``.
+
+    Every non-edge for small formations; beyond ``DENSE_LIMIT`` robots only those
+    closer than ``max a_ij + s0`` in some state of ``q`` (``gamma_ij`` is zero farther).
+    """
+    n = formation.n
+    if n <= DENSE_LIMIT:
+        iu, ju = np.triu_indices(n, k=1)
+        other = ~formation.adjacency[iu, ju]
+        return iu[other], ju[other]
+    reach = float(formation.diameters.max()) + repulsion.influence
+    p = non_edges(close_pairs(q, reach), formation.edges, n)
+    return p[:, 0], p[:, 1]
+
+
+def _phi_slope(r: NDArray, formation: Formation, a: NDArray) -> NDArray:
+    return dphi_dr(r, formation.distances, a)  # eq. (7)
+
+
+def _grad_listed(formation: Formation, q: NDArray, repulsion: Repulsion | None, *, edge_slope):
+    """``grad_i`` of the edge potentials and the repulsion, pair by listed pair; ``(..., n, 2)``.
+
+    ``edge_slope(r, formation, a)`` is ``d V_ij / d r`` per edge; each pair ``(i, j)``
+    adds ``-slope r_ij / r_ij`` to robot ``i`` and the opposite to robot ``j``.
+    """
+    q = np.asarray(q, dtype=float)
+    e = formation.edges
+    a = 0.5 * (formation.diameters[e[:, 0]] + formation.diameters[e[:, 1]])
+    i, j = e[:, 0], e[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        vec = q[..., j, :] - q[..., i, :]
+        r = np.sqrt(np.sum(vec * vec, axis=-1))
+        force = (edge_slope(r, formation, a) / r)[..., None] * vec
+        if repulsion is not None:
+            pi, pj = repulsion_pairs(formation, q, repulsion)
+            pv = q[..., pj, :] - q[..., pi, :]
+            pr = np.sqrt(np.sum(pv * pv, axis=-1))
+            s = pr - 0.5 * (formation.diameters[pi] + formation.diameters[pj])
+            slope = dkhatib_ds(s, repulsion.eta, repulsion.influence)
+            i, j = np.concatenate([i, pi]), np.concatenate([j, pj])
+            force = np.concatenate([force, (slope / pr)[..., None] * pv], axis=-2)
+    n = formation.n
+    return scatter_rows(-force, i, n) + scatter_rows(force, j, n)
 
 
 def phi_sum(
@@ -78,17 +129,13 @@ def phi_sum(
     q = np.asarray(q, dtype=float)
     e = formation.edges
     r = np.linalg.norm(q[..., e[:, 1], :] - q[..., e[:, 0], :], axis=-1)
-    a = formation.contact_matrix[e[:, 0], e[:, 1]]
+    a = 0.5 * (formation.diameters[e[:, 0]] + formation.diameters[e[:, 1]])
     total = 2.0 * phi(r, formation.distances, a).sum(axis=-1)
     if repulsion is not None:
-        iu, ju = np.triu_indices(formation.n, k=1)
-        other = ~formation.adjacency[iu, ju]
-        if other.any():
-            i, j = iu[other], ju[other]
-            s = (
-                np.linalg.norm(q[..., j, :] - q[..., i, :], axis=-1)
-                - formation.contact_matrix[i, j]
-            )
+        i, j = repulsion_pairs(formation, q, repulsion)
+        if i.size:
+            a_ij = 0.5 * (formation.diameters[i] + formation.diameters[j])
+            s = np.linalg.norm(q[..., j, :] - q[..., i, :], axis=-1) - a_ij
             total = total + 2.0 * khatib(s, repulsion.eta, repulsion.influence).sum(axis=-1)
     return total
 

@@ -76,11 +76,13 @@ def desired_areas(formation: Formation) -> tuple[NDArray[np.int64], NDArray[np.f
 def _desired_areas_cached(formation: Formation) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     signs: dict[tuple[int, int, int], float] = {}
     first: dict[tuple[int, int, int], tuple[int, int, int]] = {}
-    for i, j, k in np.argwhere(formation.restricted):
+    for (i, j, k), sign in zip(
+        formation.restricted_triples, formation.restricted_sign, strict=True
+    ):
         tri = (int(i), int(j), int(k))
         lo, mid, hi = sorted(tri)
         srt = (lo, mid, hi)
-        s = float(formation.desired_sign[tri]) * float(parity(*tri))  # desired sign of c_abc
+        s = float(sign) * float(parity(*tri))  # desired sign of c_abc
         if srt in signs and signs[srt] != s:
             a, b, c = (x + 1 for x in first[srt])
             x, y, z = (v + 1 for v in tri)
@@ -107,10 +109,12 @@ def _area_size(formation: Formation, tri: list[int]) -> float:
         x, y, z = dm[a, b], dm[b, c], dm[a, c]
         s = 0.5 * (x + y + z)
         return float(np.sqrt(max(s * (s - x) * (s - y) * (s - z), 0.0)))  # Heron
-    if formation.alpha_values == "angle" and formation.alpha is not None:
+    if formation.alpha_values == "angle" and formation.has_orientation:
+        alpha = dict(zip(map(tuple, formation.restricted_triples.tolist()),
+                         formation.restricted_alpha, strict=True))  # fmt: skip
         for i, j, k in ((a, b, c), (b, c, a), (c, a, b)):
-            if adj[i, j] and adj[i, k]:
-                return 0.5 * dm[i, j] * dm[i, k] * abs(np.sin(formation.alpha[i, j, k]))
+            if adj[i, j] and adj[i, k] and (i, j, k) in alpha:
+                return 0.5 * dm[i, j] * dm[i, k] * abs(np.sin(alpha[i, j, k]))
     raise FormationError(
         f"the desired area of triangle ({a + 1},{b + 1},{c + 1}) is unknown: give a template, "
         "all three of its distances, or angle-valued alpha"

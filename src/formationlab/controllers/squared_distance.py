@@ -27,10 +27,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..potentials import dkhatib_ds, khatib
-from ..spec import Formation
+from ..spec import DENSE_LIMIT, Formation
 from ..validation import check_fields
 from .base import Law, Repulsion, register
-from .distance import pair_geometry
+from .distance import _grad_listed, pair_geometry, repulsion_pairs
 from .terms import SQUARED, KernelTerms, build_terms
 
 __all__ = [
@@ -47,6 +47,8 @@ def grad_squared_distance(formation: Formation, q: NDArray[np.float64]) -> NDArr
 
     ``grad_i V = -sum_{j in N_i} (r_ij^2 - d_ij^2) r_ij`` (Krick et al. 2009).
     """
+    if formation.n > DENSE_LIMIT:
+        return _grad_listed(formation, q, None, edge_slope=_squared_slope)
     r, dist, _ = pair_geometry(q)
     adj = formation.adjacency
     d = np.where(adj, formation.distance_matrix, 0.0)
@@ -61,6 +63,8 @@ def grad_repulsion(
 
     ``grad_i gamma_ij = -gamma'(s_ij) r_ij / r_ij`` with the clearance ``s_ij = r_ij - a_ij``.
     """
+    if formation.n > DENSE_LIMIT:
+        return _grad_listed(formation, q, repulsion, edge_slope=_no_slope)
     _, dist, unit = pair_geometry(q)
     n = formation.n
     other = ~formation.adjacency & ~np.eye(n, dtype=bool)
@@ -78,13 +82,21 @@ def repulsion_sum(
 ) -> NDArray[np.float64]:
     """``Gamma = sum_{i < j, j not in N_i} gamma_ij``, each pair once; shape ``(...)``."""
     q = np.asarray(q, dtype=float)
-    iu, ju = np.triu_indices(formation.n, k=1)
-    other = ~formation.adjacency[iu, ju]
-    if not other.any():
+    i, j = repulsion_pairs(formation, q, repulsion)
+    if not i.size:
         return np.zeros(q.shape[:-2])
-    i, j = iu[other], ju[other]
-    s = np.linalg.norm(q[..., j, :] - q[..., i, :], axis=-1) - formation.contact_matrix[i, j]
+    a_ij = 0.5 * (formation.diameters[i] + formation.diameters[j])
+    s = np.linalg.norm(q[..., j, :] - q[..., i, :], axis=-1) - a_ij
     return khatib(s, repulsion.eta, repulsion.influence).sum(axis=-1)
+
+
+def _squared_slope(r: NDArray, formation: Formation, a: NDArray) -> NDArray:
+    """``d/dr`` of ``1/4 (r^2 - d^2)^2``: ``(r^2 - d^2) r`` (Krick et al. 2009)."""
+    return (r * r - formation.distances**2) * r
+
+
+def _no_slope(r: NDArray, formation: Formation, a: NDArray) -> NDArray:
+    return np.zeros_like(r)
 
 
 def squared_distance_sum(formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -29,7 +29,11 @@ from numpy.typing import NDArray
 
 from ..spec import Formation
 
-__all__ = ["LOG_BARRIER", "SQUARED", "KernelTerms", "build_terms"]
+__all__ = ["LOG_BARRIER", "PAIR_LIMIT", "SQUARED", "KernelTerms", "build_terms"]
+
+#: Largest formation for which the batch kernel's all-pairs arrays are built
+#: (``n (n - 1) / 2`` pairs); larger ones run only through the neighbour-search kernel.
+PAIR_LIMIT = 2000
 
 #: Edge potential: the paper's phi (eq. 5) or Krick et al.'s squared distance.
 LOG_BARRIER, SQUARED = 0, 1
@@ -68,6 +72,12 @@ class KernelTerms(NamedTuple):
     area_c: NDArray[np.int64]
     area_target: NDArray[np.float64]
     area_gain: float  #: k k_s
+    edge_i: NDArray[np.int64]  #: the edges i < j (every size; the pair arrays are for small n)
+    edge_j: NDArray[np.int64]
+    edge_distance: NDArray[np.float64]
+    edge_contact: NDArray[np.float64]
+    radius: NDArray[np.float64]  #: rho_i / 2, so that a_ij = radius_i + radius_j
+    term_surface: NDArray[np.int64]  #: the surface of each term
 
 
 def build_terms(
@@ -85,22 +95,26 @@ def build_terms(
 ) -> KernelTerms:
     """Assemble :class:`KernelTerms`; the angular terms when ``k_a > 0`` and alpha is set."""
     n = formation.n
-    pi, pj = (np.ascontiguousarray(x, dtype=np.int64) for x in np.triu_indices(n, k=1))
-    is_edge = formation.adjacency[pi, pj].copy()
-    dist = np.where(is_edge, np.nan_to_num(formation.distance_matrix[pi, pj]), 0.0)
-    tris, beta, index = formation.surfaces
-    if formation.alpha is None or k_a <= 0:
+    if n <= PAIR_LIMIT:
+        pi, pj = (np.ascontiguousarray(x, dtype=np.int64) for x in np.triu_indices(n, k=1))
+        is_edge = formation.adjacency[pi, pj].copy()
+        dist = np.where(is_edge, np.nan_to_num(formation.distance_matrix[pi, pj]), 0.0)
+        contact = formation.contact_matrix[pi, pj].copy()
+    else:  # the batch kernel's all-pairs arrays are not built for large formations
+        pi = pj = np.zeros(0, np.int64)
+        is_edge, dist, contact = np.zeros(0, bool), np.zeros(0), np.zeros(0)
+    e = formation.edges
+    tris, beta, surface = formation.surfaces
+    terms, alpha = formation.restricted_triples, formation.restricted_alpha
+    if not formation.has_orientation or k_a <= 0:
         tris, beta = np.zeros((0, 3), np.int64), np.zeros(0)
-        terms = np.zeros((0, 3), np.int64)
-    else:
-        terms = np.argwhere(index >= 0).astype(np.int64)
-        terms = terms[terms[:, 1] < terms[:, 2]]  # (i, k, j) is the same term as (i, j, k)
-    surface = index[tuple(terms.T)] if len(terms) else np.zeros(0, np.int64)
+        terms, alpha, surface = np.zeros((0, 3), np.int64), np.zeros(0), np.zeros(0, np.int64)
+    half = terms[:, 1] < terms[:, 2]  # (i, k, j) is the same term as (i, j, k)
+    terms, alpha, surface = terms[half], alpha[half], surface[half]
     order = np.argsort(surface, kind="stable")
-    terms, surface = terms[order], surface[order]
+    terms, alpha, surface = terms[order], alpha[order], surface[order]
     start = np.searchsorted(surface, np.arange(len(tris) + 1)).astype(np.int64)
     i, j, k = (np.ascontiguousarray(terms[:, m]) for m in range(3))
-    alpha = formation.alpha[i, j, k] if len(terms) else np.zeros(0)  # type: ignore[index]
     area_tris, target = areas if areas is not None else (np.zeros((0, 3), np.int64), np.zeros(0))
     return KernelTerms(
         kind=int(kind),
@@ -108,7 +122,7 @@ def build_terms(
         pair_j=pj,
         pair_is_edge=is_edge,
         pair_distance=dist,
-        pair_contact=formation.contact_matrix[pi, pj].copy(),
+        pair_contact=contact,
         edge_gain=float(edge_gain),
         repulsion_gain=float(repulsion_gain),
         repulsion_eta=float(eta),
@@ -128,4 +142,10 @@ def build_terms(
         area_c=np.ascontiguousarray(area_tris[:, 2], dtype=np.int64),
         area_target=np.array(target, dtype=float),
         area_gain=float(area_gain),
+        edge_i=np.ascontiguousarray(e[:, 0], dtype=np.int64),
+        edge_j=np.ascontiguousarray(e[:, 1], dtype=np.int64),
+        edge_distance=np.array(formation.distances, dtype=float),
+        edge_contact=0.5 * (formation.diameters[e[:, 0]] + formation.diameters[e[:, 1]]),
+        radius=0.5 * np.array(formation.diameters, dtype=float),
+        term_surface=np.ascontiguousarray(surface, dtype=np.int64),
     )

@@ -102,12 +102,7 @@ class Equilibrium:
 
 def restriction_labels(formation: Formation) -> list[str]:
     """1-based label of each switching surface, e.g. ``"alpha_123"`` (its first triple)."""
-    tris, _, index = formation.surfaces
-    labels = []
-    for s in range(len(tris)):
-        i, j, k = np.argwhere(index == s)[0] + 1
-        labels.append(f"alpha_{i}{j}{k}")
-    return labels
+    return formation.surface_labels
 
 
 def _zero_tol(lam: NDArray[np.complex128]) -> float:

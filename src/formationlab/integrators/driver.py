@@ -264,5 +264,5 @@ def _message(status: Status, steps: int, dt: float) -> str:
     if status is Status.CONVERGED:
         return f"the robots stopped moving after {steps} steps (t = {steps * dt:g} s)"
     if status is Status.INTERRUPTED:
-        return f"interrupted by the user at t = {steps * dt:g} s; the states so far are kept"
+        return f"interrupted by the user at t = {steps * dt:g} s"
     return f"{status.explanation} at t = {steps * dt:g} s"

@@ -349,7 +349,7 @@ class Filippov(Integrator):
             status = Status.INTERRUPTED
             t, y = ts[-1], qs[-1].ravel()  # keep what was saved, consistently
             vs = vs[: len(ts)]
-            message = f"interrupted by the user at t = {t:g} s; the states so far are kept"
+            message = f"interrupted by the user at t = {t:g} s"
         if sliding_from is not None:
             intervals.append((sliding_from, t))
         if ts[-1] < t:

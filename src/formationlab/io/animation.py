@@ -1,7 +1,10 @@
-"""Saving animations: GIF (pillow), MP4 (ffmpeg from ``imageio-ffmpeg``), HTML player.
+"""Saving animations: GIF (pillow), MP4 (ffmpeg), HTML player.
 
-Every file is written to a temporary name and renamed into place, so an
-interrupted save never leaves half an animation behind.
+MP4 needs an ffmpeg executable: the one of ``imageio-ffmpeg`` (the ``video``
+extra: ``pip install formationlab[video]``) or one on the ``PATH``;
+:func:`missing_writer` says when there is none. Every file is written to a
+temporary name and renamed into place, so an interrupted save never leaves
+half an animation behind.
 """
 
 from __future__ import annotations
@@ -9,16 +12,36 @@ from __future__ import annotations
 import html
 import os
 import re
+import shutil
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 from .files import atomic_path, atomic_write_text
 
-__all__ = ["FORMATS", "save_animation"]
+__all__ = ["FORMATS", "ffmpeg_executable", "missing_writer", "save_animation"]
 
 #: The formats :func:`save_animation` writes, with their file suffixes.
 FORMATS = {"gif": ".gif", "mp4": ".mp4", "html": ".html"}
+
+
+def ffmpeg_executable() -> str | None:
+    """Path of an ffmpeg executable: imageio-ffmpeg's, else one on the PATH; None if none."""
+    try:
+        import imageio_ffmpeg
+    except ImportError:
+        return shutil.which("ffmpeg")
+    return str(imageio_ffmpeg.get_ffmpeg_exe())
+
+
+def missing_writer(fmt: str) -> str | None:
+    """Why ``fmt`` cannot be written here (what to install), or None when it can."""
+    if fmt == "mp4" and ffmpeg_executable() is None:
+        return (
+            "MP4 export needs the 'video' extra: pip install formationlab[video] "
+            "(or an ffmpeg on the PATH)"
+        )
+    return None
 
 
 def save_animation(
@@ -27,6 +50,7 @@ def save_animation(
     *,
     formats: Iterable[str] = ("gif", "mp4", "html"),
     fps: int = 15,
+    written: list[Path] | None = None,
 ) -> list[Path]:
     """Save a :class:`matplotlib.animation.Animation` as ``stem.gif``, ``stem.mp4``, ``stem.html``.
 
@@ -41,6 +65,9 @@ def save_animation(
         as base64 PNG, with matplotlib's JavaScript player).
     fps : int
         Frames per second.
+    written : list, optional
+        Each file is appended as soon as it is complete, so that a caller
+        interrupted during a later format knows which files exist.
 
     Returns
     -------
@@ -51,7 +78,7 @@ def save_animation(
     from matplotlib.animation import FFMpegWriter, PillowWriter
 
     stem = Path(stem)
-    written = []
+    written = [] if written is None else written
     for fmt in formats:
         if fmt not in FORMATS:
             raise ValueError(f"unknown animation format {fmt!r}; choose from {', '.join(FORMATS)}")
@@ -60,10 +87,11 @@ def save_animation(
             with atomic_path(target) as tmp:
                 anim.save(tmp, writer=PillowWriter(fps=fps))
         elif fmt == "mp4":
-            import imageio_ffmpeg
-
+            missing = missing_writer(fmt)
+            if missing:
+                raise ModuleNotFoundError(missing)
             with (
-                mpl.rc_context({"animation.ffmpeg_path": imageio_ffmpeg.get_ffmpeg_exe()}),
+                mpl.rc_context({"animation.ffmpeg_path": ffmpeg_executable()}),
                 atomic_path(target) as tmp,
             ):
                 # yuv420p + even frame size: playable in browsers and common players

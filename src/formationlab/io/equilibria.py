@@ -65,7 +65,11 @@ def read_study_end_states(
         path = path / "trials.parquet"
     if not path.exists():
         raise ScenarioError(f"no study results at {path}; run `formationlab study` first")
-    frame = pd.read_parquet(path)
+    try:
+        frame = pd.read_parquet(path)
+    except (OSError, ValueError, ImportError) as exc:  # pyarrow's errors are ValueErrors
+        reason = getattr(exc, "strerror", None) or str(exc).split("\n")[0]
+        raise ScenarioError(f"cannot read {path} as a study's trials table: {reason}") from None
     need = ["outcome", *(f"{c}{i}" for i in range(1, n + 1) for c in "xy")]
     missing = [c for c in need if c not in frame.columns]
     if missing:

@@ -9,27 +9,60 @@ file and an interrupted run leaves the previous file intact.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import re
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..errors import OutputExistsError
+from ..errors import OutputError, OutputExistsError
 
 __all__ = [
     "atomic_path",
     "atomic_write_bytes",
     "atomic_write_json",
     "atomic_write_text",
+    "earlier_files",
+    "output_error",
     "prepare_output_dir",
+    "remove_stale",
     "to_jsonable",
 ]
+
+#: what to do about a failed write, by errno
+_FIXES = {
+    errno.EACCES: "choose a folder you can write to",
+    errno.EPERM: "choose a folder you can write to",
+    errno.EROFS: "the file system is read-only; choose another folder",
+    errno.ENOSPC: "free some space or choose a folder on another disk",
+    errno.EDQUOT: "your disk quota is used up; free some space or choose another folder",
+}
+
+
+def output_error(
+    exc: OSError, folder: str | os.PathLike[str], what: str = "write to"
+) -> OutputError:
+    """An :class:`~formationlab.errors.OutputError` naming ``folder`` and the reason of ``exc``.
+
+    E.g. ``"cannot write to runs/a: permission denied; choose a folder you can write to"``.
+    A path below a regular file is named as such (``"runs is a file, not a folder"``).
+    """
+    folder = Path(folder)
+    reason = (exc.strerror or str(exc) or type(exc).__name__).rstrip(".")
+    reason = reason[:1].lower() + reason[1:]
+    fix = _FIXES.get(exc.errno or 0, "")
+    if exc.errno in (errno.ENOTDIR, errno.EEXIST):
+        for parent in (folder, *folder.parents):
+            if parent.is_file():
+                reason, fix = f"{parent} is a file, not a folder", "choose another folder"
+                break
+    return OutputError(f"cannot {what} {folder}: {reason}" + (f"; {fix}" if fix else ""))
 
 
 @contextmanager
@@ -38,13 +71,18 @@ def atomic_path(target: str | os.PathLike[str], suffix: str = "") -> Iterator[Pa
 
     For writers that need a file name (matplotlib, netCDF, parquet). On an
     exception the temporary file is removed and ``target`` is untouched.
+    Any ``OSError`` on the way (permission, disk full, a path under a file)
+    becomes an :class:`~formationlab.errors.OutputError` naming the folder.
     """
     target = Path(target)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(
-        prefix=f".{target.name}.", suffix=suffix or target.suffix, dir=target.parent
-    )
-    os.close(fd)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(
+            prefix=f".{target.name}.", suffix=suffix or target.suffix, dir=target.parent
+        )
+        os.close(fd)
+    except OSError as exc:
+        raise output_error(exc, target.parent) from exc
     tmp_path = Path(tmp)
     try:
         yield tmp_path
@@ -52,6 +90,8 @@ def atomic_path(target: str | os.PathLike[str], suffix: str = "") -> Iterator[Pa
             os.fsync(fh.fileno())
         os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp makes it private; files are not
         os.replace(tmp_path, target)
+    except OSError as exc:
+        raise output_error(exc, target.parent, f"write {target.name} in") from exc
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
@@ -125,13 +165,17 @@ def prepare_output_dir(
 ) -> Path:
     """Create ``out`` or check that it holds no earlier results.
 
-    A folder that exists and is not empty is refused unless ``force`` (then
-    files are replaced one by one, atomically; nothing else is deleted).
+    A folder that exists and is not empty is refused unless ``force``; then
+    files are replaced one by one, atomically, and the command removes what
+    the earlier run wrote and this one does not (:func:`earlier_files`,
+    :func:`remove_stale`) once its own results are written.
 
     Raises
     ------
     OutputExistsError
         When ``out`` holds files and ``force`` is false, or is a file.
+    OutputError
+        When the folder cannot be created (permission, a path under a file, ...).
     """
     path = Path(out)
     if path.exists() and not path.is_dir():
@@ -143,5 +187,58 @@ def prepare_output_dir(
             f"output folder {path} is not empty{what}; choose another --out, or pass --force "
             "to replace its files"
         )
-    path.mkdir(parents=True, exist_ok=True)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise output_error(exc, path, "create the folder") from exc
     return path
+
+
+#: key of summary.json listing the files a command wrote (names relative to the folder)
+MANIFEST = "manifest"
+
+
+def earlier_files(folder: str | os.PathLike[str], patterns: Iterable[str] = ()) -> list[str]:
+    """Names of the files an earlier run wrote in ``folder`` (to replace them under --force).
+
+    The manifest of the folder's ``summary.json`` when it has one (key
+    :data:`MANIFEST`, or ``files`` in summaries of older versions), and
+    otherwise, or in addition, the files that match ``patterns`` (globs such as
+    ``"*.png"``, for earlier runs without a manifest). Files of the user that
+    neither names are never listed.
+    """
+    folder = Path(folder)
+    names: set[str] = set()
+    summary = folder / "summary.json"
+    try:
+        data = json.loads(summary.read_text(encoding="utf-8")) if summary.is_file() else {}
+    except (OSError, ValueError):
+        data = {}
+    listed = data.get(MANIFEST, data.get("files")) if isinstance(data, dict) else None
+    if isinstance(listed, list):
+        names.update(n for n in listed if isinstance(n, str) and "/" not in n and n != "..")
+    for pattern in patterns:
+        names.update(p.name for p in folder.glob(pattern) if p.is_file())
+    return sorted(n for n in names if (folder / n).is_file())
+
+
+def remove_stale(
+    folder: str | os.PathLike[str], earlier: Iterable[str], written: Iterable[str]
+) -> list[str]:
+    """Remove the files of ``earlier`` that are not in ``written``; returns their names.
+
+    Called after a command has written its results under --force, so that the
+    folder holds exactly one run's files (a stale ``animation.gif`` of an
+    earlier run would otherwise sit beside the new results).
+    """
+    folder = Path(folder)
+    keep = set(written)
+    removed = []
+    for name in earlier:
+        if name not in keep and (folder / name).is_file():
+            try:
+                (folder / name).unlink()
+            except OSError as exc:
+                raise output_error(exc, folder, f"remove {name} of the earlier run from") from exc
+            removed.append(name)
+    return removed

@@ -80,8 +80,21 @@ def write_trials(frame: pd.DataFrame, target: str | os.PathLike[str]) -> Path:
 
 
 def read_trials(path: str | os.PathLike[str]) -> pd.DataFrame:
-    """Read a trials table written by :func:`write_trials`."""
-    return pq.read_table(path).to_pandas()
+    """Read a trials table written by :func:`write_trials`.
+
+    Raises
+    ------
+    ParameterError
+        The file cannot be read or is not a parquet table (damaged, truncated, another
+        kind of file); the message names it.
+    """
+    try:
+        return pq.read_table(path).to_pandas()
+    except FileNotFoundError:
+        raise
+    except (OSError, pa.ArrowException) as exc:
+        reason = getattr(exc, "strerror", None) or str(exc).split("\n")[0]
+        raise ParameterError(f"cannot read {path} as a trials table (parquet): {reason}") from None
 
 
 class ChunkFolder:
@@ -125,7 +138,10 @@ class ChunkFolder:
                 f"nothing to resume in {self.root.parent}: it holds no chunks of a study; "
                 "run without --resume"
             )
-        old = json.loads(others[-1].read_text(encoding="utf-8"))
+        try:
+            old = json.loads(others[-1].read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            old = {}  # a damaged manifest: say only that the chunks are another study's
         diff = [
             k for k in self.identity if k != "fingerprint" and old.get(k) != self.identity.get(k)
         ]
@@ -140,11 +156,21 @@ class ChunkFolder:
         return len(list(self.folder.glob("g*-c*.parquet")))
 
     def load(self, chunk_id: str) -> pd.DataFrame | None:
-        """The chunk's trials, or None if it has not finished."""
+        """The chunk's trials, or None if it has not finished.
+
+        Raises
+        ------
+        ParameterError
+            The chunk's file is damaged (it was not written by this package's atomic
+            writer, or the disk corrupted it): delete it and resume to run it again.
+        """
         p = self.path(chunk_id)
         if not p.exists():
             return None
-        return read_trials(p)
+        try:
+            return read_trials(p)
+        except ParameterError as exc:
+            raise ParameterError(f"{exc}; delete it and resume again to rerun that chunk") from None
 
     def save(self, chunk_id: str, frame: pd.DataFrame) -> None:
         """Keep a finished chunk (atomic: an interruption leaves no half-written chunk)."""

@@ -18,6 +18,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 from numpy.typing import ArrayLike, NDArray
 
+from .fonts import displayable, font_context
 from .runs import robot_colors
 
 __all__ = ["animate_run", "frame_indices"]
@@ -93,8 +94,10 @@ def animate_run(
     path = frame_indices(t, max(2000, max_frames))
     colors = robot_colors(n)
 
-    fig = Figure(figsize=(size, size), dpi=dpi, layout="constrained")
-    ax = fig.add_subplot()
+    title = displayable(title)  # the user's scenario name: any script
+    with font_context():
+        fig = Figure(figsize=(size, size), dpi=dpi, layout="constrained")
+        ax = fig.add_subplot()
     lo = q.reshape(-1, 2).min(axis=0) - diameters.max()
     hi = q.reshape(-1, 2).max(axis=0) + diameters.max()
     pad = 0.05 * max(float(np.max(hi - lo)), 1e-9)

@@ -9,6 +9,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Circle
 
+from .fonts import displayable, font_context
+
 __all__ = ["continuation_figure", "gallery_figure", "plot_equilibrium"]
 
 _COLOURS = {
@@ -76,9 +78,11 @@ def gallery_figure(catalogue: Any, *, columns: int = 4, title: str = "", limit: 
     k = max(len(eqs), 1)
     cols = min(columns, k)
     rows = -(-k // cols)
-    fig, axes = plt.subplots(
-        rows, cols, figsize=(2.6 * cols, 3.1 * rows + 0.4), squeeze=False, layout="constrained"
-    )
+    title = displayable(title)  # holds the user's scenario name: any script
+    with font_context():
+        fig, axes = plt.subplots(
+            rows, cols, figsize=(2.6 * cols, 3.1 * rows + 0.4), squeeze=False, layout="constrained"
+        )
     for ax in axes.ravel()[len(eqs) :]:
         ax.axis("off")
     span = max((_span(eq.q, catalogue.formation) for eq in eqs), default=1.0)
@@ -98,7 +102,8 @@ def gallery_figure(catalogue: Any, *, columns: int = 4, title: str = "", limit: 
     if not eqs:
         axes[0, 0].text(0.5, 0.5, "no equilibrium found", ha="center", va="center")
     if title:
-        fig.suptitle(title)
+        with font_context():
+            fig.suptitle(title)
     return fig
 
 

@@ -16,6 +16,8 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
+from .fonts import displayable, font_context
+
 __all__ = [
     "plot_controls",
     "plot_distance_errors",
@@ -168,10 +170,11 @@ def run_figures(result: Any, *, prefix: str = "") -> dict[str, Figure]:
         ("distance_errors", plot_distance_errors, {}, (6.0, 3.6)),
     )
     for name, fn, kw, size in panels:
-        fig = Figure(figsize=size, layout="constrained")
-        ax = fig.add_subplot()
-        fn(result, ax=ax, **kw)
-        if prefix:
-            ax.set_title(f"{prefix}: {ax.get_title()}")
+        with font_context():  # ``prefix`` is the user's scenario name: any script
+            fig = Figure(figsize=size, layout="constrained")
+            ax = fig.add_subplot()
+            fn(result, ax=ax, **kw)
+            if prefix:
+                ax.set_title(f"{displayable(prefix)}: {ax.get_title()}")
         out[name] = fig
     return out

@@ -125,7 +125,8 @@ def study_identity(
     h = hashlib.sha256()
     for g in groups:
         f = g.formation
-        for arr in (f.diameters, f.edges, f.distances, f.alpha, f.template):
+        alpha = f.alpha if f.alpha is not None or not f.has_orientation else f.restricted_alpha
+        for arr in (f.diameters, f.edges, f.distances, alpha, f.template):
             h.update(b"-" if arr is None else np.ascontiguousarray(arr).tobytes())
     if center is not None:
         h.update(np.ascontiguousarray(center, dtype=float).tobytes())
@@ -257,6 +258,7 @@ def run_study(
     store: ChunkStore | None = None,
     resume: bool = False,
     progress: Callable[[int, int], None] | None = None,
+    notify: Callable[[str], None] | None = None,
 ) -> StudyResult:
     """Run a Monte-Carlo study.
 
@@ -280,6 +282,8 @@ def run_study(
         Skip the chunks ``store`` already holds.
     progress : callable, optional
         Called as ``progress(done_trials, total_trials)`` after each chunk.
+    notify : callable, optional
+        Called with a message before a long silent step (compiling the kernels).
 
     Returns
     -------
@@ -297,6 +301,9 @@ def run_study(
         groups, config, seed=int(seed), dt=dt, duration=duration, center=setup.center
     )
     total = sum(t.size for t in tasks)
+    # compiled (or loaded from numba's cache) here, timed apart from the trials; dask
+    # workers compile for themselves
+    compile_time = _warm_kernels(tasks, notify) if scheduler is None else 0.0
     start = time.perf_counter()
     frames: dict[str, pd.DataFrame] = {}
     done = 0
@@ -345,8 +352,42 @@ def run_study(
         "trial_steps": steps,
         "settled_trials": settled,
         "wall_time_s": wall,
+        "compile_time_s": compile_time,
         "trial_steps_per_s": steps / wall if wall > 0 and resumed == 0 else None,
         "scheduler": scheduler,
         "workers": workers,
     }
     return StudyResult(trials=trials, summary=summary, groups=groups)
+
+
+def _warm_kernels(tasks: list[ChunkTask], notify: Callable[[str], None] | None) -> float:
+    """Compile (or load from numba's cache) the kernel for each law, on one trial of two
+    steps, so that the study's throughput does not count it; returns the time taken."""
+    first = {t.group.law.name: t for t in tasks if t.backend == "numba"}
+    if not first:
+        return 0.0
+    from .batch import run_batch
+    from .kernels import run_chunks
+    from .sampling import trial_initial_states
+
+    if notify is not None and not _kernel_cached(run_chunks):
+        notify("compiling kernels (once; later studies load them from the cache) ...")
+    start = time.perf_counter()
+    for t in first.values():
+        f = t.group.formation
+        q0 = trial_initial_states(f, t.initial, t.seed, np.arange(1), center=t.center)
+        run_batch(f, t.group.law, q0, dt=t.dt, duration=2 * t.dt, tolerances=t.tolerances)
+    return time.perf_counter() - start
+
+
+def _kernel_cached(dispatcher: Any) -> bool:
+    """Whether numba's on-disk cache holds compiled versions of ``dispatcher`` (its index
+    file exists; a new signature may still compile)."""
+    try:
+        from pathlib import Path
+
+        return (
+            bool(dispatcher.signatures) or Path(dispatcher._cache._cache_file._index_path).exists()
+        )
+    except AttributeError:  # another numba's internals: assume compiling
+        return False

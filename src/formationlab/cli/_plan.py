@@ -1,0 +1,184 @@
+"""What a run will cost before it starts: steps, memory, output size, and whether they fit.
+
+``run`` and ``validate`` print :meth:`RunPlan.describe`; ``run`` refuses a run
+whose saved trajectory would not fit in memory or on disk (:func:`check_plan`)
+unless ``--force``, and suggests the ``--save-every`` that makes it fit.
+
+The memory of a run is what the integrator keeps per saved state (the state
+and its Python list entry) plus what the post-processing (controls, Lyapunov
+function, switching functions) allocates per state. The latter depends on the
+law and the formation, so it is measured, not guessed: the law is evaluated on
+a small stack of copies of the initial state under :mod:`tracemalloc`, which
+counts numpy's allocations.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import tracemalloc
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import ParameterError
+
+__all__ = ["RunPlan", "available_disk", "available_memory", "check_plan", "plan_run"]
+
+#: states in the stack whose post-processing is measured
+_PROBE = 8
+#: share of the available memory (and disk) a run may plan to use
+_SHARE = 0.8
+#: Python's cost of a saved state beyond its data: the ndarray object, the
+#: time as a float object, and two list slots (bytes, CPython 3.11 on 64 bits)
+_OBJECT_BYTES = 112 + 24 + 16
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunPlan:
+    """The size of a run, from its scenario and ``save_every``.
+
+    Attributes
+    ----------
+    steps : int
+        Integrator steps.
+    saved : int
+        States kept (every ``save_every``-th step, the first and the last).
+    save_every : int
+    memory_per_state : float
+        Bytes of memory per saved state (integrator's list, stacked arrays,
+        post-processing).
+    output_per_state : float
+        Bytes of ``trajectory.nc`` per saved state.
+    """
+
+    steps: int
+    saved: int
+    save_every: int
+    memory_per_state: float
+    output_per_state: float
+
+    @property
+    def memory(self) -> float:
+        """Estimated peak memory of the saved trajectory, bytes."""
+        return self.saved * self.memory_per_state
+
+    @property
+    def output(self) -> float:
+        """Estimated size of ``trajectory.nc``, bytes."""
+        return self.saved * self.output_per_state + 64e3  # + header and coordinates
+
+    def with_save_every(self, save_every: int) -> RunPlan:
+        """The same run storing every ``save_every``-th step."""
+        return RunPlan(
+            steps=self.steps,
+            saved=_saved(self.steps, save_every),
+            save_every=save_every,
+            memory_per_state=self.memory_per_state,
+            output_per_state=self.output_per_state,
+        )
+
+    def describe(self) -> str:
+        """``"10,000 steps, 10,001 saved: ~13 MB of memory, ~2.1 MB trajectory.nc"``."""
+        saved = "all saved" if self.save_every == 1 else f"{self.saved:,} saved"
+        return (
+            f"{self.steps:,} steps, {saved}: ~{_size(self.memory)} of memory, "
+            f"~{_size(self.output)} trajectory.nc"
+        )
+
+
+def _saved(steps: int, save_every: int) -> int:
+    return steps // save_every + 1 + (steps % save_every != 0)
+
+
+def _size(n: float) -> str:
+    for unit in ("B", "kB", "MB", "GB", "TB"):
+        if n < 999.5 or unit == "TB":
+            return f"{n:.3g} {unit}" if unit != "B" else f"{n:.0f} B"
+        n /= 1e3
+    raise AssertionError("unreachable")
+
+
+def plan_run(sc: Any, save_every: int) -> RunPlan:
+    """The :class:`RunPlan` of scenario ``sc`` (a :class:`formationlab.scenario.Scenario`)."""
+    from ..integrators.base import steps_for
+
+    dt = getattr(sc.integrator, "dt", None)
+    if dt is None:  # an event-driven integrator: as many saved states as it likes
+        raise ParameterError("no fixed step: the run's size is not known in advance")
+    steps = steps_for(sc.duration, float(dt))
+    f, law = sc.formation, sc.law
+    q = np.broadcast_to(np.asarray(sc.q0, float), (_PROBE, f.n, 2)).copy()
+    tracemalloc.start()
+    try:
+        base = tracemalloc.get_traced_memory()[0]
+        sigma = law.switching(f, q)
+        law.control(f, q)
+        law.potential(f, q)
+        post = (tracemalloc.get_traced_memory()[1] - base) / _PROBE
+    finally:
+        tracemalloc.stop()
+    n, m, s = f.n, len(f.edges), int(sigma.shape[-1])
+    floats = 4 * n + 1 + m + s  # q, u, V, distance errors, sigma
+    stored = _OBJECT_BYTES + 16 * n + 8 * floats  # the integrator's list and the arrays
+    return RunPlan(
+        steps=steps,
+        saved=_saved(steps, save_every),
+        save_every=save_every,
+        memory_per_state=stored + post,
+        output_per_state=8.0 * (floats + 1),  # + time
+    )
+
+
+def available_memory() -> float | None:
+    """Memory available to a new allocation, bytes (Linux ``MemAvailable``); None if unknown."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def available_disk(folder: Path) -> float | None:
+    """Free bytes on the disk that holds ``folder`` (or its nearest existing parent)."""
+    for p in (folder, *folder.absolute().parents):
+        if p.exists():
+            try:
+                return float(shutil.disk_usage(p).free)
+            except OSError:
+                return None
+    return None
+
+
+def check_plan(plan: RunPlan, out: Path, *, save_every_given: bool) -> str | None:
+    """Why the run does not fit (with the ``--save-every`` that fits), or None if it does."""
+    memory, disk = available_memory(), available_disk(out)
+    budgets = []
+    if memory is not None and plan.memory > _SHARE * memory:
+        budgets.append((f"~{_size(plan.memory)} of memory, {_size(memory)} available", "memory"))
+    if disk is not None and plan.output > _SHARE * disk:
+        budgets.append((f"a ~{_size(plan.output)} trajectory.nc, {_size(disk)} free", "disk"))
+    if not budgets:
+        return None
+    states = math.inf
+    if memory is not None:
+        states = min(states, 0.5 * _SHARE * memory / plan.memory_per_state)
+    if disk is not None:
+        states = min(states, 0.5 * _SHARE * (disk - 64e3) / plan.output_per_state)
+    k = max(plan.save_every + 1, math.ceil(plan.steps / max(states - 2, 1)))
+    what = " and ".join(b[0] for b in budgets)
+    given = f" with --save-every {plan.save_every}" if save_every_given else ""
+    return (
+        f"the run is too large{given}: {plan.steps:,} steps, {plan.saved:,} saved states need "
+        f"{what}; store fewer states with --save-every {k} (it keeps "
+        f"{_saved(plan.steps, k):,}), shorten the run, or pass --force to run it anyway"
+    )

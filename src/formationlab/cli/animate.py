@@ -1,0 +1,144 @@
+"""Command ``animate`` and the animation step of ``run``: a run's trajectory as GIF, MP4, HTML."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from ..errors import OutputExistsError, ParameterError, UserInputError
+from ._app import INTERRUPTED, command, fail, warn
+
+__all__: list[str] = []
+
+ANIMATION_STEM = "animation"
+FORMATS_ALL = ("gif", "mp4", "html")
+
+
+def usable_formats(formats: tuple[str, ...], *, explicit: bool) -> tuple[str, ...]:
+    """The formats that can be written; a missing writer is an error when the format was
+    asked for by name, else a warning and the format is left out."""
+    from ..io.animation import missing_writer
+
+    keep = []
+    for f in formats:
+        missing = missing_writer(f)
+        if missing and explicit:
+            raise ParameterError(missing)
+        if missing:
+            warn(f"{ANIMATION_STEM}.{f} left out: {missing}")
+        else:
+            keep.append(f)
+    return tuple(keep)
+
+
+def write_animation(
+    folder: Path,
+    result_or_ds: Any,
+    title: str,
+    frames: int,
+    formats: tuple[str, ...] = FORMATS_ALL,
+    done: list[Path] | None = None,
+) -> list[Path]:
+    """Animate a run (a SimulationResult, or the Dataset of its trajectory.nc) into
+    ``folder/animation.*``; each file is appended to ``done`` once complete."""
+    from ..io.animation import save_animation
+    from ..plotting.animation import animate_run
+
+    if hasattr(result_or_ds, "formation"):
+        r = result_or_ds
+        t, q, edges, diam = r.t, r.q, r.formation.edges, r.formation.diameters
+    else:
+        ds = result_or_ds
+        t, q = ds["time"].values, ds["q"].values
+        edges, diam = ds["edge_robots"].values - 1, ds["diameter"].values
+    anim = animate_run(t, q, edges=edges, diameters=diam, max_frames=frames, title=title)
+    return save_animation(anim, folder / ANIMATION_STEM, formats=formats, written=done)
+
+
+@command(
+    "animate",
+    epilog="Example:  formationlab animate runs/sim2 --frames 100 --format gif",
+)
+def animate_cmd(
+    folder: Annotated[Path, typer.Argument(help="Output folder of `formationlab run`.")],
+    frames: Annotated[
+        int, typer.Option(min=2, help="Most frames in the animation (the run is thinned).")
+    ] = 150,
+    fmt: Annotated[
+        list[str] | None,
+        typer.Option("--format", "-f", help="gif, mp4 or html; repeat for several (default: all)."),
+    ] = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="Replace an existing animation in the folder.")
+    ] = False,
+) -> None:
+    """Animate a finished run: robots as discs of their diameters and the graph's edges.
+
+    Reads DIR/trajectory.nc and writes DIR/animation.gif (pillow),
+    DIR/animation.mp4 (ffmpeg from imageio-ffmpeg) and DIR/animation.html (a
+    self-contained player), with at most --frames frames evenly spaced in time.
+    """
+    from ..io.animation import FORMATS
+    from ..io.netcdf import load_trajectory
+
+    formats = tuple(dict.fromkeys(fmt or FORMATS))
+    bad = [f for f in formats if f not in FORMATS]
+    if bad:
+        raise UserInputError(
+            f"unknown animation format {bad[0]!r}; choose from {', '.join(FORMATS)}"
+        )
+    formats = usable_formats(formats, explicit=bool(fmt))
+    if not folder.is_dir():
+        raise UserInputError(
+            f"{folder} is not a folder; give the --out folder of `formationlab run`"
+        )
+    nc = folder / "trajectory.nc"
+    if not nc.is_file():
+        raise UserInputError(
+            f"{folder} holds no trajectory.nc; run `formationlab run SCENARIO --out {folder}` first"
+        )
+    existing = [
+        (folder / ANIMATION_STEM).with_suffix(FORMATS[f]).name
+        for f in formats
+        if (folder / ANIMATION_STEM).with_suffix(FORMATS[f]).exists()
+    ]
+    if existing and not force:
+        raise OutputExistsError(
+            f"{folder} already holds {', '.join(existing)}; pass --force to replace it"
+        )
+    try:
+        ds = load_trajectory(nc)
+    except (OSError, ValueError) as exc:
+        raise UserInputError(f"cannot read {nc} as netCDF: {exc}") from None
+    if "q" not in ds or "edge_robots" not in ds:
+        raise UserInputError(f"{nc} is not a formationlab trajectory (no q or edge_robots)")
+    title = str(ds.attrs.get("scenario_name", folder.name))
+    done: list[Path] = []
+    try:
+        write_animation(folder, ds, title, frames, formats, done)
+    except (KeyboardInterrupt, subprocess.CalledProcessError):  # Ctrl-C, also killing ffmpeg
+        _add_to_manifest(folder, [p.name for p in done])
+        kept = f"; kept {', '.join(p.name for p in done)}" if done else ""
+        fail(f"interrupted{kept}", INTERRUPTED)
+    finally:
+        for p in done:
+            typer.echo(f"wrote {p}")
+    _add_to_manifest(folder, [p.name for p in done])
+
+
+def _add_to_manifest(folder: Path, names: list[str]) -> None:
+    """List ``names`` in the manifest of the run's summary.json (when there is one)."""
+    from ..io.files import MANIFEST, atomic_write_json
+
+    path = folder / "summary.json"
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return  # no summary (an interrupted run's folder, or not ours): nothing to list in
+    if isinstance(data, dict) and isinstance(data.get(MANIFEST), list):
+        data[MANIFEST] = [*data[MANIFEST], *(n for n in names if n not in data[MANIFEST])]
+        atomic_write_json(path, data)

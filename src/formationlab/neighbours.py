@@ -1,0 +1,42 @@
+"""Pairs of robots that are close, without ``n x n`` arrays: a k-d tree query.
+
+Khatib's repulsion acts only within clearance ``s0`` of contact, and contact
+only at clearance 0, so for a formation of many robots only the pairs closer
+than ``max a_ij + reach`` matter. :func:`close_pairs` finds exactly those
+(``scipy.spatial.cKDTree.query_pairs``, tested against brute force), for one
+state or each state of a batch; :func:`non_edges` drops the graph's edges.
+Small formations (at most ``DENSE_LIMIT`` robots) keep the plain all-pairs
+arithmetic of the paper's figures.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+__all__ = ["close_pairs", "non_edges"]
+
+
+def close_pairs(q: NDArray[np.float64], cutoff: float) -> NDArray[np.int64]:
+    """Pairs ``i < j`` closer than ``cutoff`` in any state of ``q`` ``(..., n, 2)``; ``(p, 2)``.
+
+    Sorted and unique (the union over the batch).
+    """
+    q = np.asarray(q, dtype=float)
+    n = q.shape[-2]
+    found = []
+    for state in q.reshape(-1, n, 2):
+        ok = np.all(np.isfinite(state), axis=-1)
+        idx = np.flatnonzero(ok)
+        pairs = cKDTree(state[idx]).query_pairs(r=float(cutoff), output_type="ndarray")
+        found.append(idx[pairs].reshape(-1, 2))
+    p = np.sort(np.concatenate(found), axis=1) if found else np.zeros((0, 2), np.int64)
+    return np.unique(p, axis=0).astype(np.int64).reshape(-1, 2)
+
+
+def non_edges(pairs: NDArray[np.int64], edges: NDArray[np.int64], n: int) -> NDArray[np.int64]:
+    """The ``pairs`` ``(p, 2)``, ``i < j``, that are not ``edges`` ``(m, 2)``, ``i < j``."""
+    key = pairs[:, 0] * n + pairs[:, 1]
+    edge_key = np.asarray(edges, dtype=np.int64)[:, 0] * n + np.asarray(edges)[:, 1]
+    return pairs[~np.isin(key, edge_key)]
