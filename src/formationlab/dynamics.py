@@ -79,7 +79,10 @@ class System:
         qs = [np.asarray(self.positions(x), dtype=float) for x in states]
         move = max((float(np.nanmax(np.abs(b - a))) for a, b in pairwise(qs)), default=0.0)
         top = float(f.diameters.max())
-        cutoff = top + max(top, 2.0 * 1.5 * move)  # 1.5 > sqrt(2): the move's norm
+        # 1.5 > sqrt(2) turns the largest coordinate move into a bound on its norm; a step
+        # moving robots more than some 16 diameters (a blow-up) is judged on the pairs
+        # within that range
+        cutoff = top + max(top, min(2.0 * 1.5 * move, 32.0 * top))
         p = close_pairs(np.stack(qs), cutoff)
         a = 0.5 * (f.diameters[p[:, 0]] + f.diameters[p[:, 1]])
         return p[:, 0], p[:, 1], a, cutoff - top
