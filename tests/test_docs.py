@@ -10,6 +10,7 @@ import formationlab
 import formationlab.registry
 import formationlab.simulation
 import formationlab.spec
+import formationlab.templates
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -28,7 +29,14 @@ def test_readme_python_example_runs(capsys, tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize(
-    "module", [formationlab, formationlab.registry, formationlab.simulation, formationlab.spec]
+    "module",
+    [
+        formationlab,
+        formationlab.registry,
+        formationlab.simulation,
+        formationlab.spec,
+        formationlab.templates,
+    ],
 )
 def test_docstring_examples(module):
     result = doctest.testmod(module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)

@@ -17,6 +17,7 @@ from importlib.metadata import PackageNotFoundError, version
 from .analysis import OUTCOMES, Tolerances, classify, distance_errors, triangle_orientation
 from .controllers import LAWS, AngleRestrictedLaw, DistanceLaw, Law, Repulsion, get_law
 from .dynamics import SingleIntegrator, System
+from .graphs import build_edges
 from .integrators import (
     INTEGRATORS,
     RK4,
@@ -29,6 +30,7 @@ from .integrators import (
 from .potentials import dphi_dr, khatib, phi, psi, triple_products
 from .simulation import SimulationResult, simulate
 from .spec import Formation, FormationError
+from .templates import lattice
 
 try:
     __version__ = version("formationlab")
@@ -65,12 +67,14 @@ __all__ = [
     "System",
     "Tolerances",
     "__version__",
+    "build_edges",
     "classify",
     "distance_errors",
     "dphi_dr",
     "get_integrator",
     "get_law",
     "khatib",
+    "lattice",
     "phi",
     "psi",
     "simulate",

@@ -11,12 +11,26 @@ from __future__ import annotations
 import re
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
+from ._scenario_models import Lattice, StartAround
 from ._scenario_parts import Fail
 from .errors import UserInputError
+from .graph import edges_connected
+from .graphs import build_edges, nearest_gap, overlapping_pairs
 from .realisability import realisability_problems
 from .spec import AlphaValues, Formation
+from .templates import lattice
 
-__all__ = ["FIXED", "build_formation", "stem"]
+__all__ = [
+    "FIXED",
+    "build_formation",
+    "initial_positions",
+    "restrictions_on_at_target",
+    "stem",
+]
+
 
 #: The keys of ``[controller]`` and ``[simulation]`` that are not the class's parameters.
 FIXED = {"controller": ("law", "alpha_values"), "simulation": ("integrator", "duration")}
@@ -32,7 +46,15 @@ def build_formation(
     ``from_alpha_table`` or ``from_distances``; appends warnings (non-rigid
     graph, default distances) to ``warnings``.
     """
-    n = len(rob.positions)
+    template = _template(frm, fail)
+    around = isinstance(rob.positions, StartAround)
+    if around and template is None:
+        raise fail(
+            "robots.positions",
+            'positions = { around = "template", ... } needs formation.template (a list of '
+            'points or { lattice = "triangular", count = ..., spacing = ... })',
+        )
+    n = len(template) if around else len(rob.positions)  # type: ignore[arg-type]
     if isinstance(rob.diameters, list) and len(rob.diameters) != n:
         raise fail(
             "robots.diameters",
@@ -41,13 +63,14 @@ def build_formation(
         )
     orientation = frm.orientation
     if orientation is None:
-        orientation = "template" if frm.template is not None else "table" if frm.alpha else "free"
-    if frm.template is not None:
-        if len(frm.template) != n:
+        orientation = "template" if template is not None else "table" if frm.alpha else "free"
+    if template is not None:
+        if len(template) != n:
             raise fail(
                 "formation.template",
-                f"the template has {len(frm.template)} points but there are {n} robots "
-                "(robots.positions); give one template point per robot",
+                f"the template has {len(template)} points but there are {n} robots "
+                "(robots.positions); give one template point per robot, or start around it "
+                'with robots.positions = { around = "template", sigma = ... }',
             )
         if frm.distances is not None:
             raise fail(
@@ -82,15 +105,25 @@ def build_formation(
                 "formation.alpha",
                 f'an alpha table is only used with orientation = "table", got "{orientation}"',
             )
+    built = isinstance(frm.edges, dict) or frm.edges in ("delaunay", "henneberg")
+    if built and template is None:
+        raise fail(
+            "formation.edges",
+            f"edges = {_edges_text(frm.edges)} builds the graph from the template's points; "
+            "add formation.template (a list of points or { lattice = ... }) or give the "
+            "edges as a list of pairs [i, j]",
+        )
     distances = 1.0 if frm.distances is None else frm.distances
     try:
-        if frm.template is not None:
+        if template is not None:
+            edges = build_edges(frm.edges, template) if built else frm.edges
             formation = Formation.from_template(
-                frm.template,
-                edges=frm.edges,
+                template,
+                edges=edges,
                 diameters=rob.diameters,
                 orientation=orientation,  # type: ignore[arg-type]
                 alpha_values=alpha_values,
+                one_based=not built,
             )
         elif orientation == "table":
             formation = Formation.from_alpha_table(
@@ -107,9 +140,9 @@ def build_formation(
             )
     except UserInputError as exc:
         raise fail(_formation_key(exc, frm), str(exc)) from None
-    if frm.distances is None and frm.template is None:
+    if frm.distances is None and template is None:
         warnings.append("formation.distances not given: every d_ij = 1")
-    if not formation.is_connected:
+    if not edges_connected(formation.edges, formation.n):
         raise fail(
             "formation.edges",
             "the graph is not connected, so the formation cannot hold together; add edges "
@@ -120,12 +153,120 @@ def build_formation(
             "the graph is not rigid: the distances do not fix the shape (add edges to make "
             f"it rigid; {n} robots need at least {2 * n - 3} well-placed edges)"
         )
-    warnings.extend(
-        f"formation.distances cannot all be met: {p}; runs will not reach the desired shape, "
-        "check the distances"
-        for p in realisability_problems(formation)
-    )
+    if template is None:  # a template realises its own distances
+        warnings.extend(
+            f"formation.distances cannot all be met: {p}; runs will not reach the desired "
+            "shape, check the distances"
+            for p in realisability_problems(formation)
+        )
     return formation
+
+
+def _template(frm: Any, fail: Fail) -> NDArray[np.float64] | None:
+    """The template's points: the list given, or the lattice patch (``templates.lattice``)."""
+    if frm.template is None:
+        return None
+    if isinstance(frm.template, Lattice):
+        try:
+            return lattice(frm.template.lattice, frm.template.count, frm.template.spacing)
+        except UserInputError as exc:
+            raise fail("formation.template", str(exc)) from None
+    return np.asarray(frm.template, dtype=float)
+
+
+def _edges_text(edges: Any) -> str:
+    if isinstance(edges, dict):
+        key, value = next(iter(edges.items()))
+        return f"{{ {key} = {value} }}"
+    return f'"{edges}"'
+
+
+def initial_positions(rob: Any, formation: Formation, fail: Fail) -> NDArray[np.float64]:
+    """The start ``q0`` (n, 2) of ``[robots] positions``: the list, or around the template.
+
+    Checked for overlapping robots (``Formation.check_positions``); a start drawn around
+    the template that overlaps names the first pair, counts the pairs and suggests a
+    smaller ``sigma`` or another ``seed``.
+    """
+    start = rob.positions
+    if not isinstance(start, StartAround):
+        try:
+            return formation.check_positions(np.asarray(start, dtype=float))
+        except UserInputError as exc:
+            raise fail("robots.positions", str(exc)) from None
+    assert formation.template is not None  # build_formation requires it
+    rng = np.random.default_rng(start.seed)
+    q0 = formation.template + rng.normal(scale=start.sigma, size=formation.template.shape)
+    pairs = overlapping_pairs(q0, formation.diameters)
+    if len(pairs):
+        i, j = pairs[0]
+        r = float(np.linalg.norm(q0[j] - q0[i]))
+        a = 0.5 * float(formation.diameters[i] + formation.diameters[j])
+        raise fail(
+            "robots.positions",
+            f"robots {i + 1} and {j + 1} overlap in the start drawn around the template "
+            f"(sigma = {start.sigma:g}, seed = {start.seed}): distance {r:g} <= "
+            f"a_{i + 1},{j + 1} = {a:g} ({len(pairs)} overlapping pairs); "
+            + _sigma_hint(formation, start.sigma),
+        )
+    return q0
+
+
+def _sigma_hint(formation: Formation, sigma: float) -> str:
+    """Advice for a perturbed start that overlaps: a sigma that keeps robots apart."""
+    tpl = formation.template
+    assert tpl is not None
+    gap = nearest_gap(tpl, formation.diameters)
+    if gap <= 0:
+        return "the template itself has touching robots: use smaller diameters or a larger spacing"
+    # the difference of two starts has std sigma * sqrt(2) per axis; keep the gap ~8 std wide
+    good = 10.0 ** np.floor(np.log10(gap / (8.0 * np.sqrt(2.0))))
+    good = min(good * np.floor(gap / (8.0 * np.sqrt(2.0)) / good), sigma / 2)
+    return f"use a smaller sigma (e.g. sigma = {good:.2g}) or another seed"
+
+
+def restrictions_on_at_target(formation: Formation, law: Any) -> str | None:
+    """A warning when restrictions of a switching law are on at the desired shape, else ``None``.
+
+    The restriction of eq. (14) is on while ``alpha_ijk c_ijk + theta >= 0``. At the
+    template (or its mirror image) ``alpha_ijk c_ijk = -|c_ijk|`` for sign-valued alpha, so
+    a template triangle with ``|c_ijk| <= theta`` (thinner than theta: nearly collinear
+    neighbours) keeps its restriction on, its angular term pushes, and the desired shape is
+    not an equilibrium of the law: with a rigid graph, random starts then almost never reach
+    it (docs/swarms.md); with a graph that is not rigid, another shape with the same
+    distances may still be reached.
+    """
+    switching = getattr(law, "switching", None)
+    theta = getattr(law, "theta", None)
+    if switching is None or theta is None or formation.alpha is None:
+        return None
+    if formation.template is None or formation.orientation not in ("template", "mirror"):
+        return None
+    shape = formation.template
+    if formation.orientation == "mirror":
+        shape = shape * np.array([-1.0, 1.0])
+    sigma = np.asarray(switching(formation, shape))
+    on = np.flatnonzero(sigma >= 0)
+    if on.size == 0:
+        return None
+    tris, beta, _ = formation.surfaces
+    worst = on[np.argmax(sigma[on])]
+    a, b, c = (int(x) + 1 for x in tris[worst])
+    area = abs(float(sigma[worst] - theta) / float(beta[worst]))  # |c_abc|
+    bound = float(np.min(theta - sigma))  # the smallest |beta_s c_abc| at the desired shape
+    tip = f"use theta below {bound:.3g} (the thinnest restricted triangle), " if bound > 0 else ""
+    what = (
+        "the desired formation is not an equilibrium of the law"
+        if formation.is_rigid
+        else "the template itself is not an equilibrium of the law (the graph is not rigid: "
+        "another shape with the same distances may be)"
+    )
+    return (
+        f"{on.size} of the {sigma.size} restrictions of law {law.name!r} are on at the desired "
+        f"shape (e.g. robots {a}, {b}, {c}: |c_{a}{b}{c}| = {area:.3g} <= theta = {theta:g}, a "
+        f"triangle thinner than theta), so {what}; {tip}a template without such thin "
+        "triangles, or a graph without these triples"
+    )
 
 
 #: Scenario keys of the formation builders' parameters (``FormationError.key``).

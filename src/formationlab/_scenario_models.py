@@ -14,13 +14,19 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from .templates import LATTICES
+from .validation import choices, suggest
+
 __all__ = [
+    "EDGE_NAMES",
     "SECTIONS",
     "ControllerModel",
     "FormationModel",
+    "Lattice",
     "RobotsModel",
     "ScenarioModel",
     "SimulationModel",
+    "StartAround",
 ]
 
 _STRICT = ConfigDict(strict=True, extra="forbid", allow_inf_nan=False, frozen=True)
@@ -55,16 +61,121 @@ def _points(v: Any, what: str) -> list[list[float]]:
     return out
 
 
-class RobotsModel(BaseModel):
-    """``[robots]``: initial positions and diameters."""
+def _table(v: dict[str, Any], what: str, known: dict[str, str], required: tuple[str, ...]) -> None:
+    """Check the keys of an inline table: only ``known`` ones, and the ``required`` ones."""
+    for key in v:
+        if key not in known:
+            hint = suggest(str(key), known) or "."
+            raise ValueError(
+                f"{what} has no key {key!r}{hint} It takes "
+                + ", ".join(f"{k} ({m})" for k, m in known.items())
+            )
+    for key in required:
+        if key not in v:
+            raise ValueError(f"{what} needs the key {key!r} ({known[key]})")
+
+
+class StartAround(BaseModel):
+    """``positions = { around = "template", sigma = ..., seed = ... }``: a perturbed template.
+
+    Robot ``i`` starts at template point ``i`` plus Gaussian noise of standard
+    deviation ``sigma`` per coordinate, drawn with ``numpy.random.default_rng(seed)``.
+    """
 
     model_config = _STRICT
-    positions: list[list[float]]
+    around: Literal["template"] = "template"
+    sigma: float = Field(ge=0)
+    seed: int = Field(default=0, ge=0)
+
+
+_START_KEYS = {
+    "around": '"template"',
+    "sigma": "noise std per coordinate, >= 0",
+    "seed": "whole number >= 0, default 0",
+}
+
+
+def _start_around(v: dict[str, Any]) -> StartAround:
+    what = "positions"
+    _table(v, what, _START_KEYS, ("around", "sigma"))
+    if v["around"] != "template":
+        raise ValueError(f'positions = {{ around = ... }} takes "template", got {v["around"]!r}')
+    sigma = _finite(v["sigma"], "positions.sigma")
+    if sigma < 0:
+        raise ValueError(f"positions.sigma must be >= 0, got {sigma:g}")
+    seed = v.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"positions.seed must be a whole number >= 0, got {seed!r}")
+    return StartAround(around="template", sigma=sigma, seed=seed)
+
+
+class Lattice(BaseModel):
+    """``template = { lattice = "triangular", count = 100, spacing = 1.0 }``: a lattice patch."""
+
+    model_config = _STRICT
+    lattice: str
+    count: int = Field(ge=2)
+    spacing: float = Field(default=1.0, gt=0)
+
+
+_LATTICE_KEYS = {
+    "lattice": '"' + '", "'.join(LATTICES) + '"',
+    "count": "number of robots, >= 2",
+    "spacing": "nearest-neighbour distance > 0, default 1",
+}
+
+
+def _lattice(v: dict[str, Any]) -> Lattice:
+    what = "template"
+    _table(v, what, _LATTICE_KEYS, ("lattice", "count"))
+    kind = v["lattice"]
+    if not isinstance(kind, str) or kind not in LATTICES:
+        raise ValueError(f"unknown lattice {kind!r}{choices(str(kind), LATTICES)}")
+    count = v["count"]
+    if isinstance(count, bool) or not isinstance(count, int) or count < 2:
+        raise ValueError(f"template.count must be a whole number >= 2, got {count!r}")
+    spacing = _finite(v.get("spacing", 1.0), "template.spacing")
+    if spacing <= 0:
+        raise ValueError(f"template.spacing must be > 0, got {spacing:g}")
+    return Lattice(lattice=kind, count=count, spacing=spacing)
+
+
+#: The graph names of ``formation.edges`` (tables: ``{ knn = k }``, ``{ within = r }``).
+EDGE_NAMES = ("complete", "delaunay", "henneberg")
+
+_EDGE_FORMS = (
+    '"complete", "delaunay", "henneberg", { knn = k }, { within = r } or a list of pairs [i, j]'
+)
+
+
+def _edge_rule(v: dict[str, Any]) -> dict[str, int | float]:
+    if len(v) != 1 or next(iter(v)) not in ("knn", "within"):
+        keys = ", ".join(repr(k) for k in v) or "none"
+        hint = suggest(str(next(iter(v))), ("knn", "within")) if len(v) == 1 else ""
+        raise ValueError(f"a graph table is {{ knn = k }} or {{ within = r }}, got {keys}{hint}")
+    if "knn" in v:
+        k = v["knn"]
+        if isinstance(k, bool) or not isinstance(k, int) or k < 1:
+            raise ValueError(f"edges = {{ knn = k }} needs a whole k >= 1, got {k!r}")
+        return {"knn": k}
+    r = _finite(v["within"], "edges.within")
+    if r <= 0:
+        raise ValueError(f"edges = {{ within = r }} needs r > 0, got {r:g}")
+    return {"within": r}
+
+
+class RobotsModel(BaseModel):
+    """``[robots]``: initial positions (a list, or around the template) and diameters."""
+
+    model_config = _STRICT
+    positions: list[list[float]] | StartAround
     diameters: float | list[float] = 0.2
 
     @field_validator("positions", mode="before")
     @classmethod
-    def _positions(cls, v: Any) -> list[list[float]]:
+    def _positions(cls, v: Any) -> list[list[float]] | StartAround:
+        if isinstance(v, dict):
+            return _start_around(v)
         pts = _points(v, "positions")
         if len(pts) < 2:
             raise ValueError(f"a formation needs at least 2 robots, got {len(pts)} position")
@@ -83,21 +194,24 @@ class FormationModel(BaseModel):
     """``[formation]``: graph, desired distances, desired orientation."""
 
     model_config = _STRICT
-    edges: Literal["complete"] | list[list[int]] = "complete"
+    edges: str | dict[str, int | float] | list[list[int]] = "complete"
     distances: float | list[float] | None = None
-    template: list[list[float]] | None = None
+    template: list[list[float]] | Lattice | None = None
     orientation: Literal["free", "template", "mirror", "table"] | None = None
     alpha: list[list[float]] | None = None
 
     @field_validator("edges", mode="before")
     @classmethod
-    def _edges(cls, v: Any) -> str | list[list[int]]:
+    def _edges(cls, v: Any) -> str | dict[str, int | float] | list[list[int]]:
         if isinstance(v, str):
-            if v != "complete":
-                raise ValueError(f'edges must be "complete" or a list of pairs [i, j], got {v!r}')
+            if v not in EDGE_NAMES:
+                hint = suggest(v, (*EDGE_NAMES, "knn", "within"))
+                raise ValueError(f"edges must be {_EDGE_FORMS}, got {v!r}{hint}")
             return v
+        if isinstance(v, dict):
+            return _edge_rule(v)
         if not isinstance(v, list) or not v:
-            raise ValueError(f'edges must be "complete" or a list of pairs [i, j], got {v!r}')
+            raise ValueError(f"edges must be {_EDGE_FORMS}, got {v!r}")
         for t, row in enumerate(v):
             ok = isinstance(row, list) and len(row) == 2
             ok = ok and all(isinstance(x, int) and not isinstance(x, bool) for x in row)
@@ -114,7 +228,9 @@ class FormationModel(BaseModel):
 
     @field_validator("template", mode="before")
     @classmethod
-    def _template(cls, v: Any) -> list[list[float]] | None:
+    def _template(cls, v: Any) -> list[list[float]] | Lattice | None:
+        if isinstance(v, dict):
+            return _lattice(v)
         return None if v is None else _points(v, "template")
 
     @field_validator("alpha", mode="before")

@@ -1,7 +1,9 @@
 """Graphs of formations: edge lists, connectivity, rigidity.
 
 Edges are pairs ``(i, j)`` with ``i < j``, 0-based, shape ``(m, 2)``; users give
-them 1-based (``one_based=True``).
+them 1-based (``one_based=True``). Builders of graphs from points (Delaunay,
+k-nearest, ...) are in :mod:`formationlab.graphs`; the rigidity check for large
+graphs in :mod:`formationlab.rigidity`.
 """
 
 from __future__ import annotations
@@ -11,7 +13,17 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import FormationError
 
-__all__ = ["as_edges", "complete_edges", "is_connected", "is_rigid"]
+__all__ = [
+    "DENSE_RIGIDITY_MAX",
+    "as_edges",
+    "complete_edges",
+    "edges_connected",
+    "is_connected",
+    "is_rigid",
+]
+
+#: Up to this many robots :func:`is_rigid` computes the dense rank; above, the pebble game.
+DENSE_RIGIDITY_MAX = 50
 
 
 def complete_edges(n: int) -> NDArray[np.int64]:
@@ -23,6 +35,7 @@ def complete_edges(n: int) -> NDArray[np.int64]:
 
 
 def as_edges(edges: str | ArrayLike, n: int, *, one_based: bool) -> NDArray[np.int64]:
+    """Validated edges ``(m, 2)``, 0-based, ``i < j``, sorted, from ``"complete"`` or pairs."""
     if isinstance(edges, str):
         if edges != "complete":
             raise FormationError(
@@ -43,24 +56,27 @@ def as_edges(edges: str | ArrayLike, n: int, *, one_based: bool) -> NDArray[np.i
         raise FormationError("edges must hold whole robot numbers", key="edges")
     arr = arr.astype(np.int64)
     base = 1 if one_based else 0
-    seen: set[tuple[int, int]] = set()
-    out = []
-    for i, j in arr:
-        for x in (i, j):
-            if not base <= x < n + base:
-                raise FormationError(
-                    f"edge ({i}, {j}) names robot {x}, but robots are numbered "
-                    f"{base}..{n - 1 + base}",
-                    key="edges",
-                )
-        if i == j:
-            raise FormationError(f"edge ({i}, {j}) joins robot {i} to itself", key="edges")
-        key = (min(i, j) - base, max(i, j) - base)
-        if key in seen:
-            raise FormationError(f"edge ({i}, {j}) is given twice", key="edges")
-        seen.add(key)
-        out.append(key)
-    return np.asarray(sorted(out), dtype=np.int64)
+    outside = np.flatnonzero(((arr < base) | (arr >= n + base)).any(axis=1))
+    if outside.size:
+        i, j = arr[outside[0]]
+        x = i if not base <= i < n + base else j
+        raise FormationError(
+            f"edge ({i}, {j}) names robot {x}, but robots are numbered {base}..{n - 1 + base}",
+            key="edges",
+        )
+    loops = np.flatnonzero(arr[:, 0] == arr[:, 1])
+    if loops.size:
+        i, j = arr[loops[0]]
+        raise FormationError(f"edge ({i}, {j}) joins robot {i} to itself", key="edges")
+    pairs = np.sort(arr, axis=1) - base
+    order = np.lexsort((pairs[:, 1], pairs[:, 0]))
+    pairs = pairs[order]
+    repeat = np.flatnonzero((pairs[1:] == pairs[:-1]).all(axis=1))
+    if repeat.size:
+        first = np.min(order[repeat + 1])  # the later of the two, in the order given
+        i, j = arr[first]
+        raise FormationError(f"edge ({i}, {j}) is given twice", key="edges")
+    return np.ascontiguousarray(pairs, dtype=np.int64)
 
 
 def is_connected(adjacency: NDArray[np.bool_]) -> bool:
@@ -77,12 +93,38 @@ def is_connected(adjacency: NDArray[np.bool_]) -> bool:
     return len(seen) == n
 
 
-def is_rigid(edges: NDArray[np.int64], n: int) -> bool:
+def edges_connected(edges: NDArray[np.int64], n: int) -> bool:
+    """Whether the graph of ``edges`` (m, 2) on ``n`` robots is connected (sparse, any size)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    return bool(connected_components(graph, directed=False, return_labels=False) == 1)
+
+
+def is_rigid(edges: NDArray[np.int64], n: int, *, method: str = "auto") -> bool:
     """Generic infinitesimal rigidity in the plane: the rigidity matrix has rank ``2n - 3``.
 
-    The rank is evaluated at a generic (seeded random) placement, so the answer
-    is the graph's, not a particular shape's.
+    Parameters
+    ----------
+    edges : ndarray of int, shape (m, 2)
+        0-based pairs.
+    n : int
+        Number of robots.
+    method : {"auto", "dense", "pebble"}
+        ``"dense"``: the rank of the dense rigidity matrix at a generic (seeded
+        random) placement, so the answer is the graph's, not a particular
+        shape's; ``"pebble"``: rigid bodies and the pebble game
+        (:func:`formationlab.rigidity.is_generically_rigid`, exact, for any
+        size); ``"auto"``: dense up to :data:`DENSE_RIGIDITY_MAX` robots.
     """
+    if method not in ("auto", "dense", "pebble"):
+        raise ValueError(f'method must be "auto", "dense" or "pebble", got {method!r}')
+    if method == "pebble" or (method == "auto" and n > DENSE_RIGIDITY_MAX):
+        from .rigidity import is_generically_rigid
+
+        return is_generically_rigid(edges, n)
     if n == 2:
         return len(edges) == 1
     q = np.random.default_rng(12345).normal(size=(n, 2))

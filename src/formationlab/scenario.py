@@ -35,7 +35,13 @@ import tomli_w
 from numpy.typing import NDArray
 from pydantic import ValidationError
 
-from ._scenario_build import FIXED, build_formation, stem
+from ._scenario_build import (
+    FIXED,
+    build_formation,
+    initial_positions,
+    restrictions_on_at_target,
+    stem,
+)
 from ._scenario_models import SECTIONS, ScenarioModel
 from ._scenario_parts import build_entry
 from .controllers import LAWS, Law
@@ -234,10 +240,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         return ScenarioError(f"{source}: {where}{at}: {message}", key=where)
 
     formation = build_formation(rob, frm, ctl.alpha_values, fail, warnings)
-    try:
-        q0 = formation.check_positions(np.asarray(rob.positions, dtype=float))
-    except UserInputError as exc:
-        raise fail("robots.positions", str(exc)) from None
+    q0 = initial_positions(rob, formation, fail)
     q0.setflags(write=False)  # the scenario is frozen, its arrays too
 
     study_laws = (model.study or {}).get("laws")
@@ -261,6 +264,9 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
             f"law {law.name!r} has an angular term but the orientation is free, so it acts as "
             'the distance law; set formation.orientation (e.g. "template") to use it'
         )
+    thin = restrictions_on_at_target(formation, law)
+    if thin:
+        warnings.append(thin)
     integrator, ignored_integrator = build_entry(
         INTEGRATORS,
         LAWS,
