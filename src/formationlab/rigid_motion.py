@@ -42,7 +42,7 @@ from .geometry import cross, perp
 if TYPE_CHECKING:
     from .analysis import Tolerances
 
-__all__ = ["RigidMotion", "rigid_motion", "rigid_outcome"]
+__all__ = ["RigidMotion", "field_motion", "rigid_motion", "rigid_outcome"]
 
 #: codes of :func:`rigid_outcome`
 NOT_RIGID, DRIFTING, ROTATING = 0, 1, 2
@@ -138,6 +138,28 @@ def rigid_motion(before: ArrayLike, after: ArrayLike, window: ArrayLike) -> Rigi
     return RigidMotion(
         velocity=velocity, omega=omega, centre=centre, speed=speed, spin=spin,
         shape_rate=shape_rate, window=t,
+    )  # fmt: skip
+
+
+def field_motion(q: ArrayLike, velocity: ArrayLike, omega: ArrayLike) -> RigidMotion:
+    """The :class:`RigidMotion` of the exact rigid field ``u_i = v + omega k x (q_i - q_bar)``.
+
+    For a relative equilibrium found by solving for it (``formationlab.equilibria``):
+    ``q`` ``(..., n, 2)``, ``velocity`` ``v`` ``(..., 2)`` of the centroid and
+    ``omega`` ``(...)``; the shape rate is 0 and the window infinite.
+    """
+    q = np.asarray(q, dtype=float)
+    v = np.asarray(velocity, dtype=float)
+    w = np.asarray(omega, dtype=float)
+    b = q - q.mean(axis=-2, keepdims=True)
+    move = v[..., None, :] + w[..., None, None] * perp(b)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        centre = q.mean(axis=-2) + perp(v) / np.where(w == 0.0, np.nan, w)[..., None]
+    return RigidMotion(
+        velocity=v, omega=w, centre=centre,
+        speed=np.max(np.linalg.norm(move, axis=-1), axis=-1),
+        spin=np.abs(w) * np.max(np.linalg.norm(b, axis=-1), axis=-1),
+        shape_rate=np.zeros(w.shape), window=np.full(w.shape, np.inf),
     )  # fmt: skip
 
 

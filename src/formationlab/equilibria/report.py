@@ -218,6 +218,12 @@ class EquilibriaReport:
         out = []
         for k, (eq, count) in enumerate(zip(cat.equilibria, cat.counts, strict=True)):
             extra = f", {eq.unstable_directions} unstable" if eq.unstable_directions else ""
+            if eq.outcome == "drifting":
+                extra += f", |v| = {float(np.hypot(*eq.velocity)):.4g} m/s"
+            elif eq.outcome == "rotating":
+                extra += (
+                    f", omega = {eq.omega:.4g} rad/s, |v| = {float(np.hypot(*eq.velocity)):.4g}"
+                )
             out.append(
                 f"#{k + 1} {eq.outcome} {eq.stability}{extra}: "
                 f"{count} trials, max Re(lambda) = {eq.growth_rate:.4g}"

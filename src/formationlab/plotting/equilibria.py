@@ -26,8 +26,10 @@ def plot_equilibrium(
 
     Edges are coloured by ``r_ij - d_ij`` (blue short, red long, black met);
     the frame's colour is the class (green stable, orange saddle, purple
-    Filippov, grey degenerate). ``span`` fixes the width shown (a common scale
-    for a gallery). Returns the artists.
+    Filippov, grey degenerate). A relative equilibrium (drifting or rotating)
+    carries the arrow of its centroid's velocity (one second of motion) and,
+    when it rotates, a cross at the centre of the rotation. ``span`` fixes the
+    width shown (a common scale for a gallery). Returns the artists.
     """
     if ax is None:
         _, ax = plt.subplots(figsize=(3, 3))
@@ -43,6 +45,17 @@ def plot_equilibrium(
         ax.add_patch(c)
         artists.append(c)
         artists.append(ax.annotate(str(i + 1), (x, y), ha="center", va="center", fontsize=8))
+    if getattr(eq, "moving", False):  # a relative equilibrium: one second of its motion
+        c = q.mean(axis=0)
+        v = np.asarray(eq.velocity, dtype=float)
+        artists.append(
+            ax.annotate(
+                "", xy=tuple(c + v), xytext=tuple(c),
+                arrowprops={"arrowstyle": "-|>", "color": "tab:purple", "lw": 1.5},
+            )
+        )  # fmt: skip
+        if eq.centre is not None:
+            artists.append(ax.plot(*eq.centre, marker="+", color="tab:brown", ms=8)[0])
     ax.set_aspect("equal")
     if span is None:
         span = _span(q, formation)
@@ -94,6 +107,10 @@ def gallery_figure(catalogue: Any, *, columns: int = 4, title: str = "", limit: 
             lines.append("on " + ", ".join(eq.surfaces))
         elif eq.active:
             lines.append("active " + ", ".join(eq.active))
+        if eq.outcome == "drifting":
+            lines.append(f"|v| = {float(np.hypot(*eq.velocity)):.3g} m/s (arrow: 1 s)")
+        elif eq.outcome == "rotating":
+            lines.append(f"omega = {eq.omega:.3g} rad/s (+: centre)")
         plot_equilibrium(catalogue.formation, eq, ax, title="\n".join(lines), span=span)
     if not eqs:
         axes[0, 0].text(0.5, 0.5, "no equilibrium found", ha="center", va="center")

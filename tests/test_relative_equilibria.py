@@ -1,0 +1,121 @@
+"""Relative equilibria: shapes that the closed loop moves as a rigid body.
+
+The finder (``refine(..., moving=True)``) is held against simulations: implicit
+Euler keeps a translating Filippov relative equilibrium exactly (a translate of
+it solves the implicit step, the field being translation invariant), so a
+drifting hexagon settled by implicit Euler must be the finder's shape and
+velocity to 1e-6; explicit Euler's chattering drift converges to the finder's
+velocity at first order in dt. A static equilibrium is the case v = 0, omega = 0.
+"""
+
+import numpy as np
+import pytest
+
+import formationlab as fl
+from formationlab.equilibria.catalogue import catalogue
+from formationlab.equilibria.classify import classify_equilibrium
+from formationlab.equilibria.dedup import canonical_pose, same_equilibrium
+from formationlab.equilibria.refine import refine
+from formationlab.equilibria.search import settle
+from formationlab.integrators import ImplicitEuler
+from formationlab.io.scenario import load_scenario
+from formationlab.studies.batch import run_batch
+from formationlab.studies.config import BoxInitial
+from formationlab.studies.sampling import trial_initial_states
+
+
+def _body(q, v):
+    """``v`` in the frame of ``q`` turned so that robot 1 -> robot 2 points along +x."""
+    d = q[1] - q[0]
+    c, s = d / np.hypot(*d)
+    return np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1]])
+
+
+@pytest.fixture(scope="module")
+def hexagon_drift():
+    """The first drifting trial of the hexagon study (box 3, seed 3), after 20 s of Euler."""
+    sc = load_scenario("examples/hexagon.toml")
+    q0 = trial_initial_states(sc.formation, BoxInitial(half_width=3.0), 3, np.arange(12))
+    res = run_batch(sc.formation, sc.law, q0, dt=1e-3, duration=20.0)
+    k = int(np.flatnonzero(res.outcome == "drifting")[0])
+    return sc, res.q_final[k], res.motion[k]
+
+
+def test_finder_recovers_the_drifting_hexagon_of_a_simulation(hexagon_drift):
+    sc, q_end, _ = hexagon_drift
+    f, law = sc.formation, sc.law
+    found = refine(f, law, q_end, moving=True)
+    assert found.success and found.filippov and found.residual < 1e-12
+    # the simulation: implicit Euler slides on the surfaces and keeps the drift exactly
+    settled = settle(f, law, q_end[None], duration=20.0, integrator=ImplicitEuler(dt=0.01))
+    assert settled.outcome[0] == "drifting"
+    q_sim, m = settled.q_final[0], settled.motion[0]
+    assert m.shape_rate < 1e-9
+    assert same_equilibrium(f, found.q, q_sim, tol=1e-6)
+    np.testing.assert_allclose(canonical_pose(found.q), canonical_pose(q_sim), atol=1e-6)
+    np.testing.assert_allclose(_body(found.q, found.velocity), _body(q_sim, m.velocity), atol=1e-6)
+    assert abs(found.omega) < 1e-9 and abs(m.omega) < 1e-9
+    # the field at the found shape is the rigid motion, robot by robot
+    u = law.control_with(f, found.q, found.weights)
+    np.testing.assert_allclose(u, np.broadcast_to(found.velocity, u.shape), atol=1e-12)
+    eq = classify_equilibrium(f, law, found)
+    assert eq.outcome == "drifting" and eq.moving and eq.unstable_directions == 0
+    assert eq.speed == pytest.approx(float(np.hypot(*found.velocity)))
+
+
+def test_explicit_euler_drift_converges_to_the_finder_at_first_order(hexagon_drift):
+    sc, q_end, _ = hexagon_drift
+    found = refine(sc.formation, sc.law, q_end, moving=True)
+    target = float(np.hypot(*found.velocity))
+    errors = []
+    for dt in (1e-3, 5e-4, 2.5e-4):
+        r = run_batch(sc.formation, sc.law, q_end[None], dt=dt, duration=6.0)
+        assert r.outcome[0] == "drifting"
+        errors.append(abs(float(r.motion.speed[0]) - target))
+    ratios = np.array(errors[:-1]) / np.array(errors[1:])
+    assert np.all((ratios > 1.6) & (ratios < 2.6)), (errors, ratios)
+
+
+def test_a_static_equilibrium_is_the_case_of_no_motion(rng):
+    f = fl.Formation.from_template(
+        [[1.0, 0.0], [0.5, 0.866], [-0.5, 0.866], [-1.0, 0.0], [-0.5, -0.866], [0.5, -0.866]],
+        edges=[[1, 2], [2, 3], [3, 4], [4, 5], [5, 6], [6, 1], [1, 3], [1, 4], [1, 5]],
+        orientation="template",
+    )
+    law = fl.AngleRestrictedLaw(k_c=2.0, k_a=3.0, theta=0.5)
+    start = f.template + 0.02 * rng.standard_normal((6, 2))
+    static = refine(f, law, start)
+    moving = refine(f, law, start, moving=True)
+    assert static.success and moving.success
+    assert np.abs(moving.velocity).max() < 1e-10 and abs(moving.omega) < 1e-10
+    np.testing.assert_allclose(moving.q, static.q, atol=1e-9)
+    eq = classify_equilibrium(f, law, moving)
+    assert eq.outcome == "desired" and eq.stability == "stable" and not eq.moving
+    # the distance law's collinear saddle of three robots, found as a moving shape
+    tri = fl.Formation.from_distances(3, distances=1.0, diameters=0.2)
+    line = np.array([[-0.8, 0.01], [0.02, 0.0], [0.75, -0.01]])
+    a = refine(tri, fl.DistanceLaw(k_c=2.0), line)
+    b = refine(tri, fl.DistanceLaw(k_c=2.0), line, moving=True)
+    assert a.success and b.success and np.abs(b.velocity).max() < 1e-10 and abs(b.omega) < 1e-10
+    np.testing.assert_allclose(b.q, a.q, atol=1e-9)
+
+
+def test_catalogue_lists_moving_shapes_with_their_velocity(hexagon_drift):
+    sc, q_end, motion = hexagon_drift
+    f, law = sc.formation, sc.law
+    # the raw end state and a copy of it turned and shifted:
+    # one relative equilibrium, its velocity turned with its pose
+    turn = np.array([[0.0, -1.0], [1.0, 0.0]])
+    other = q_end @ turn.T + [5.0, -2.0]
+    cat = catalogue(f, law, np.stack([q_end, other]), outcomes=np.array(["drifting"] * 2))
+    assert len(cat.equilibria) == 1 and cat.counts == [2]
+    eq = cat.equilibria[0]
+    assert eq.outcome == "drifting"
+    np.testing.assert_allclose(canonical_pose(eq.q), eq.q, atol=1e-12)  # posed
+    found = refine(f, law, q_end, moving=True)
+    np.testing.assert_allclose(eq.velocity, _body(found.q, found.velocity), atol=1e-9)
+    row = cat.to_dict()["equilibria"][0]
+    assert row["outcome"] == "drifting" and row["centre"] is None
+    assert row["speed"] == pytest.approx(float(np.hypot(*found.velocity)), rel=1e-9)
+    # the simulation's measured drift is the finder's to explicit Euler's O(dt) error
+    assert float(motion.speed) == pytest.approx(row["speed"], rel=5e-2)
