@@ -251,3 +251,23 @@ def test_a_study_without_moving_shapes_keeps_its_tables():
         rows = res.trials[res.trials["group"] == g]
         assert list(rows["outcome"]) == list(today) == list(batch.outcome)
         assert {"drift_vx", "drift_vy", "drift_omega", "shape_rate"} <= set(rows.columns)
+
+
+def test_the_drifting_examples_load_with_their_studies():
+    from pathlib import Path
+
+    from formationlab.studies import parse_study, study_groups
+
+    folder = Path(__file__).resolve().parents[1] / "examples" / "drifting"
+    files = sorted(folder.glob("*.toml"))
+    assert len(files) == 7
+    for path in files:
+        sc = load_scenario(path)
+        config = parse_study(sc.study)
+        groups = study_groups(sc.formation, sc.law, config)
+        assert config.trials == 1000 and len(groups) == len(config.sweep.get("k_a", [0])) * len(
+            config.sweep.get("theta", [0])
+        )
+        if sc.formation.template is not None:  # a regular polygon of side 1 on its graph
+            t = sc.formation.template
+            assert np.linalg.norm(t[1] - t[0]) == pytest.approx(1.0, rel=1e-12)
