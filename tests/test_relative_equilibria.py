@@ -119,3 +119,43 @@ def test_catalogue_lists_moving_shapes_with_their_velocity(hexagon_drift):
     assert row["speed"] == pytest.approx(float(np.hypot(*found.velocity)), rel=1e-9)
     # the simulation's measured drift is the finder's to explicit Euler's O(dt) error
     assert float(motion.speed) == pytest.approx(row["speed"], rel=5e-2)
+
+
+class _Spinning(fl.DistanceLaw):
+    """The distance law plus a rigid rotation ``omega0 k x (q_i - q_bar)`` of every shape."""
+
+    name = "spinning-for-test"
+    omega0 = 0.7
+
+    def control(self, formation, q):
+        q = np.asarray(q, dtype=float)
+        p = q - q.mean(axis=-2, keepdims=True)
+        return super().control(formation, q) + self.omega0 * np.stack([-p[..., 1], p[..., 0]], -1)
+
+
+def test_rotating_equilibrium_is_classified_in_the_co_moving_frame(rng):
+    """The spinning law turns the distance law's triangle at omega0; in the co-moving frame
+    its eigenvalues are the distance law's at rest (the added rotation's Jacobian is omega0 k x
+    minus a map into translations), not shifted by +-i omega0."""
+    f = fl.Formation.from_distances(3, distances=1.0, diameters=0.2)
+    start = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, 0.87]]) + 0.03 * rng.standard_normal((3, 2))
+    spin = refine(f, _Spinning(k_c=2.0), start, moving=True)
+    rest = refine(f, fl.DistanceLaw(k_c=2.0), start)
+    assert spin.success and rest.success
+    assert spin.omega == pytest.approx(0.7, abs=1e-10) and np.abs(spin.velocity).max() < 1e-10
+    np.testing.assert_allclose(spin.q, rest.q, atol=1e-9)
+    a = classify_equilibrium(f, _Spinning(k_c=2.0), spin)
+    b = classify_equilibrium(f, fl.DistanceLaw(k_c=2.0), rest)
+    np.testing.assert_allclose(a.eigenvalues, b.eigenvalues, atol=1e-6)
+    assert np.all(a.eigenvalues.imag == 0) and a.stability == b.stability == "stable"
+    assert a.centre is None and a.outcome == "desired"  # distances met: desired, turning or not
+    # the collinear saddle of the distance law, turning: outcome rotating about its centroid
+    line = np.array([[-0.8, 0.01], [0.02, 0.0], [0.75, -0.01]])
+    turning = refine(f, _Spinning(k_c=2.0), line, moving=True)
+    still = refine(f, fl.DistanceLaw(k_c=2.0), line)
+    c = classify_equilibrium(f, _Spinning(k_c=2.0), turning)
+    d = classify_equilibrium(f, fl.DistanceLaw(k_c=2.0), still)
+    assert c.outcome == "rotating" and c.moving and d.outcome == "incorrect"
+    np.testing.assert_allclose(c.centre, turning.q.mean(axis=0), atol=1e-9)
+    np.testing.assert_allclose(c.eigenvalues, d.eigenvalues, atol=1e-6)
+    assert c.stability == d.stability == "saddle" and c.unstable_directions == 1

@@ -47,6 +47,7 @@ from scipy.optimize import least_squares
 
 from ..controllers import Law
 from ..spec import Formation
+from .relative import MAX_NEAR, all_subsets, attracts, rigid_field, rigid_guess
 
 __all__ = ["Refined", "refine", "rigid_field"]
 
@@ -105,13 +106,6 @@ def _gauge(q: NDArray, c0: NDArray, p0: NDArray, scale: float) -> NDArray:
     p = q - c[..., None, :]
     rot = np.sum(p0[:, 0] * p[..., 1] - p0[:, 1] * p[..., 0], axis=-1) / (q.shape[-2] * scale)
     return np.concatenate([c - c0, rot[..., None]], axis=-1)
-
-
-def rigid_field(q: NDArray, motion: NDArray) -> NDArray:
-    """``v + omega k x (q_i - q_bar)`` at ``q`` ``(..., n, 2)`` for ``motion = (vx, vy, omega)``."""
-    p = q - q.mean(axis=-2, keepdims=True)
-    v, omega = motion[..., None, :2], motion[..., None, 2:3]
-    return v + omega * np.stack([-p[..., 1], p[..., 0]], axis=-1)
 
 
 def _field(law: Law, formation: Formation, weights: NDArray) -> Callable[[NDArray], NDArray]:
@@ -196,7 +190,7 @@ def refine(
     m0 = None
     if moving:  # the rigid part of the field halfway across the surfaces q0 is near
         w_half = np.where(np.abs(sigma0) <= band * scale**2, 0.5, w0)
-        m0 = _rigid_guess(_field(law, formation, w_half)(q0), q0)
+        m0 = rigid_guess(_field(law, formation, w_half)(q0), q0)
 
     def try_filippov(subset: tuple[int, ...]) -> Refined:
         q, w, m = _solve_filippov(formation, law, q0, w0, subset, scale, m0)
@@ -229,8 +223,8 @@ def refine(
         # near surfaces of a moving formation: several relative equilibria slide on
         # subsets of them; the one the run was at attracts on each of its surfaces,
         # and of those it is the nearest to q0
-        found = [r for r in map(try_filippov, _all_subsets(subsets[0])) if r.success]
-        held = [r for r in found if _attracts(formation, law, r)] or found
+        found = [r for r in map(try_filippov, all_subsets(subsets[0])) if r.success]
+        held = [r for r in found if attracts(formation, law, r.q, r.weights, r.surfaces)] or found
         if held:
             return min(held, key=lambda r: float(np.sum((r.q - q0) ** 2)))
     if subsets and np.all(np.abs(sigma0[list(subsets[0])]) <= band * scale**2):
@@ -276,14 +270,6 @@ def refine(
                 omega=cand.omega,
             )
     return best
-
-
-def _rigid_guess(u: NDArray, q: NDArray) -> NDArray[np.float64]:
-    """Least-squares ``(vx, vy, omega)`` of the velocities ``u`` ``(n, 2)`` at ``q``."""
-    p = q - q.mean(axis=0)
-    kp = np.stack([-p[:, 1], p[:, 0]], axis=-1)
-    omega = float(np.sum(kp * u) / max(float(np.sum(p * p)), 1e-12))
-    return np.array([*u.mean(axis=0), omega])
 
 
 def _motion(m: NDArray | None) -> dict[str, Any]:
@@ -368,30 +354,6 @@ def _solve_filippov(
     x = _solve(fun, x0, bounds=(lo, hi), method="trf")
     q, w = unpack(x)
     return q, w, (None if m0 is None else x[k:])
-
-
-#: most near surfaces whose subsets are all tried for a relative equilibrium (2^k - 1 solves)
-MAX_NEAR = 5
-
-
-def _all_subsets(near: tuple[int, ...]) -> list[tuple[int, ...]]:
-    """Every non-empty subset of ``near``, largest first."""
-    return [c for k in range(len(near), 0, -1) for c in combinations(near, k)]
-
-
-def _attracts(formation: Formation, law: Law, r: Refined) -> bool:
-    """Whether each surface ``s`` of ``r`` attracts: ``grad sigma_s . u`` is positive with
-    ``w_s = 0`` and negative with ``w_s = 1`` (the other weights at ``r``'s)."""
-    h = 1e-7 * max(1.0, float(np.max(np.abs(r.q))))
-    for s in r.surfaces:
-        for value, sign in ((0.0, 1.0), (1.0, -1.0)):
-            w = r.weights.copy()
-            w[s] = value
-            u = law.control_with(formation, r.q, w)
-            ds = law.switching(formation, r.q + h * u)[s] - law.switching(formation, r.q - h * u)[s]
-            if not sign * ds > 0:
-                return False
-    return True
 
 
 def _subsets(sigma0: NDArray, max_surfaces: int, band: float) -> list[tuple[int, ...]]:
