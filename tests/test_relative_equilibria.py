@@ -159,3 +159,21 @@ def test_rotating_equilibrium_is_classified_in_the_co_moving_frame(rng):
     np.testing.assert_allclose(c.centre, turning.q.mean(axis=0), atol=1e-9)
     np.testing.assert_allclose(c.eigenvalues, d.eigenvalues, atol=1e-6)
     assert c.stability == d.stability == "saddle" and c.unstable_directions == 1
+
+
+def test_a_drifting_shape_is_followed_in_k_a(hexagon_drift):
+    from formationlab.equilibria.continuation import follow
+
+    sc, q_end, _ = hexagon_drift
+    start = refine(sc.formation, sc.law, q_end, moving=True)
+    branch = follow(sc.formation, sc.law, start.q, "k_a", [3.0, 3.2, 3.4], moving=True)
+    assert branch.end == "end of range" and len(branch.equilibria) == 3
+    assert all(e.outcome == "drifting" and e.residual < 1e-10 for e in branch.equilibria)
+    assert branch.equilibria[0].speed == pytest.approx(float(np.hypot(*start.velocity)))
+    # at each value the field is the drift: checked against the law built at that value
+    for v, e in zip(branch.values, branch.equilibria, strict=True):
+        lw = sc.law.with_params(k_a=float(v))
+        u = lw.control_with(sc.formation, e.q, e.weights)
+        np.testing.assert_allclose(u, np.broadcast_to(e.velocity, u.shape), atol=1e-9)
+    speeds = [e.speed for e in branch.equilibria]
+    assert speeds[0] != speeds[1] != speeds[2]

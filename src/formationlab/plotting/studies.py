@@ -254,7 +254,7 @@ def shapes_figure(
     One row per outcome (mirror, incorrect, collision, drifting, rotating,
     not-converged: those that occur), up to ``per_outcome`` trials each, the first
     ones by group and trial; a drifting or rotating shape carries the arrow of its
-    centroid's velocity (one second of motion).
+    centroid's velocity (one second of motion, less where that would leave the panel).
     Each panel is centred on the shape's centroid. ``diameters`` maps a group to its
     robots' diameters. Returns None when every trial of the law ended as desired.
     """
@@ -288,7 +288,15 @@ def shapes_figure(
             err = f"\n|e|max={row['max_distance_error']:.2g}"
             if o in ("drifting", "rotating") and "drift_vx" in row:
                 v = np.array([row["drift_vx"], row["drift_vy"]], dtype=float)
-                draw_velocity(ax, np.zeros(2), v, color=OUTCOME_COLORS[o])
+                extent = float(np.ptp(q, axis=0).max())
+                speed = max(float(np.hypot(*v)), 1e-300)
+                draw_velocity(
+                    ax,
+                    np.zeros(2),
+                    v,
+                    color=OUTCOME_COLORS[o],
+                    scale=min(1.0, 0.4 * extent / speed),
+                )
                 err += f" |v|={np.hypot(*v):.2f}"
                 if o == "rotating":
                     err += f" w={row['drift_omega']:.2f}"
