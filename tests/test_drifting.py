@@ -271,3 +271,37 @@ def test_the_drifting_examples_load_with_their_studies():
         if sc.formation.template is not None:  # a regular polygon of side 1 on its graph
             t = sc.formation.template
             assert np.linalg.norm(t[1] - t[0]) == pytest.approx(1.0, rel=1e-12)
+
+
+def test_run_command_says_the_formation_drifts(hexagon_runs, tmp_path):
+    import json
+    import re
+    from pathlib import Path
+
+    from typer.testing import CliRunner
+
+    from formationlab.cli import _load_commands, app
+
+    _load_commands()
+    _, long, starts, _ = hexagon_runs
+    k = int(
+        np.flatnonzero(
+            long["numba"].outcome[np.isin(long["numba"].outcome, ["drifting", "rotating"])]
+            == "drifting"
+        )[0]
+    )
+    text = (Path(__file__).resolve().parents[1] / "examples" / "hexagon.toml").read_text()
+    pos = "positions = [" + ", ".join(f"[{float(x)!r}, {float(y)!r}]" for x, y in starts[k]) + "]"
+    text = re.sub(r"positions = \[\[.*?\]\]", pos, text, count=1, flags=re.S)
+    text = text.replace("duration = 20.0", "duration = 2.5")
+    (tmp_path / "drift.toml").write_text(text)
+    res = CliRunner().invoke(
+        app, ["run", str(tmp_path / "drift.toml"), "--out", str(tmp_path / "o")]
+    )
+    assert res.exit_code == 0, res.output
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["outcome"] == "drifting" and summary["rigid_motion"]["centre"] is None
+    speed = summary["rigid_motion"]["speed"]
+    assert speed == pytest.approx(float(np.hypot(*summary["rigid_motion"]["velocity"])), rel=1e-6)
+    assert f"outcome drifting at {speed:.3g} m/s" in res.output
+    assert summary["tolerances"]["drift_window"] == 2.0

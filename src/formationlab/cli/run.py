@@ -99,8 +99,14 @@ def run(
     }
     atomic_write_json(folder / "summary.json", summary)
     conv = summary["converged_time"]
+    rigid = summary.get("rigid_motion")
+    moving = ""
+    if rigid is not None:  # drifting or rotating: say how fast
+        moving = f" at {rigid['speed']:.3g} m/s"
+        if rigid["centre"] is not None:
+            moving += f", {rigid['angular_velocity']:.3g} rad/s"
     _say(
-        f"{sc.name}: outcome {summary['outcome']}, max |r_ij - d_ij| = "
+        f"{sc.name}: outcome {summary['outcome']}{moving}, max |r_ij - d_ij| = "
         f"{summary['max_distance_error']:.3g}, "
         + (f"converged at t = {conv:.3g} s" if conv is not None else "not converged")
         + f"; wrote {folder}/",
