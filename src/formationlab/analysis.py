@@ -14,8 +14,15 @@ One classification is shared by every command (``run``, ``paper``, ``study``,
 ``incorrect``
     stopped (below) with distances not met, or distances met with only *some*
     triples reversed (a flip that a non-rigid graph allows);
+``drifting``
+    distances not met, not stopped, but moving as a rigid body: the shape kept
+    over the last ``Tolerances.drift_window`` seconds while the formation
+    translates (a relative equilibrium of the closed loop,
+    :mod:`formationlab.rigid_motion`, ``docs/drifting.md``);
+``rotating``
+    the same with a rotation: an angular velocity about a centre;
 ``not-converged``
-    still moving at the end with distances not met.
+    still moving at the end, distances not met, shape still changing.
 
 **Stopped** means: the instantaneous speed ``max_i |u_i|`` *or* the net speed
 over the last check interval, ``max_i |q_i(t) - q_i(t - T)| / T`` with
@@ -24,6 +31,11 @@ what recognises a sliding-mode (Filippov) equilibrium reached by explicit
 Euler: the iterates chatter across a switching surface with a large ``|u_i|``
 at every step while the net motion, like the Filippov velocity there, is zero.
 A smooth motion faster than ``speed`` fails both tests.
+
+**Moving rigidly** is decided by :func:`formationlab.rigid_motion.rigid_outcome`
+from the positions ``drift_window`` seconds before the end
+(:func:`formationlab.rigid_motion.rigid_motion`): shape rate at most
+``Tolerances.shape`` while the rigid motion is faster than that.
 """
 
 from __future__ import annotations
@@ -36,23 +48,30 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import ParameterError
 from .geometry import cross
+from .rigid_motion import DRIFTING, NOT_RIGID, ROTATING, RigidMotion, rigid_motion, rigid_outcome
 from .spec import Formation
 
 __all__ = [
     "OUTCOMES",
     "Outcome",
+    "RigidMotion",
     "Tolerances",
     "classify",
     "converged_time",
     "distance_errors",
     "edge_labels",
+    "final_motion",
     "net_speed",
     "orientation_agreement",
     "triangle_orientation",
 ]
 
-Outcome = Literal["desired", "mirror", "incorrect", "collision", "not-converged"]
-OUTCOMES: tuple[Outcome, ...] = ("desired", "mirror", "incorrect", "collision", "not-converged")
+Outcome = Literal[
+    "desired", "mirror", "incorrect", "collision", "drifting", "rotating", "not-converged"
+]
+OUTCOMES: tuple[Outcome, ...] = (
+    "desired", "mirror", "incorrect", "collision", "drifting", "rotating", "not-converged"
+)  # fmt: skip
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -70,17 +89,38 @@ class Tolerances:
         Length ``T`` of the check interval of the net speed
         ``max_i |q_i(t) - q_i(t - T)| / T``, seconds. The batched studies test
         convergence every ``window`` seconds (``round(window / dt)`` steps).
+    shape : float
+        Largest shape rate, m/s, for a moving formation to count as rigid
+        (``drifting`` or ``rotating``): ``max_i |B_i - R A_i| / T`` after the best
+        rigid fit of the positions ``T = drift_window`` seconds apart
+        (:mod:`formationlab.rigid_motion`); the rigid motion must also move some
+        robot faster than this, and a rotation must move the robots about their
+        centroid faster than this to count as ``rotating``. The default 2e-2 m/s
+        (4 cm over the default window) lies above the shape rate that explicit
+        Euler's chatter on a switching surface leaves at ``dt = 1e-3`` (at most
+        1.1e-2 m/s, median 3e-3, over the moving trials of the hexagon's study) and
+        far below the drift speeds seen (0.24 to 1.2 m/s).
+    drift_window : float
+        The window ``T`` of the rigid-motion fit, seconds: the positions this long
+        before the end are compared with the final ones (a run shorter than this is
+        never ``drifting`` or ``rotating``). Rotations faster than ``pi / T`` rad/s alias.
     """
 
     distance: float = 1e-2
     speed: float = 1e-3
     window: float = 1e-2
+    shape: float = 2e-2
+    drift_window: float = 2.0
 
     def __post_init__(self) -> None:
-        for name in ("distance", "speed", "window"):
+        for name in ("distance", "speed", "window", "shape", "drift_window"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
                 raise ParameterError(f"tolerance {name} must be a finite number > 0, got {v!r}")
+
+    def drift_steps(self, dt: float) -> int:
+        """Steps of ``dt`` in the drift window, ``max(1, round(drift_window / dt))``."""
+        return max(1, round(self.drift_window / dt))
 
 
 def distance_errors(formation: Formation, q: ArrayLike) -> NDArray[np.float64]:
@@ -124,13 +164,16 @@ def classify(
     *,
     contact: bool = False,
     net_speed: float | None = None,
+    motion: RigidMotion | None = None,
 ) -> Outcome:
     """The outcome of a final state ``q`` with controls ``u`` (both ``(n, 2)``).
 
     ``contact`` marks a run stopped at a rejected step (contact reached).
     ``net_speed`` is ``max_i |q_i(t) - q_i(t - T)| / T`` over the last check
     interval (:func:`net_speed`); None or NaN when unknown, and then only the
-    instantaneous speed decides whether the robots have stopped.
+    instantaneous speed decides whether the robots have stopped. ``motion`` is
+    the rigid motion over the drift window (:func:`final_motion`); None when
+    unknown, and then a moving state is ``not-converged``.
     """
     tol = tolerances or Tolerances()
     q = np.asarray(q, dtype=float)
@@ -148,7 +191,26 @@ def classify(
         return "incorrect"
     speed = np.max(np.linalg.norm(np.asarray(u, dtype=float), axis=-1))
     stopped = speed <= tol.speed or (net_speed is not None and net_speed <= tol.speed)
-    return "incorrect" if stopped else "not-converged"
+    if stopped:
+        return "incorrect"
+    rigid = NOT_RIGID if motion is None else int(rigid_outcome(motion, tol))
+    return "drifting" if rigid == DRIFTING else "rotating" if rigid == ROTATING else "not-converged"
+
+
+def final_motion(t: ArrayLike, q: ArrayLike, tolerances: Tolerances | None = None) -> RigidMotion:
+    """Rigid motion over the last ``drift_window`` seconds of a saved run ``(T,)``, ``(T, n, 2)``.
+
+    Compares the final positions with the latest saved ones at least
+    ``drift_window`` before the end (to a relative 1e-9, as :func:`net_speed`);
+    unknown (NaN) when the run is shorter than the window.
+    """
+    tol = tolerances or Tolerances()
+    t = np.asarray(t, dtype=float)
+    q = np.asarray(q, dtype=float)
+    j = int(np.searchsorted(t, t[-1] - tol.drift_window * (1.0 - 1e-9), side="right")) - 1
+    if j < 0:
+        return RigidMotion.unknown()
+    return rigid_motion(q[j], q[-1], t[-1] - t[j])
 
 
 def net_speed(t: ArrayLike, q: ArrayLike, window: float) -> NDArray[np.float64]:

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .analysis import OUTCOMES, Tolerances
+from .rigid_motion import DRIFTING, ROTATING, RigidMotion, rigid_motion, rigid_outcome
 from .spec import Formation
 from .status import Status
 
@@ -56,6 +57,12 @@ class BatchResult:
         (:meth:`statuses` gives the members).
     x_final : ndarray, shape (B, n, k)
         Last accepted states (positions first; ``q_final`` for single integrators).
+    motion : RigidMotion
+        Batch ``(B,)``: the rigid motion fitted between the positions at step
+        ``window_step`` (``drift_window`` before the end of the full duration) and
+        the final ones (:func:`formationlab.rigid_motion.rigid_motion`); NaN for a
+        trial that ended before ``window_step``. Its ``velocity`` and ``omega``
+        are the drift of a ``drifting`` or ``rotating`` trial.
     """
 
     q_final: NDArray[np.float64]
@@ -68,6 +75,7 @@ class BatchResult:
     net_speed: NDArray[np.float64]
     status: NDArray[np.int8]
     x_final: NDArray[np.float64]
+    motion: RigidMotion
 
     def statuses(self) -> list[Status]:
         """The :class:`~formationlab.status.Status` of every trial."""
@@ -86,19 +94,32 @@ class BatchResult:
         net_speed: NDArray[np.float64],
         dt: float,
         tolerances: Tolerances | None = None,
+        q_window: NDArray[np.float64] | None = None,
+        window_step: int = 0,
     ) -> BatchResult:
-        """Classify final states ``x`` / velocities ``v`` ``(B, n, k)`` (positions first)."""
+        """Classify final states ``x`` / velocities ``v`` ``(B, n, k)`` (positions first).
+
+        ``q_window`` ``(B, n, 2)`` holds the positions at step ``window_step`` (NaN for
+        trials that had ended by then, and for all when ``window_step < 0``: a run
+        shorter than the drift window); without it no trial counts as moving rigidly.
+        """
         tol = tolerances or Tolerances()
         q, u = x[..., :2], v[..., :2]
         contact = np.isin(status, [s.code for s in Status if s.contact])
-        outcome = classify_batch(formation, q, u, tol, contact=contact, net_speed=net_speed)
+        if q_window is None:
+            motion = RigidMotion.unknown((len(q),))
+        else:
+            motion = rigid_motion(q_window, q, (steps - window_step) * float(dt))
+        outcome = classify_batch(
+            formation, q, u, tol, contact=contact, net_speed=net_speed, motion=motion
+        )
         converged = status == Status.CONVERGED.code
         return cls(
             q_final=q, u_final=u, outcome=outcome,
             max_distance_error=max_distance_errors(formation, q),
             converged_time=np.where(converged, steps * float(dt), np.nan),
             min_clearance=min_clearance, steps=steps, net_speed=net_speed,
-            status=status, x_final=x,
+            status=status, x_final=x, motion=motion,
         )  # fmt: skip
 
 
@@ -125,13 +146,16 @@ def classify_batch(
     *,
     contact: NDArray[np.bool_] | None = None,
     net_speed: NDArray[np.float64] | None = None,
+    motion: RigidMotion | None = None,
 ) -> NDArray[np.str_]:
     """:func:`formationlab.analysis.classify` of every trial: ``(B, n, 2) -> (B,)`` str.
 
     ``contact`` ``(B,)`` marks trials stopped at a step rejected for reaching contact;
     ``net_speed`` ``(B,)`` is each trial's net speed over its last check interval (NaN
     where unknown), which counts the trial as stopped when ``<= tolerances.speed``,
-    as the instantaneous speed does.
+    as the instantaneous speed does; ``motion`` (batch ``(B,)``) the rigid motion over
+    the drift window, which makes a moving trial ``drifting`` or ``rotating``
+    (:func:`formationlab.rigid_motion.rigid_outcome`).
     """
     tol = tolerances or Tolerances()
     q = np.asarray(q, dtype=float)
@@ -139,6 +163,9 @@ def classify_batch(
     n_trials = q.shape[0]
     contact = np.zeros(n_trials, bool) if contact is None else np.asarray(contact, bool)
     net = np.full(n_trials, np.nan) if net_speed is None else np.asarray(net_speed, float)
+    rigid = (
+        np.zeros(n_trials, np.int8) if motion is None else rigid_outcome(motion, tol).reshape(-1)
+    )
     labels = np.array(OUTCOMES)
     code = {name: m for m, name in enumerate(OUTCOMES)}
     iu, ju = np.triu_indices(formation.n, k=1)
@@ -162,9 +189,18 @@ def classify_batch(
         stopped = np.max(np.linalg.norm(u[sl], axis=-1), axis=-1) <= tol.speed
         stopped |= net[sl] <= tol.speed
         result = np.select(
-            [collided, met & (disagree == 0), met & (agree == 0), met, stopped],
-            [code[x] for x in ("collision", "desired", "mirror", "incorrect", "incorrect")],
+            [
+                collided, met & (disagree == 0), met & (agree == 0), met, stopped,
+                rigid[sl] == DRIFTING, rigid[sl] == ROTATING,
+            ],
+            [
+                code[x]
+                for x in (
+                    "collision", "desired", "mirror", "incorrect", "incorrect", "drifting",
+                    "rotating",
+                )
+            ],
             default=code["not-converged"],
-        )
+        )  # fmt: skip
         out[sl] = labels[result]
     return out

@@ -9,6 +9,7 @@ with a message, and the integrator's diagnostics.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -24,6 +25,7 @@ from .analysis import (
     converged_time,
     distance_errors,
     edge_labels,
+    final_motion,
     net_speed,
 )
 from .controllers import LAWS, Law
@@ -32,6 +34,7 @@ from .errors import ParameterError
 from .integrators import INTEGRATORS, Euler, Integrator
 from .integrators.compiled import compiled_terms, run_euler_compiled
 from .registry import resolve
+from .rigid_motion import RigidMotion
 from .spec import Formation
 from .status import Status
 from .validation import whole
@@ -125,11 +128,17 @@ class SimulationResult:
         v = float(net_speed(self.t, self.q, tol.window)[-1])
         return v if np.isfinite(v) else None
 
+    def motion(self, tolerances: Tolerances | None = None) -> RigidMotion:
+        """Rigid motion over the last ``drift_window`` seconds (:func:`~.analysis.final_motion`)."""
+        return final_motion(self.t, self.q, tolerances)
+
     def outcome(self, tolerances: Tolerances | None = None) -> Outcome:
         """Outcome of the final state (see :mod:`formationlab.analysis`).
 
         The robots count as stopped when the final ``max_i |u_i|`` or the net speed over
-        the last ``window`` seconds (:meth:`net_speed`) is at most ``tolerances.speed``.
+        the last ``window`` seconds (:meth:`net_speed`) is at most ``tolerances.speed``;
+        a moving formation that kept its shape over the last ``drift_window`` seconds
+        (:meth:`motion`) is ``drifting`` or ``rotating``.
         """
         return classify(
             self.formation,
@@ -138,6 +147,7 @@ class SimulationResult:
             tolerances,
             contact=Status(self.status).contact,
             net_speed=self.net_speed(tolerances),
+            motion=self.motion(tolerances),
         )
 
     def converged_time(self, tolerances: Tolerances | None = None) -> float | None:
@@ -152,18 +162,22 @@ class SimulationResult:
         robot 1 first), ``distance_errors`` (final ``r_ij - d_ij`` keyed by edge label
         ``"i-j"``, 1-based), ``max_distance_error``, ``converged_time`` (or None),
         ``final_time``, ``orientation`` (``"ccw"``/``"cw"`` of robots 1, 2, 3),
-        ``active_restrictions_final`` (labels), ``diagnostics`` (integrator statistics)
-        and ``tolerances``.
+        ``active_restrictions_final`` (labels), ``diagnostics`` (integrator statistics),
+        ``tolerances`` and, for a ``drifting`` or ``rotating`` outcome, ``rigid_motion``:
+        ``velocity`` (of the centroid, ``[vx, vy]``), ``speed``, ``angular_velocity``,
+        ``centre`` (of the rotation; None for a drift), ``shape_rate`` and ``window``.
         """
         from .analysis import triangle_orientation
 
         tol = tolerances or Tolerances()
         err = self.distance_errors[-1]
+        outcome = self.outcome(tol)
+        moving = outcome in ("drifting", "rotating")
         active = [
             lab for lab, on in zip(self.restriction_labels, self.active[-1], strict=True) if on
         ]
         return {
-            "outcome": self.outcome(tol),
+            "outcome": outcome,
             "status": self.status,
             "message": self.message,
             "final_time": float(self.t[-1]),
@@ -176,7 +190,8 @@ class SimulationResult:
             "orientation": triangle_orientation(self.q[-1]) if self.formation.n >= 3 else None,
             "active_restrictions_final": active,
             "diagnostics": dict(self.stats),
-            "tolerances": {"distance": tol.distance, "speed": tol.speed, "window": tol.window},
+            "tolerances": dataclasses.asdict(tol),
+            **({"rigid_motion": _motion_dict(self.motion(tol), outcome)} if moving else {}),
         }
 
     def plot(self, kind: str = "trajectories", ax: Any = None, **kwargs: Any) -> Any:
@@ -187,6 +202,18 @@ class SimulationResult:
         from . import plotting
 
         return plotting.plot_result(self, kind, ax=ax, **kwargs)
+
+
+def _motion_dict(m: RigidMotion, outcome: str) -> dict[str, Any]:
+    v = np.asarray(m.velocity, dtype=float)
+    return {
+        "velocity": v.tolist(),
+        "speed": float(np.hypot(*v)),
+        "angular_velocity": float(m.omega),
+        "centre": np.asarray(m.centre).tolist() if outcome == "rotating" else None,
+        "shape_rate": float(m.shape_rate),
+        "window": float(m.window),
+    }
 
 
 def simulate(

@@ -226,7 +226,13 @@ def _verdict(s: dict[str, Any]) -> str:
     instead of a contradictory "not converged".
     """
     tol = s["tolerances"]
-    line = f"outcome {s['outcome']}, max |r_ij - d_ij| = {s['max_distance_error']:.3g}"
+    rigid = s.get("rigid_motion")
+    moving = ""
+    if rigid is not None:  # drifting or rotating: say how fast
+        moving = f" at {rigid['speed']:.3g} m/s"
+        if rigid["centre"] is not None:
+            moving += f", {rigid['angular_velocity']:.3g} rad/s"
+    line = f"outcome {s['outcome']}{moving}, max |r_ij - d_ij| = {s['max_distance_error']:.3g}"
     if s["converged_time"] is not None:
         return line + f", stopped at t = {s['converged_time']:.3g} s"
     speed = min(v for v in (s["final_speed"], s["net_speed"]) if v is not None)

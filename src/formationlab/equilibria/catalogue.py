@@ -4,7 +4,9 @@
 from a study's trials), counts each against the equilibria already found,
 refines the others with :func:`~.refine.refine`, classifies them with
 :func:`~.classify.classify_equilibrium` and merges duplicates with
-:func:`~.dedup.same_equilibrium`.
+:func:`~.dedup.same_equilibrium`. Candidates whose run ended ``drifting`` or
+``rotating`` are refined to relative equilibria (``refine(..., moving=True)``:
+shape and rigid motion together), the others to static ones.
 """
 
 from __future__ import annotations
@@ -24,6 +26,9 @@ from .dedup import canonical_pose, same_equilibrium
 from .refine import refine
 
 __all__ = ["Catalogue", "catalogue"]
+
+#: outcomes of the runs whose end states are refined to relative equilibria
+MOVING = ("drifting", "rotating")
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -75,6 +80,10 @@ class Catalogue:
                     "attractive": eq.attractive,
                     "growth_rate": eq.growth_rate,
                     "e_folding_time": (1.0 / eq.growth_rate if eq.growth_rate > 0 else None),
+                    "velocity": eq.velocity.tolist(),
+                    "speed": eq.speed,
+                    "angular_velocity": eq.omega,
+                    "centre": None if eq.centre is None else eq.centre.tolist(),
                 }
             )
         return {
@@ -94,6 +103,7 @@ def catalogue(
     extra: list[NDArray[np.float64]] | None = None,
     tolerances: Tolerances | None = None,
     match_tol: float = 1e-3,
+    moving_match_tol: float = 2e-2,
 ) -> Catalogue:
     """Refine, classify and merge the end states ``candidates`` (``(B, n, 2)``).
 
@@ -106,6 +116,9 @@ def catalogue(
     match_tol : float
         A raw candidate within this (pairwise distances, RMS fit) of an
         equilibrium already found is counted there without refining it.
+    moving_match_tol : float
+        The same for the end states of ``drifting`` and ``rotating`` runs: explicit
+        Euler leaves them within its chatter (about 5e-3) of the relative equilibrium.
     """
     cand = np.asarray(candidates, dtype=float).reshape(-1, formation.n, 2)
     outs = np.asarray(outcomes) if outcomes is not None else np.full(len(cand), "")
@@ -119,13 +132,13 @@ def catalogue(
                 return k
         return None
 
-    pending = [(q, 1) for q, o in zip(cand, outs, strict=True) if o != "collision"]
+    pending = [(q, 1, o in MOVING) for q, o in zip(cand, outs, strict=True) if o != "collision"]
     skipped["collision"] += int(np.sum(outs == "collision"))
-    pending += [(np.asarray(q, dtype=float), 0) for q in (extra or [])]
-    for q, weight in pending:
-        k = attribute(q, match_tol) if weight else None
+    pending += [(np.asarray(q, dtype=float), 0, False) for q in (extra or [])]
+    for q, weight, moving in pending:
+        k = attribute(q, moving_match_tol if moving else match_tol) if weight else None
         if k is None:
-            ref = refine(formation, law, q)
+            ref = refine(formation, law, q, moving=moving)
             if not ref.success:
                 skipped["not-refined"] += weight
                 continue
@@ -147,4 +160,10 @@ def catalogue(
 
 
 def _posed(eq: Equilibrium) -> Equilibrium:
-    return replace(eq, q=canonical_pose(eq.q))
+    """``eq`` in its canonical pose, its velocity turned with it."""
+    d = eq.q[1] - eq.q[0]
+    c, s = d / max(float(np.hypot(*d)), 1e-300)
+    v = np.array(
+        [c * eq.velocity[0] + s * eq.velocity[1], -s * eq.velocity[0] + c * eq.velocity[1]]
+    )
+    return replace(eq, q=canonical_pose(eq.q), velocity=v)

@@ -19,6 +19,13 @@ rotation modes removed (:mod:`formationlab.equilibria.jacobian`):
     are those of the sliding dynamics on the surface (the field with the
     equivalent-control weight, the surface normal removed as well), and
     ``attractive`` says whether both one-sided fields point into the surface.
+
+**Relative equilibria** (a shape the field moves rigidly, ``u = v + omega k x
+(q - q_bar)``: ``drifting`` or ``rotating``) are classified the same way in the
+co-moving frame, where they are at rest: the Jacobian of ``u(q) - omega k x q``
+(the translation ``v`` is constant), whose rigid-motion modes span an invariant
+subspace (``J T = k x T`` maps translations and the rotation to translations),
+removed as for static equilibria.
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ from numpy.typing import NDArray
 
 from ..analysis import Tolerances, classify
 from ..controllers import Law
+from ..rigid_motion import field_motion
 from ..spec import Formation
 from .jacobian import jacobian, reduced_eigenvalues
 from .refine import Refined
@@ -78,6 +86,10 @@ class Equilibrium:
     attractive : bool or None
         Filippov equilibria: whether the surfaces attract from both sides
         (a sliding mode exists there). None otherwise.
+    velocity : ndarray, shape (2,)
+        Relative equilibria: velocity of the centroid, m/s (in the frame of ``q``).
+    omega : float
+        Relative equilibria: angular velocity, rad/s (counter-clockwise positive).
     """
 
     q: NDArray[np.float64]
@@ -93,6 +105,25 @@ class Equilibrium:
     surfaces: tuple[str, ...] = ()
     weights: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     attractive: bool | None = None
+    velocity: NDArray[np.float64] = field(default_factory=lambda: np.zeros(2))
+    omega: float = 0.0
+
+    @property
+    def moving(self) -> bool:
+        """Whether this is a relative equilibrium (outcome ``drifting`` or ``rotating``)."""
+        return self.outcome in ("drifting", "rotating")
+
+    @property
+    def speed(self) -> float:
+        """Largest robot speed of the rigid motion, m/s (0 for a static equilibrium)."""
+        return float(field_motion(self.q, self.velocity, self.omega).speed)
+
+    @property
+    def centre(self) -> NDArray[np.float64] | None:
+        """Centre of the rotation of a ``rotating`` equilibrium (None otherwise)."""
+        if self.outcome != "rotating":
+            return None
+        return np.asarray(field_motion(self.q, self.velocity, self.omega).centre)
 
     @property
     def growth_rate(self) -> float:
@@ -163,9 +194,12 @@ def classify_equilibrium(
     active = tuple(lab for lab, s in zip(labels, sigma, strict=True) if s >= 0)
     on = list(refined.surfaces)
     attractive: bool | None = None
+    omega = float(refined.omega)
+    # the co-moving frame of a rotating equilibrium turns with it: d/dq of -omega k x q
+    turn = omega * np.kron(np.eye(formation.n), np.array([[0.0, -1.0], [1.0, 0.0]]))
     if on:
-        field, grad_sigma = _sliding_field(formation, law, w, on)
-        jac = jacobian(field, q)
+        sliding, grad_sigma = _sliding_field(formation, law, w, on)
+        jac = jacobian(sliding, q) - turn
         normals = grad_sigma(q).reshape(len(on), -1).T  # (2n, k)
         lam = reduced_eigenvalues(jac, q, extra=normals)
         wk = w.copy()
@@ -187,7 +221,7 @@ def classify_equilibrium(
             def field(x: NDArray) -> NDArray:
                 return law.control(formation, x)
 
-        lam = reduced_eigenvalues(jacobian(field, q), q)
+        lam = reduced_eigenvalues(jacobian(field, q) - turn, q)
     ztol = _zero_tol(lam)
     lam = np.where(np.abs(lam.imag) <= ztol, lam.real, lam)  # round-off pairs of a real double
     unstable = int(np.sum(lam.real > ztol))
@@ -199,7 +233,10 @@ def classify_equilibrium(
         stability = "saddle"
     else:
         stability = "stable"
-    outcome = classify(formation, q, np.zeros_like(q), tolerances)
+    motion = field_motion(q, refined.velocity, omega)
+    u = q - q.mean(axis=0)
+    u = refined.velocity + omega * np.stack([-u[:, 1], u[:, 0]], axis=-1)
+    outcome = classify(formation, q, u, tolerances, motion=motion)
     r = np.linalg.norm(q[formation.edges[:, 1]] - q[formation.edges[:, 0]], axis=-1)
     return Equilibrium(
         q=q,
@@ -215,4 +252,6 @@ def classify_equilibrium(
         surfaces=tuple(labels[s] for s in on),
         weights=w,
         attractive=attractive,
+        velocity=np.asarray(refined.velocity, dtype=float),
+        omega=omega,
     )

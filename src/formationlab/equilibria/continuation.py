@@ -54,8 +54,13 @@ def follow(
     values: Sequence[float],
     *,
     tolerances: Tolerances | None = None,
+    moving: bool = False,
 ) -> Branch:
-    """Follow the equilibrium near ``q`` (``(n, 2)``) along ``law.<parameter> = values``."""
+    """Follow the equilibrium near ``q`` (``(n, 2)``) along ``law.<parameter> = values``.
+
+    ``moving`` follows a relative equilibrium (a drifting or rotating shape): each step
+    solves for the shape and its rigid motion together (``refine(..., moving=True)``).
+    """
     found: list[Equilibrium] = []
     done: list[float] = []
     end = "end of range"
@@ -63,7 +68,7 @@ def follow(
     surfaces: tuple[str, ...] | None = None
     for v in values:
         lw = law.with_params(**{parameter: float(v)})
-        ref = refine(formation, lw, prev)
+        ref = refine(formation, lw, prev, moving=moving)
         if not ref.success:
             end = f"{parameter} = {v:g}: {ref.message}"
             break

@@ -21,13 +21,25 @@ Translation and rotation leave ``u`` unchanged (up to turning it), so the
 roots form three-dimensional orbits. The solver works modulo those: three
 gauge equations pin the centroid to the start's and the mean angular
 displacement about it to zero.
+
+**Relative equilibria** (``moving=True``): shapes that the field moves as a
+rigid body, ``u_i(q) = v + omega k x (q_i - q_bar)`` (a drift ``v`` of the
+centroid and a rotation ``omega`` about it; the centre of the rotation is
+``q_bar + (k x v) / omega``). The three numbers ``(v, omega)`` are unknowns
+beside the shape (and the Filippov weights): ``2n + 3 (+ |S|)`` unknowns for
+``2n`` field equations, ``3`` gauge equations (``+ |S|`` surfaces), the same
+square system as for a static equilibrium, which is its case ``v = 0,
+omega = 0``. Every surface ``sigma_s`` is a function of the shape only, so a
+rigid motion keeps a state on the surfaces it lies on: the Filippov
+combination is taken as for static equilibria.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from itertools import combinations
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,8 +47,9 @@ from scipy.optimize import least_squares
 
 from ..controllers import Law
 from ..spec import Formation
+from .relative import MAX_NEAR, all_subsets, attracts, rigid_field, rigid_guess
 
-__all__ = ["Refined", "refine"]
+__all__ = ["Refined", "refine", "rigid_field"]
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -59,6 +72,10 @@ class Refined:
         consistent with the signs of ``sigma(q)``.
     message : str
         What happened, in words.
+    velocity : ndarray, shape (2,)
+        Relative equilibria: velocity ``v`` of the centroid (zero for a static one).
+    omega : float
+        Relative equilibria: angular velocity about the centroid, rad/s.
     """
 
     q: NDArray[np.float64]
@@ -67,6 +84,8 @@ class Refined:
     residual: float
     success: bool
     message: str
+    velocity: NDArray[np.float64] = field(default_factory=lambda: np.zeros(2))
+    omega: float = 0.0
 
     @property
     def filippov(self) -> bool:
@@ -125,7 +144,8 @@ def refine(
     tol: float = 1e-9,
     surface_tol: float = 1e-7,
     max_surfaces: int = 2,
-    band: float = 1e-2,
+    band: float | None = None,
+    moving: bool = False,
 ) -> Refined:
     """Refine ``q0`` (shape ``(n, 2)``) to an equilibrium of ``law`` on ``formation``.
 
@@ -145,6 +165,13 @@ def refine(
         configuration squared are those ``q0`` sits on: a Filippov equilibrium
         on exactly that set is tried before anything else; then the frozen
         smooth piece; then the nearest surfaces one, two, ... at a time.
+        Default 1e-2; 5e-2 with ``moving``: the end state of a formation that
+        drifts while explicit Euler chatters on several surfaces at once lies
+        farther from them (``docs/drifting.md``).
+    moving : bool
+        Solve for a relative equilibrium: the shape and its rigid motion ``(v, omega)``
+        together (module docstring); the residual is then ``max_i |u_i - v - omega k x
+        (q_i - q_bar)|``.
 
     Returns
     -------
@@ -152,6 +179,7 @@ def refine(
         ``success`` says whether an equilibrium was found; ``message`` why not.
     """
     q0 = np.asarray(q0, dtype=float)
+    band = (5e-2 if moving else 1e-2) if band is None else band
     scale = _scale(q0)
     sigma0 = np.asarray(law.switching(formation, q0), dtype=float)
     w0 = (sigma0 >= 0).astype(float)
@@ -159,9 +187,14 @@ def refine(
     atol = tol * u_scale
     stol = surface_tol * scale**2 + surface_tol
 
+    m0 = None
+    if moving:  # the rigid part of the field halfway across the surfaces q0 is near
+        w_half = np.where(np.abs(sigma0) <= band * scale**2, 0.5, w0)
+        m0 = rigid_guess(_field(law, formation, w_half)(q0), q0)
+
     def try_filippov(subset: tuple[int, ...]) -> Refined:
-        q, w = _solve_filippov(formation, law, q0, w0, subset, scale)
-        res_f = _residual(formation, law, q, w)
+        q, w, m = _solve_filippov(formation, law, q0, w0, subset, scale, m0)
+        res_f = _residual(formation, law, q, w, m)
         sig = np.asarray(law.switching(formation, q), dtype=float)
         on = np.zeros(sig.size, bool)
         on[list(subset)] = True
@@ -179,19 +212,28 @@ def refine(
             residual=res_f,
             success=ok,
             message="Filippov equilibrium on a switching surface" if ok else "",
+            **_motion(m),
         )
 
     smooth_law = law.smooth or sigma0.size == 0
     subsets = [] if smooth_law else _subsets(sigma0, max_surfaces, band * scale**2)
     # a state that sits on surfaces (an implicit scheme's end, or a continuation
     # step) is first refined on them: the frozen field of one side could lead far away
+    if moving and subsets and 0 < len(subsets[0]) <= MAX_NEAR:
+        # near surfaces of a moving formation: several relative equilibria slide on
+        # subsets of them; the one the run was at attracts on each of its surfaces,
+        # and of those it is the nearest to q0
+        found = [r for r in map(try_filippov, all_subsets(subsets[0])) if r.success]
+        held = [r for r in found if attracts(formation, law, r.q, r.weights, r.surfaces)] or found
+        if held:
+            return min(held, key=lambda r: float(np.sum((r.q - q0) ** 2)))
     if subsets and np.all(np.abs(sigma0[list(subsets[0])]) <= band * scale**2):
         first = try_filippov(subsets[0])
         if first.success:
             return first
         subsets = subsets[1:]
-    smooth = _solve_piece(formation, law, q0, w0, scale)
-    res = _residual(formation, law, smooth, w0)
+    smooth, m = _solve_piece(formation, law, q0, w0, scale, m0)
+    res = _residual(formation, law, smooth, w0, m)
     sig = np.asarray(law.switching(formation, smooth), dtype=float)
     consistent = bool(np.all((sig >= 0) == (w0 > 0.5))) and bool(np.all(np.abs(sig) > stol))
     if res <= atol and consistent:
@@ -202,13 +244,16 @@ def refine(
             residual=res,
             success=True,
             message="equilibrium in the interior of a smooth region",
+            **_motion(m),
         )
     why = (
         f"the root finder stopped at largest |u_i| = {res:.3g}"
         if res > atol
         else "the root of the frozen field lies across a switching surface"
     )
-    best = Refined(q=smooth, weights=w0, surfaces=(), residual=res, success=False, message=why)
+    best = Refined(
+        q=smooth, weights=w0, surfaces=(), residual=res, success=False, message=why, **_motion(m)
+    )
     for subset in subsets:
         cand = try_filippov(subset)
         if cand.success:
@@ -221,30 +266,50 @@ def refine(
                 residual=cand.residual,
                 success=False,
                 message=why + "; no Filippov equilibrium on the nearest surfaces either",
+                velocity=cand.velocity,
+                omega=cand.omega,
             )
     return best
 
 
-def _residual(formation: Formation, law: Law, q: NDArray, w: NDArray) -> float:
+def _motion(m: NDArray | None) -> dict[str, Any]:
+    if m is None:
+        return {}
+    return {"velocity": np.array(m[:2], dtype=float), "omega": float(m[2])}
+
+
+def _residual(
+    formation: Formation, law: Law, q: NDArray, w: NDArray, m: NDArray | None = None
+) -> float:
     u = _field(law, formation, w)(q)
+    if m is not None:
+        u = u - rigid_field(q, m)
     return float(np.max(np.linalg.norm(u, axis=-1)))
 
 
 def _solve_piece(
-    formation: Formation, law: Law, q0: NDArray, w: NDArray, scale: float
-) -> NDArray[np.float64]:
-    """Root of the field with frozen steps ``w``, modulo translation and rotation."""
+    formation: Formation, law: Law, q0: NDArray, w: NDArray, scale: float, m0: NDArray | None
+) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    """Root of the field with frozen steps ``w``, modulo translation and rotation.
+
+    With ``m0``, of the field minus a rigid motion solved for from ``m0``.
+    """
     n = q0.shape[0]
+    size = q0.size
     c0 = q0.mean(axis=0)
     p0 = q0 - c0
     field = _field(law, formation, w)
 
     def fun(x: NDArray) -> NDArray:
-        q = x.reshape(*x.shape[:-1], n, 2)
-        u = field(q).reshape(*x.shape[:-1], 2 * n)
-        return np.concatenate([u, _gauge(q, c0, p0, scale)], axis=-1)
+        q = x[..., :size].reshape(*x.shape[:-1], n, 2)
+        u = field(q)
+        if m0 is not None:
+            u = u - rigid_field(q, x[..., size:])
+        return np.concatenate([u.reshape(*x.shape[:-1], size), _gauge(q, c0, p0, scale)], axis=-1)
 
-    return _solve(fun, q0.ravel(), method="lm").reshape(n, 2)
+    x0 = q0.ravel() if m0 is None else np.concatenate([q0.ravel(), m0])
+    x = _solve(fun, x0, method="lm")
+    return x[:size].reshape(n, 2), (None if m0 is None else x[size:])
 
 
 def _solve_filippov(
@@ -254,30 +319,41 @@ def _solve_filippov(
     w0: NDArray,
     subset: tuple[int, ...],
     scale: float,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Solve ``u_w(q) = 0``, ``sigma_S(q) = 0`` for ``q`` and ``w_S in [0, 1]``."""
+    m0: NDArray | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None]:
+    """Solve ``u_w(q) = 0``, ``sigma_S(q) = 0`` for ``q`` and ``w_S in [0, 1]``.
+
+    With ``m0``: ``u_w(q) = v + omega k x (q - q_bar)``, with ``(v, omega)`` unknowns too.
+    """
     n = q0.shape[0]
     size = q0.size
     c0 = q0.mean(axis=0)
     p0 = q0 - c0
     idx = list(subset)
+    k = size + len(idx)
 
     def unpack(x: NDArray) -> tuple[NDArray, NDArray]:
         w = np.broadcast_to(w0, (*x.shape[:-1], w0.size)).copy()
-        w[..., idx] = x[..., size:]
+        w[..., idx] = x[..., size:k]
         return x[..., :size].reshape(*x.shape[:-1], n, 2), w
 
     def fun(x: NDArray) -> NDArray:
         q, w = unpack(x)
-        u = law.control_with(formation, q, w).reshape(*x.shape[:-1], size)
+        u = law.control_with(formation, q, w)
+        if m0 is not None:
+            u = u - rigid_field(q, x[..., k:])
         sig = np.asarray(law.switching(formation, q))[..., idx] / scale**2
-        return np.concatenate([u, sig, _gauge(q, c0, p0, scale)], axis=-1)
+        parts = [u.reshape(*x.shape[:-1], size), sig, _gauge(q, c0, p0, scale)]
+        return np.concatenate(parts, axis=-1)
 
-    x0 = np.concatenate([q0.ravel(), np.full(len(idx), 0.5)])
-    lo = np.concatenate([np.full(size, -np.inf), np.zeros(len(idx))])
-    hi = np.concatenate([np.full(size, np.inf), np.ones(len(idx))])
-    q, w = unpack(_solve(fun, x0, bounds=(lo, hi), method="trf"))
-    return q, w
+    extra = np.zeros(0) if m0 is None else m0
+    free = np.full(extra.size, np.inf)
+    x0 = np.concatenate([q0.ravel(), np.full(len(idx), 0.5), extra])
+    lo = np.concatenate([np.full(size, -np.inf), np.zeros(len(idx)), -free])
+    hi = np.concatenate([np.full(size, np.inf), np.ones(len(idx)), free])
+    x = _solve(fun, x0, bounds=(lo, hi), method="trf")
+    q, w = unpack(x)
+    return q, w, (None if m0 is None else x[k:])
 
 
 def _subsets(sigma0: NDArray, max_surfaces: int, band: float) -> list[tuple[int, ...]]:

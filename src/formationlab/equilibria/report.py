@@ -206,6 +206,8 @@ class EquilibriaReport:
                 "attractive": [e.attractive for e in b.equilibria],
                 "distances": [e.distances.tolist() for e in b.equilibria],
                 "positions": [e.q.tolist() for e in b.equilibria],
+                "speed": [e.speed for e in b.equilibria],
+                "angular_velocity": [e.omega for e in b.equilibria],
                 "end": b.end,
             }
             for k, b in zip(self.ids, self.branches, strict=True)
@@ -218,6 +220,11 @@ class EquilibriaReport:
         out = []
         for k, (eq, count) in enumerate(zip(cat.equilibria, cat.counts, strict=True)):
             extra = f", {eq.unstable_directions} unstable" if eq.unstable_directions else ""
+            speed = float(np.hypot(*eq.velocity))
+            if eq.outcome == "drifting":
+                extra += f", |v| = {speed:.4g} m/s"
+            elif eq.outcome == "rotating":
+                extra += f", omega = {eq.omega:.4g} rad/s, |v| = {speed:.4g} m/s"
             out.append(
                 f"#{k + 1} {eq.outcome} {eq.stability}{extra}: "
                 f"{count} trials, max Re(lambda) = {eq.growth_rate:.4g}"
@@ -306,20 +313,26 @@ def find_equilibria(
     for k, eq in enumerate(cat.equilibria):
         if eq.desired:
             continue
-        branches.append(_both_ways(sc, eq.q, name, lo, hi, config.follow_steps))
+        branches.append(_both_ways(sc, eq.q, name, lo, hi, config.follow_steps, eq.moving))
         labels.append(f"#{k + 1} ({eq.stability})")
         ids.append(k + 1)
     return dataclasses.replace(report, parameter=name, branches=branches, labels=labels, ids=ids)
 
 
 def _both_ways(
-    sc: Scenario, q: NDArray[np.float64], name: str, lo: float, hi: float, k: int
+    sc: Scenario,
+    q: NDArray[np.float64],
+    name: str,
+    lo: float,
+    hi: float,
+    k: int,
+    moving: bool = False,
 ) -> Branch:
     """Follow the equilibrium at ``q`` from the scenario's value of ``name`` to ``lo``, ``hi``."""
     v0 = float(getattr(sc.law, name))
     grid = np.linspace(lo, hi, k)
-    up = follow(sc.formation, sc.law, q, name, [v0, *grid[grid > v0]])
-    down = follow(sc.formation, sc.law, q, name, [v0, *grid[grid < v0][::-1]])
+    up = follow(sc.formation, sc.law, q, name, [v0, *grid[grid > v0]], moving=moving)
+    down = follow(sc.formation, sc.law, q, name, [v0, *grid[grid < v0][::-1]], moving=moving)
     values = np.concatenate([down.values[::-1], up.values[1:]])
     eqs = [*down.equilibria[::-1], *up.equilibria[1:]]
     return Branch(

@@ -97,7 +97,9 @@ def settle(
     contact, the exact flow never touches); if that fails too the trial stops
     with outcome ``"collision"``. A trial stops once its robots move slower than
     ``speed`` (the driver's stop rule, checked every 10 steps: on a sliding-mode
-    equilibrium the one-sided fields do not vanish, the motion does).
+    equilibrium the one-sided fields do not vanish, the motion does). A trial that
+    never stops but keeps its shape over the last ``tolerances.drift_window`` seconds
+    is ``drifting`` or ``rotating`` (:mod:`formationlab.rigid_motion`).
 
     The default integrator is ``RK4(dt=0.01)`` for a smooth law and
     ``ImplicitEuler(dt=0.01)`` for a switching one: explicit schemes chatter
@@ -117,12 +119,14 @@ def settle(
     if integrator is None:
         integrator = RK4(dt=0.01) if law.smooth else ImplicitEuler(dt=0.01)
     stepper = Substepped(inner=integrator, reach=0.05 * float(formation.distances.min()))
+    tol = tolerances or Tolerances()
     out = drive(
         System(formation=formation, law=law), stepper, q,
         n_steps=int(np.ceil(duration / integrator.dt)), stop=StopRule(speed=speed, check_every=10),
+        window=tol.drift_steps(integrator.dt),
     )  # fmt: skip
     return BatchResult.from_final(
         formation, x=out.x, v=out.v, status=out.status, steps=out.steps,
         min_clearance=out.min_clearance, net_speed=out.net_speed, dt=integrator.dt,
-        tolerances=tolerances,
+        tolerances=tol, q_window=out.q_window, window_step=out.window_step,
     )  # fmt: skip

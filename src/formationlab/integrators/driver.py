@@ -19,6 +19,11 @@ its own:
   trial ends at ``x_k``, its last accepted state, with that status;
 * **end**: ``k`` reached ``n_steps`` (:attr:`Status.SUCCESS`).
 
+With ``window`` the positions of the live trials at step ``n_steps - window`` (if
+it is not negative) are kept (``Stepped.q_window``): the start of the drift window over which the
+rigid motion of a formation that never stops is fitted
+(:mod:`formationlab.rigid_motion`).
+
 Saving every ``save_every`` steps keeps ``(t, x, v)`` of every live trial, and
 always a trial's last state. Counts in ``stats`` are integers.
 """
@@ -83,6 +88,11 @@ class Stepped:
     net_speed : ndarray, shape (B,)
         Net speed over the last check interval (NaN before the second check
         or without a stop rule).
+    q_window : ndarray, shape (B, n, 2)
+        Positions at step ``window_step`` (NaN for trials that had ended by then,
+        and for all without ``window``).
+    window_step : int
+        ``n_steps - window`` (-1 without ``window``; negative: no positions kept).
     saved : list
         Blocks ``(k, trials, x, v)`` saved at step ``k``; see :meth:`trajectory`.
     stats : dict
@@ -100,6 +110,8 @@ class Stepped:
     message: list[str]
     min_clearance: NDArray[np.float64]
     net_speed: NDArray[np.float64]
+    q_window: NDArray[np.float64]
+    window_step: int
     saved: list[tuple[int, NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]]
     stats: dict[str, Any] = field(default_factory=dict)
     dt: float = 0.0
@@ -128,6 +140,7 @@ def drive(
     n_steps: int,
     save_every: int | None = None,
     stop: StopRule | None = None,
+    window: int | None = None,
     diagnostics: bool = False,
     progress: Progress | None = None,
     interruptible: bool = False,
@@ -149,6 +162,8 @@ def drive(
         nothing is kept when None.
     stop : StopRule, optional
         Stop each trial once it has stopped moving; without one, trials run to the end.
+    window : int, optional
+        Keep the positions ``window`` steps before ``n_steps`` (module docstring).
     diagnostics : bool
         Record the switching diagnostics of trial 0 (for single runs).
     progress : callable, optional
@@ -166,6 +181,8 @@ def drive(
     message = [""] * B
     min_clear = system.clearance(x)
     net = np.full(B, np.nan)
+    q_window = np.full((B, *x.shape[1:-1], 2), np.nan)
+    window_step = -1 if window is None else n_steps - int(window)
     saved: list[tuple[int, NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]] = []
     live = np.arange(B)
     xc, kc = x[..., :2].copy(), -1  # positions at the previous check, its step
@@ -185,6 +202,8 @@ def drive(
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
                 x_new, v = stepper.advance(system, x, dt, counters)  # judged by step_verdict
             evaluations += live.size
+            if k == window_step:
+                q_window[live] = x[..., :2]
             ending = np.zeros(live.size, dtype=bool)
             if stop is not None and (k % stop.check_every == 0 or k == n_steps):
                 q = x[..., :2]
@@ -254,7 +273,8 @@ def drive(
     }
     return Stepped(
         x=x_out, v=v_out, steps=steps, status=status, message=message,
-        min_clearance=min_clear, net_speed=net, saved=saved, stats=stats, dt=dt,
+        min_clearance=min_clear, net_speed=net, q_window=q_window,
+        window_step=window_step, saved=saved, stats=stats, dt=dt,
     )  # fmt: skip
 
 

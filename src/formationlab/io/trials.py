@@ -19,6 +19,16 @@ one per swept parameter   its value; NaN for a law the parameter does not apply 
 ``net_speed``             net speed over the last check interval (displacement / time)
 ``min_clearance``         least ``r_ij - a_ij`` over pairs and time
 ``steps``                 Euler steps taken (a trial stops once converged)
+``drift_vx, drift_vy``    velocity of the centroid at the end, m/s, of the rigid motion
+                          fitted over the last ``drift_window`` seconds
+                          (:mod:`formationlab.rigid_motion`): the drift of a
+                          ``drifting`` or ``rotating`` trial; NaN when the trial
+                          stopped before that window (or the run is shorter)
+``drift_speed``           largest robot speed in that rigid motion, m/s
+``drift_omega``           its angular velocity, rad/s (counter-clockwise positive)
+``drift_cx, drift_cy``    its centre of rotation (NaN when ``drift_omega`` is 0)
+``shape_rate``            how fast the shape changed over the window (the rigid fit's
+                          largest residual over the window), m/s
 ``x1_init, y1_init, ...`` initial positions
 ``x1, y1, x2, y2, ...``   final positions
 ========================  ======================================================

@@ -11,7 +11,7 @@ from matplotlib.patches import Circle
 
 from .fonts import displayable, font_context
 
-__all__ = ["continuation_figure", "gallery_figure", "plot_equilibrium"]
+__all__ = ["arrow_seconds", "continuation_figure", "gallery_figure", "plot_equilibrium"]
 
 _COLOURS = {
     "stable": "tab:green",
@@ -28,8 +28,10 @@ def plot_equilibrium(
 
     Edges are coloured by ``r_ij - d_ij`` (blue short, red long, black met);
     the frame's colour is the class (green stable, orange saddle, purple
-    Filippov, grey degenerate). ``span`` fixes the width shown (a common scale
-    for a gallery). Returns the artists.
+    Filippov, grey degenerate). A relative equilibrium (drifting or rotating)
+    carries the arrow of its centroid's velocity (:func:`arrow_seconds` of motion) and,
+    when it rotates, a cross at the centre of the rotation. ``span`` fixes the
+    width shown (a common scale for a gallery). Returns the artists.
     """
     if ax is None:
         _, ax = plt.subplots(figsize=(3, 3))
@@ -45,9 +47,20 @@ def plot_equilibrium(
         ax.add_patch(c)
         artists.append(c)
         artists.append(ax.annotate(str(i + 1), (x, y), ha="center", va="center", fontsize=8))
-    ax.set_aspect("equal")
     if span is None:
         span = _span(q, formation)
+    if getattr(eq, "moving", False):  # a relative equilibrium: the centroid's velocity
+        c = q.mean(axis=0)
+        v = np.asarray(eq.velocity, dtype=float)
+        artists.append(
+            ax.annotate(
+                "", xy=tuple(c + arrow_seconds(v, span) * v), xytext=tuple(c),
+                arrowprops={"arrowstyle": "-|>", "color": "tab:purple", "lw": 1.5},
+            )
+        )  # fmt: skip
+        if eq.centre is not None:
+            artists.append(ax.plot(*eq.centre, marker="+", color="tab:brown", ms=8)[0])
+    ax.set_aspect("equal")
     centre = (q.max(axis=0) + q.min(axis=0)) / 2
     ax.set_xlim(centre[0] - span / 2, centre[0] + span / 2)
     ax.set_ylim(centre[1] - span / 2, centre[1] + span / 2)
@@ -59,6 +72,12 @@ def plot_equilibrium(
     if title:
         ax.set_title(title, fontsize=8)
     return artists
+
+
+def arrow_seconds(v: Any, span: float) -> float:
+    """Seconds of motion drawn by a velocity arrow: 1 s, less if it would leave the panel."""
+    speed = float(np.hypot(*np.asarray(v, dtype=float)))
+    return min(1.0, 0.4 * span / speed) if speed > 0 else 1.0
 
 
 def _span(q: Any, formation: Any) -> float:
@@ -98,6 +117,12 @@ def gallery_figure(catalogue: Any, *, columns: int = 4, title: str = "", limit: 
             lines.append("on " + ", ".join(eq.surfaces))
         elif eq.active:
             lines.append("active " + ", ".join(eq.active))
+        if eq.moving:
+            secs = arrow_seconds(eq.velocity, span)
+            speed = float(np.hypot(*eq.velocity))
+            lines.append(f"|v| = {speed:.3g} m/s (arrow: {secs:.2g} s)")
+        if eq.outcome == "rotating":
+            lines.append(f"omega = {eq.omega:.3g} rad/s (+: centre)")
         plot_equilibrium(catalogue.formation, eq, ax, title="\n".join(lines), span=span)
     if not eqs:
         axes[0, 0].text(0.5, 0.5, "no equilibrium found", ha="center", va="center")

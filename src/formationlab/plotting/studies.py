@@ -20,6 +20,7 @@ from matplotlib.patches import Circle
 __all__ = [
     "OUTCOME_COLORS",
     "desired_figure",
+    "draw_velocity",
     "fractions_figure",
     "plot_fractions",
     "plot_shape",
@@ -33,6 +34,8 @@ OUTCOME_COLORS = {
     "mirror": "tab:blue",
     "incorrect": "tab:orange",
     "collision": "tab:red",
+    "drifting": "tab:purple",
+    "rotating": "tab:brown",
     "not-converged": "tab:gray",
 }
 
@@ -248,8 +251,10 @@ def shapes_figure(
 ) -> Figure | None:
     """Final shapes of a law's trials that did not end in the desired formation.
 
-    One row per outcome (mirror, incorrect, collision, not-converged: those that
-    occur), up to ``per_outcome`` trials each, the first ones by group and trial.
+    One row per outcome (mirror, incorrect, collision, drifting, rotating,
+    not-converged: those that occur), up to ``per_outcome`` trials each, the first
+    ones by group and trial; a drifting or rotating shape carries the arrow of its
+    centroid's velocity (one second of motion, less where that would leave the panel).
     Each panel is centred on the shape's centroid. ``diameters`` maps a group to its
     robots' diameters. Returns None when every trial of the law ended as desired.
     """
@@ -281,6 +286,20 @@ def shapes_figure(
             plot_shape(q, edges, diameters[int(row["group"])], ax, color=OUTCOME_COLORS[o])
             extra = "".join(f" {p}={row[p]:g}" for p in params if np.isfinite(row[p]))
             err = f"\n|e|max={row['max_distance_error']:.2g}"
+            if o in ("drifting", "rotating") and "drift_vx" in row:
+                v = np.array([row["drift_vx"], row["drift_vy"]], dtype=float)
+                extent = float(np.ptp(q, axis=0).max())
+                speed = max(float(np.hypot(*v)), 1e-300)
+                draw_velocity(
+                    ax,
+                    np.zeros(2),
+                    v,
+                    color=OUTCOME_COLORS[o],
+                    scale=min(1.0, 0.4 * extent / speed),
+                )
+                err += f" |v|={np.hypot(*v):.2f}"
+                if o == "rotating":
+                    err += f" w={row['drift_omega']:.2f}"
             ax.set_title(f"#{int(row['trial'])}{extra}{err}", fontsize=7)
             if c == 0:
                 ax.set_ylabel(o, fontsize=8, color=OUTCOME_COLORS[o])
@@ -302,7 +321,26 @@ _FIXED = {
     "net_speed",
     "min_clearance",
     "steps",
+    "drift_vx",
+    "drift_vy",
+    "drift_speed",
+    "drift_omega",
+    "drift_cx",
+    "drift_cy",
+    "shape_rate",
 }
+
+
+def draw_velocity(
+    ax: Axes, at: np.ndarray, v: np.ndarray, *, color: str | None = None, scale: float = 1.0
+) -> Any:
+    """An arrow of the velocity ``v`` ``(2,)`` from the point ``at`` (``scale`` s of motion)."""
+    return ax.annotate(
+        "",
+        xy=(at[0] + scale * v[0], at[1] + scale * v[1]),
+        xytext=(at[0], at[1]),
+        arrowprops={"arrowstyle": "-|>", "color": color or "k", "lw": 1.2},
+    )
 
 
 def _is_position(c: str) -> bool:

@@ -121,10 +121,12 @@ def run_batch(
     out = drive(
         System(formation=formation, law=law), Euler(dt=float(dt)), q0, n_steps=n_steps,
         stop=StopRule(speed=tol.speed, check_every=int(check_every)),
+        window=tol.drift_steps(float(dt)),
     )  # fmt: skip
     return BatchResult.from_final(
         formation, x=out.x, v=out.v, status=out.status, steps=out.steps,
         min_clearance=out.min_clearance, net_speed=out.net_speed, dt=float(dt), tolerances=tol,
+        q_window=out.q_window, window_step=out.window_step,
     )  # fmt: skip
 
 
@@ -171,6 +173,8 @@ def _run_numba(
     status = np.zeros(n_trials, dtype=np.int8)
     mc = np.full(n_trials, np.inf)
     ns = np.full(n_trials, np.nan)
+    qw = np.full((n_trials, n, 2), np.nan)
+    window_step = n_steps - tol.drift_steps(dt)  # negative: never reached
     chunk = _chunk_size(n_trials, numba.get_num_threads())
     with _KERNEL_LOCK:
         # hand the chunks out one at a time (numba's setting is per thread, restored
@@ -180,13 +184,13 @@ def _run_numba(
         try:
             kernels.run_chunks(
                 q0, chunk, terms, dt, n_steps, check_every, tol.speed,
-                q_out, u_out, steps, status, mc, ns,
+                q_out, u_out, steps, status, mc, ns, window_step, qw,
             )  # fmt: skip
         finally:
             numba.set_parallel_chunksize(previous)
     return BatchResult.from_final(
         formation, x=q_out, v=u_out, status=status, steps=steps, min_clearance=mc,
-        net_speed=ns, dt=dt, tolerances=tol,
+        net_speed=ns, dt=dt, tolerances=tol, q_window=qw, window_step=window_step,
     )  # fmt: skip
 
 

@@ -21,12 +21,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..analysis import Tolerances
 from ..controllers import Law
+from ..rigid_motion import RigidMotion
 from ..spec import Formation
 from .config import BoxInitial, GaussianInitial, SettleModel, StudyConfig
 from .groups import Group
 from .sampling import trial_initial_states
 
-__all__ = ["ChunkTask", "plan_chunks", "run_chunk", "settle_trials"]
+__all__ = ["ChunkTask", "motion_columns", "plan_chunks", "run_chunk", "settle_trials"]
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -130,6 +131,7 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
         net_speed=np.asarray(res.net_speed, dtype=float),
         min_clearance=np.asarray(res.min_clearance, dtype=float),
         steps=np.asarray(res.steps, dtype=np.int64),
+        **motion_columns(res.motion),
     )
     for i in range(f.n):
         cols[f"x{i + 1}_init"] = q0[:, i, 0]
@@ -139,6 +141,19 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
         cols[f"x{i + 1}"] = qf[:, i, 0]
         cols[f"y{i + 1}"] = qf[:, i, 1]
     return pd.DataFrame(cols)
+
+
+def motion_columns(motion: RigidMotion) -> dict[str, NDArray[np.float64]]:
+    """The rigid-motion columns of ``trials.parquet`` (:mod:`formationlab.io.trials`)."""
+    return {
+        "drift_vx": np.asarray(motion.velocity[:, 0], dtype=float),
+        "drift_vy": np.asarray(motion.velocity[:, 1], dtype=float),
+        "drift_speed": np.asarray(motion.speed, dtype=float),
+        "drift_omega": np.asarray(motion.omega, dtype=float),
+        "drift_cx": np.asarray(motion.centre[:, 0], dtype=float),
+        "drift_cy": np.asarray(motion.centre[:, 1], dtype=float),
+        "shape_rate": np.asarray(motion.shape_rate, dtype=float),
+    }
 
 
 def settle_trials(

@@ -21,9 +21,11 @@ Every key, its default and its meaning (``docs/studies.md`` shows examples):
     (``eta``, ``influence``) or of the robots (``diameter``: every robot's
     diameter). A law runs only the points of the keys it has: with
     ``k_a = [...]`` the distance law runs once, not once per ``k_a``.
-``tolerances`` (table, default ``{ distance = 1e-2, speed = 1e-3, window = 1e-2 }``)
+``tolerances`` (table, default ``{ distance = 1e-2, speed = 1e-3, window = 1e-2,
+shape = 2e-2, drift_window = 2.0 }``)
     Of the outcome classification (:class:`formationlab.Tolerances`); ``window``
-    is also the interval of the kernel's convergence test.
+    is also the interval of the kernel's convergence test, ``shape`` and
+    ``drift_window`` decide ``drifting`` and ``rotating`` (:mod:`formationlab.rigid_motion`).
 ``chunk_size`` (int >= 1, default 1000)
     Trials per unit of work (a chunk is what a worker runs and what ``--resume``
     keeps). Results do not depend on it.
@@ -90,6 +92,8 @@ class TolerancesModel(BaseModel):
     distance: float = Field(default=1e-2, gt=0)
     speed: float = Field(default=1e-3, gt=0)
     window: float = Field(default=1e-2, gt=0)
+    shape: float = Field(default=2e-2, gt=0)
+    drift_window: float = Field(default=2.0, gt=0)
 
 
 class SettleModel(BaseModel):
@@ -158,7 +162,7 @@ class StudyConfig(BaseModel):
     def tol(self) -> Tolerances:
         """The tolerances as :class:`formationlab.Tolerances`."""
         t = self.tolerances
-        return Tolerances(distance=t.distance, speed=t.speed, window=t.window)
+        return Tolerances(**t.model_dump())
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form, every default filled in."""

@@ -173,7 +173,7 @@ def _controls(q, qp, disp, u, gap, swept, sigma, nact, terms):
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
 def _run_chunk(
     q0, start, stop, terms, dt, n_steps, check_every, speed,
-    q_out, u_out, steps_out, status_out, mc_out, ns_out,
+    q_out, u_out, steps_out, status_out, mc_out, ns_out, window_step, qw_out,
 ):  # fmt: skip
     n = q0.shape[1]
     m = stop - start
@@ -218,6 +218,12 @@ def _run_chunk(
                     stopping += 1
         for b in range(nact):
             mc[b] = min(mc[b], gap[b]) if code[b] < 0 else mc[b]
+        if k == window_step:  # start of the drift window (the driver's q_window)
+            for b in range(nact):
+                if code[b] < 0:
+                    for i in range(n):
+                        qw_out[ids[b], i, 0] = q[i, 0, b]
+                        qw_out[ids[b], i, 1] = q[i, 1, b]
         if k % check_every == 0 or k == n_steps:
             # stopped: instantaneous speed max |u_i| or net speed since the previous
             # check, max |q_i(k) - q_i(kc)| / ((k - kc) dt), at most `speed`
@@ -305,14 +311,16 @@ def _run_chunk(
 @njit(cache=True, fastmath=False, error_model="numpy", parallel=True)
 def run_chunks(
     q0, chunk, terms, dt, n_steps, check_every, speed,
-    q_out, u_out, steps_out, status_out, mc_out, ns_out,
+    q_out, u_out, steps_out, status_out, mc_out, ns_out, window_step, qw_out,
 ):  # fmt: skip
     """Step every trial of ``q0`` ``(B, n, 2)``; chunks of ``chunk`` trials run in parallel.
 
     ``terms`` is the law's :class:`~formationlab.controllers.terms.KernelTerms`.
     Fills ``q_out``, ``u_out`` ``(B, n, 2)``, ``steps_out`` (int64), ``status_out``
     (int8, :attr:`formationlab.status.Status.code`), ``mc_out`` (least clearance)
-    and ``ns_out`` (net speed over the last check interval), all of length ``B``.
+    and ``ns_out`` (net speed over the last check interval), all of length ``B``;
+    ``qw_out`` ``(B, n, 2)`` (filled with NaN by the caller) gets the positions of the
+    trials still running at step ``window_step``, the start of the drift window.
     """
     n_trials = q0.shape[0]
     n_chunks = (n_trials + chunk - 1) // chunk
@@ -321,5 +329,5 @@ def run_chunks(
         stop = min(n_trials, start + chunk)
         _run_chunk(
             q0, start, stop, terms, dt, n_steps, check_every, speed,
-            q_out, u_out, steps_out, status_out, mc_out, ns_out,
+            q_out, u_out, steps_out, status_out, mc_out, ns_out, window_step, qw_out,
         )  # fmt: skip

@@ -45,7 +45,6 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
-from ..analysis import OUTCOMES
 from ..controllers import LAWS, Law
 from ..errors import ParameterError
 from ..spec import Formation
@@ -54,7 +53,7 @@ from .chunks import ChunkTask, plan_chunks, run_chunk
 from .config import GaussianInitial, StudyConfig, parse_study
 from .executors import run_in_process, run_on_dask
 from .groups import REPULSION_KEYS, ROBOT_KEYS, Group, study_groups
-from .summary import summarize_groups
+from .summary import study_outcomes, summarize_groups
 
 if TYPE_CHECKING:
     from ..scenario import Scenario
@@ -347,7 +346,7 @@ def run_study(
         "settle": config.settle.model_dump(mode="json"),
         "laws": list(dict.fromkeys(g.law.name for g in groups)),
         "sweep": {k: list(v) for k, v in config.sweep.items()},
-        "outcomes": list(OUTCOMES),
+        "outcomes": study_outcomes(trials),
         "groups": summarize_groups(trials, [g.describe() for g in groups]),
         "trial_steps": steps,
         "settled_trials": settled,

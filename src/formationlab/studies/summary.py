@@ -14,7 +14,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..analysis import OUTCOMES
 
-__all__ = ["Z95", "summarize_groups", "wilson_interval"]
+__all__ = ["Z95", "study_outcomes", "summarize_groups", "wilson_interval"]
+
+#: Outcomes that a study reports only when some trial has them (before or after
+#: settling): a study without moving rigid formations keeps today's tables.
+OPTIONAL_OUTCOMES = ("drifting", "rotating")
 
 #: The standard normal quantile of 0.975: two-sided 95 % intervals.
 Z95 = 1.959963984540054
@@ -57,7 +61,24 @@ def wilson_interval(
     return low, high
 
 
-def summarize_groups(trials: pd.DataFrame, groups: list[dict[str, Any]]) -> list[dict[str, Any]]:
+def study_outcomes(trials: pd.DataFrame) -> list[str]:
+    """The outcomes a study reports, in the order of :data:`OUTCOMES`.
+
+    Every outcome except ``drifting`` and ``rotating``, which are listed only when
+    some trial of the table has them (column ``outcome`` or ``settled_outcome``).
+    """
+    seen: set[str] = set()
+    for column in ("outcome", "settled_outcome"):
+        if column in trials:
+            seen.update(str(x) for x in pd.unique(trials[column]))
+    return [o for o in OUTCOMES if o not in OPTIONAL_OUTCOMES or o in seen]
+
+
+def summarize_groups(
+    trials: pd.DataFrame,
+    groups: list[dict[str, Any]],
+    outcomes: list[str] | None = None,
+) -> list[dict[str, Any]]:
     """One summary entry per group, in the order of ``groups``.
 
     Parameters
@@ -68,18 +89,21 @@ def summarize_groups(trials: pd.DataFrame, groups: list[dict[str, Any]]) -> list
     groups : list of dict
         Per group (index = ``group`` column): ``law``, ``parameters`` and
         anything else to carry over (``law_parameters``, ...).
+    outcomes : list of str, optional
+        The outcomes counted; default :func:`study_outcomes` of ``trials``.
 
     Returns
     -------
     list of dict
         ``law``, ``parameters``, ..., ``trials``, ``counts``, ``fractions`` and
-        ``ci95`` (``[low, high]``) keyed by every outcome in :data:`OUTCOMES`,
+        ``ci95`` (``[low, high]``) keyed by every outcome in ``outcomes``,
         ``median_converged_time`` (of the trials that converged, or None) and
         ``trial_steps``; then ``settled`` (how many trials were settled with
         implicit Euler) and ``settled_counts``, ``settled_fractions`` and
         ``settled_ci95`` of the outcomes after settling (column
         ``settled_outcome``; ``outcome`` where the table has no such column).
     """
+    outs = study_outcomes(trials) if outcomes is None else list(outcomes)
     out = []
     after = "settled_outcome" if "settled_outcome" in trials else "outcome"
     by_group = dict(tuple(trials.groupby("group", sort=True)))
@@ -88,7 +112,7 @@ def summarize_groups(trials: pd.DataFrame, groups: list[dict[str, Any]]) -> list
         n = 0 if rows is None else len(rows)
         entry = dict(meta)
         entry["trials"] = n
-        entry.update(_fractions(rows, "outcome", n))
+        entry.update(_fractions(rows, "outcome", n, outs))
         if rows is not None and n:
             ct = rows["converged_time"].to_numpy(dtype=float)
             ct = ct[np.isfinite(ct)]
@@ -99,26 +123,26 @@ def summarize_groups(trials: pd.DataFrame, groups: list[dict[str, Any]]) -> list
             entry["trial_steps"] = 0
         settled = 0 if rows is None or "settled" not in rows else int(rows["settled"].sum())
         entry["settled"] = settled
-        entry.update({f"settled_{k}": v for k, v in _fractions(rows, after, n).items()})
+        entry.update({f"settled_{k}": v for k, v in _fractions(rows, after, n, outs).items()})
         out.append(entry)
     return out
 
 
-def _fractions(rows: pd.DataFrame | None, column: str, n: int) -> dict[str, Any]:
-    """``counts``, ``fractions`` and Wilson ``ci95`` of the outcomes in ``column``."""
-    counts: dict[str, int] = {o: 0 for o in OUTCOMES}
+def _fractions(rows: pd.DataFrame | None, column: str, n: int, outs: list[str]) -> dict[str, Any]:
+    """``counts``, ``fractions`` and Wilson ``ci95`` of the outcomes ``outs`` in ``column``."""
+    counts: dict[str, int] = {o: 0 for o in outs}
     if rows is not None:
         for o, c in rows[column].value_counts().items():
             counts[str(o)] = int(c)
     if not n:
         return {
             "counts": counts,
-            "fractions": {o: math.nan for o in OUTCOMES},
-            "ci95": {o: [math.nan, math.nan] for o in OUTCOMES},
+            "fractions": {o: math.nan for o in outs},
+            "ci95": {o: [math.nan, math.nan] for o in outs},
         }
-    lo, hi = wilson_interval(np.array([counts[o] for o in OUTCOMES]), n)
+    lo, hi = wilson_interval(np.array([counts[o] for o in outs]), n)
     return {
         "counts": counts,
-        "fractions": {o: counts[o] / n for o in OUTCOMES},
-        "ci95": {o: [float(a), float(b)] for o, a, b in zip(OUTCOMES, lo, hi, strict=True)},
+        "fractions": {o: counts[o] / n for o in outs},
+        "ci95": {o: [float(a), float(b)] for o, a, b in zip(outs, lo, hi, strict=True)},
     }

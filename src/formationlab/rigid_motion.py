@@ -1,0 +1,177 @@
+"""Formations that move as a rigid body: the fit and the decision ``drifting`` / ``rotating``.
+
+A relative equilibrium of the closed loop is a shape that the field moves
+rigidly, ``u_i = v + omega k x (q_i - c)``: it never stops, yet its shape does
+not change (the angle-restricted law has them on the hexagon: ``docs/drifting.md``).
+Every path that classifies a final state (single runs, the batched kernel and
+its numpy specification, settling) reads the motion the same way, here:
+
+:func:`rigid_motion` fits the rigid motion that carries the positions
+``P = q(t - T)`` onto ``Q = q(t)`` over the *drift window* ``T``: the rotation
+``phi`` of the least-squares (Procrustes) fit of the centred shapes,
+``phi = atan2(sum_i A_i x B_i, sum_i A_i . B_i)`` with ``A_i = P_i - P_bar``,
+``B_i = Q_i - Q_bar``, and the motion of constant ``omega = phi / T`` along the
+circular arc through both centroids. The *shape rate* is what the fit leaves,
+``max_i |B_i - R(phi) A_i| / T``; it is zero exactly when the shape did not
+change (every distance and angle kept).
+
+:func:`rigid_outcome` decides: ``drifting`` (a translation) or ``rotating``
+(an angular velocity ``omega`` about a centre ``c``) when the shape rate is at
+most ``Tolerances.shape`` while the rigid motion moves some robot faster than
+that; ``rotating`` when the rotation alone moves the robots about their
+centroid faster than ``Tolerances.shape`` (``|omega| max_i |B_i|``).
+
+Why a window of seconds and not the check interval of the stopping rule:
+explicit Euler on a switching surface chatters by about ``dt max_i |u_i|``
+(``~1e-2`` m on the hexagon) at every step; over 10 ms that is a shape rate of
+up to 1 m/s, over 2 s at most about 1e-2 m/s. A rotation by more than ``pi`` over the
+window cannot be told from a slower one (``|omega| < pi / T``: 1.57 rad/s at
+the default 2 s).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .geometry import cross, perp
+
+if TYPE_CHECKING:
+    from .analysis import Tolerances
+
+__all__ = ["RigidMotion", "field_motion", "rigid_motion", "rigid_outcome"]
+
+#: codes of :func:`rigid_outcome`
+NOT_RIGID, DRIFTING, ROTATING = 0, 1, 2
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class RigidMotion:
+    """The rigid motion fitted over the drift window, for a batch of shape ``S``.
+
+    Attributes
+    ----------
+    velocity : ndarray, shape S + (2,)
+        Velocity of the centroid at the end of the window, m/s.
+    omega : ndarray, shape S
+        Angular velocity, rad/s (counter-clockwise positive).
+    centre : ndarray, shape S + (2,)
+        Centre of the rotation, ``c = Q_bar + (k x v) / omega`` (from
+        ``v = omega k x (Q_bar - c)``); NaN where ``omega = 0``.
+    speed : ndarray, shape S
+        Largest speed of a robot in the rigid motion, ``max_i |v + omega k x B_i|``.
+    spin : ndarray, shape S
+        Largest speed of a robot about the centroid, ``|omega| max_i |B_i|``.
+    shape_rate : ndarray, shape S
+        ``max_i |B_i - R(phi) A_i| / T``: how fast the shape changed, m/s.
+    window : ndarray, shape S
+        The window ``T``, seconds (NaN: no positions that far back).
+    """
+
+    velocity: NDArray[np.float64]
+    omega: NDArray[np.float64]
+    centre: NDArray[np.float64]
+    speed: NDArray[np.float64]
+    spin: NDArray[np.float64]
+    shape_rate: NDArray[np.float64]
+    window: NDArray[np.float64]
+
+    def __getitem__(self, index: int | slice | NDArray[np.intp]) -> RigidMotion:
+        """The motions of some trials of a batch."""
+        return RigidMotion(**{k: getattr(self, k)[index] for k in _FIELDS})
+
+    @classmethod
+    def unknown(cls, shape: tuple[int, ...] = ()) -> RigidMotion:
+        """No window (a run shorter than it, or a trial that stopped before it): all NaN."""
+        nan, nan2 = np.full(shape, np.nan), np.full((*shape, 2), np.nan)
+        return cls(
+            velocity=nan2, omega=nan, centre=nan2.copy(), speed=nan.copy(), spin=nan.copy(),
+            shape_rate=nan.copy(), window=nan.copy(),
+        )  # fmt: skip
+
+
+_FIELDS = ("velocity", "omega", "centre", "speed", "spin", "shape_rate", "window")
+
+
+def rigid_motion(before: ArrayLike, after: ArrayLike, window: ArrayLike) -> RigidMotion:
+    """Fit the rigid motion carrying ``before`` onto ``after`` in ``window`` seconds.
+
+    Parameters
+    ----------
+    before, after : array_like, shape (..., n, 2)
+        Positions ``q(t - T)`` and ``q(t)``; NaN in ``before`` gives an unknown motion.
+    window : array_like, shape (...)
+        ``T``, seconds; not positive or NaN gives an unknown motion.
+
+    Returns
+    -------
+    RigidMotion
+        Of batch shape ``(...)``. The motion is the one of constant velocity and
+        angular velocity: the centroid moves along the arc of angle ``phi`` whose
+        chord is ``Q_bar - P_bar``, so its velocity at the end is the chord turned
+        by ``phi / 2`` and lengthened by ``(phi / 2) / sin(phi / 2)``.
+    """
+    p = np.asarray(before, dtype=float)
+    q = np.asarray(after, dtype=float)
+    t = np.asarray(window, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.where(t > 0, t, np.nan)
+        pc, qc = p.mean(axis=-2), q.mean(axis=-2)
+        a, b = p - pc[..., None, :], q - qc[..., None, :]
+        phi = np.arctan2(np.sum(cross(a, b), axis=-1), np.sum(a * b, axis=(-2, -1)))
+        c, s = np.cos(phi)[..., None], np.sin(phi)[..., None]
+        ra = c[..., None] * a + s[..., None] * perp(a)  # R(phi) A_i
+        shape_rate = np.max(np.linalg.norm(b - ra, axis=-1), axis=-1) / t
+        omega = phi / t
+        half = 0.5 * phi[..., None]
+        chord = qc - pc
+        stretch = np.where(half == 0.0, 1.0, half / np.sin(np.where(half == 0.0, 1.0, half)))
+        turned = np.cos(half) * chord + np.sin(half) * perp(chord)
+        velocity = stretch * turned / t[..., None]
+        centre = qc + perp(velocity) / np.where(omega == 0.0, np.nan, omega)[..., None]
+        spin = np.abs(omega) * np.max(np.linalg.norm(b, axis=-1), axis=-1)
+        move = velocity[..., None, :] + omega[..., None, None] * perp(b)
+        speed = np.max(np.linalg.norm(move, axis=-1), axis=-1)
+    return RigidMotion(
+        velocity=velocity, omega=omega, centre=centre, speed=speed, spin=spin,
+        shape_rate=shape_rate, window=t,
+    )  # fmt: skip
+
+
+def field_motion(q: ArrayLike, velocity: ArrayLike, omega: ArrayLike) -> RigidMotion:
+    """The :class:`RigidMotion` of the exact rigid field ``u_i = v + omega k x (q_i - q_bar)``.
+
+    For a relative equilibrium found by solving for it (``formationlab.equilibria``):
+    ``q`` ``(..., n, 2)``, ``velocity`` ``v`` ``(..., 2)`` of the centroid and
+    ``omega`` ``(...)``; the shape rate is 0 and the window infinite.
+    """
+    q = np.asarray(q, dtype=float)
+    v = np.asarray(velocity, dtype=float)
+    w = np.asarray(omega, dtype=float)
+    b = q - q.mean(axis=-2, keepdims=True)
+    move = v[..., None, :] + w[..., None, None] * perp(b)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        centre = q.mean(axis=-2) + perp(v) / np.where(w == 0.0, np.nan, w)[..., None]
+    return RigidMotion(
+        velocity=v, omega=w, centre=centre,
+        speed=np.max(np.linalg.norm(move, axis=-1), axis=-1),
+        spin=np.abs(w) * np.max(np.linalg.norm(b, axis=-1), axis=-1),
+        shape_rate=np.zeros(w.shape), window=np.full(w.shape, np.inf),
+    )  # fmt: skip
+
+
+def rigid_outcome(motion: RigidMotion, tolerances: Tolerances) -> NDArray[np.int8]:
+    """``NOT_RIGID``, ``DRIFTING`` or ``ROTATING`` for every motion of a batch (module docstring).
+
+    Rigid: ``shape_rate <= tolerances.shape < speed`` (the shape kept while some
+    robot moves faster than that). Rotating: rigid and ``spin > tolerances.shape``.
+    An unknown motion (NaN) is not rigid. Only states whose distances are not met
+    and that have not stopped reach this decision (:func:`formationlab.analysis.classify`).
+    """
+    with np.errstate(invalid="ignore"):
+        rigid = (motion.shape_rate <= tolerances.shape) & (motion.speed > tolerances.shape)
+        turning = motion.spin > tolerances.shape
+    return np.where(rigid, np.where(turning, ROTATING, DRIFTING), NOT_RIGID).astype(np.int8)
