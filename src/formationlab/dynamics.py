@@ -159,6 +159,12 @@ class System:
         self, x0: NDArray[np.float64], x1: NDArray[np.float64], status: Status, t: float, dt: float
     ) -> str:
         """Why the step from ``x0`` (one state ``(n, k)``) to ``x1``, ending at ``t``, failed."""
+        with np.errstate(over="ignore", invalid="ignore"):  # a huge but finite step
+            return self._step_message(x0, x1, status, t, dt)
+
+    def _step_message(
+        self, x0: NDArray[np.float64], x1: NDArray[np.float64], status: Status, t: float, dt: float
+    ) -> str:
         if status is Status.NON_FINITE:
             return (
                 f"the step to t = {t:g} s produced NaN or infinite positions; reduce dt "

@@ -362,6 +362,8 @@ def simulate(
         interruptible=interruptible,
     )  # fmt: skip
     points = robot.points(raw.x)
+    with np.errstate(over="ignore", invalid="ignore"):  # a diverged run: V is inf
+        V, sigma = law.potential(formation, points), law.switching(formation, points)
     return SimulationResult(
         formation=formation,
         law=law,
@@ -369,8 +371,8 @@ def simulate(
         t=raw.t,
         q=raw.q,
         u=raw.v[..., :2],
-        V=law.potential(formation, points),
-        sigma=law.switching(formation, points),
+        V=V,
+        sigma=sigma,
         status=raw.status,
         message=raw.message,
         stats=dict(raw.stats),
