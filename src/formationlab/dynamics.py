@@ -65,7 +65,7 @@ class System:
         """The command ``(..., n, 2)``: the law's control ``u`` at the points ``p``, marching added."""
         if self.marching is None:
             return u
-        return self.marching.command(self.formation, p, u, t)
+        return self.marching.command(self.formation, p, u, t, self.model.velocity_gain)
 
     def rhs(self, x: NDArray[np.float64], t: float = 0.0) -> NDArray[np.float64]:
         p = self.model.points(x)

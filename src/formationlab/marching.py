@@ -111,10 +111,19 @@ class Marching:
             )
 
     def command(
-        self, formation: Formation, p: NDArray[np.float64], u: NDArray[np.float64], t: float
+        self,
+        formation: Formation,
+        p: NDArray[np.float64],
+        u: NDArray[np.float64],
+        t: float,
+        gain: float = 1.0,
     ) -> NDArray[np.float64]:
-        """The controls ``(..., n, 2)`` with ``v_ref(t)`` added (or the leader's replaced)."""
-        v = self.reference(t)
+        """The controls ``(..., n, 2)`` with ``gain v_ref(t)`` added (or the leader's replaced).
+
+        ``gain`` is the robot model's ``velocity_gain`` (the command that holds a
+        robot at a velocity: ``k_d`` for double integrators, 1 otherwise).
+        """
+        v = gain * self.reference(t)
         if self.leader is None:
             return u + v
         out = np.array(u, dtype=float, copy=True)
@@ -130,7 +139,8 @@ def shape_realization(formation: Formation) -> NDArray[np.float64]:
     """
     if formation.template is not None:
         return np.asarray(formation.template, dtype=float)
-    d = formation.distance_matrix
+    d = np.array(formation.distance_matrix, dtype=float)
+    np.fill_diagonal(d, 0.0)
     if not np.all(np.isfinite(d)):
         raise FormationError(
             "motion parameters need the desired shape: give the formation a template "
@@ -222,12 +232,20 @@ class MotionParameters:
             )
 
     def command(
-        self, formation: Formation, p: NDArray[np.float64], u: NDArray[np.float64], t: float
+        self,
+        formation: Formation,
+        p: NDArray[np.float64],
+        u: NDArray[np.float64],
+        t: float,
+        gain: float = 1.0,
     ) -> NDArray[np.float64]:
-        """``u_i + sum_k a_ik z_k``, ``(..., n, 2)``: ``a_ik = mu_k`` (``i`` first), ``mu_tilde_k``."""
+        """``u_i + gain sum_k a_ik z_k``, ``(..., n, 2)``: ``a_ik = mu_k`` (``i`` first), ``mu_tilde_k``.
+
+        ``gain``: the robot model's ``velocity_gain`` (as for :meth:`Marching.command`).
+        """
         edges = formation.edges
         z = p[..., edges[:, 0], :] - p[..., edges[:, 1], :]
-        return u + self.incidence(formation) @ z
+        return u + gain * (self.incidence(formation) @ z)
 
     def incidence(self, formation: Formation) -> NDArray[np.float64]:
         """The matrix ``(n, m)`` of the ``a_ik``."""

@@ -51,6 +51,15 @@ class RobotModel:
         """The model's parameters (its dataclass fields), as scenario keys."""
         return tuple(f.name for f in fields(cls))
 
+    @property
+    def velocity_gain(self) -> float:
+        """The command that holds a robot at velocity ``v`` is ``velocity_gain * v``.
+
+        1 for models whose command is a velocity; a marching reference velocity
+        (:mod:`formationlab.marching`) is scaled by it.
+        """
+        return 1.0
+
     def positions(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Robot centres ``(..., n, 2)`` of states ``(..., n, k)`` (contact is tested on them)."""
         return x[..., :2]

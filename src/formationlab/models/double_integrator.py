@@ -17,6 +17,9 @@ eq. 14 jumps by ``alpha_ijk c_ijk = -theta`` where a restriction switches, so
 ``E`` jumps with ``V`` there (down when a restriction turns on, up when it turns
 off; docs/robot-models.md).
 
+Marching. A reference velocity ``v_ref`` enters as the force ``k_d v_ref``
+(:attr:`DoubleIntegrator.velocity_gain`): ``q_ddot = -k_d (q_dot - v_ref) + u``.
+
 Speed limit. With ``max_speed``, the positions move with ``sat(q_dot)`` and a
 robot at the limit is braked by extra damping ``lambda_i q_dot_i`` with
 ``lambda_i = max(0, q_dot_i . a_i) / |q_dot_i|^2``, ``a_i = -k_d q_dot_i + u_i``:
@@ -69,6 +72,11 @@ class DoubleIntegrator(RobotModel):
     def __post_init__(self) -> None:
         check_fields(self, positive=("damping",))
         check_limit(self, "max_speed")
+
+    @property
+    def velocity_gain(self) -> float:
+        """``k_d``: the force ``k_d v`` holds a robot at velocity ``v`` (``q_ddot = 0``)."""
+        return float(self.damping)
 
     def derivative(self, x: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
         w = x[..., 2:4]
