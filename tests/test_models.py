@@ -73,9 +73,12 @@ def test_limits_keep_directions_and_the_curvature():
     u = np.array([[3.0, 4.0], [0.3, 0.4], [0.0, 0.0]])
     out = limit_speed(u, 1.0)
     np.testing.assert_allclose(out, [[0.6, 0.8], [0.3, 0.4], [0.0, 0.0]])
-    v, w = limit_unicycle(np.array([2.0, 0.5, 0.0]), np.array([1.0, 4.0, 0.0]), 1.0, 2.0)
-    np.testing.assert_allclose(v, [1.0, 0.25, 0.0])  # factor min(1/2, 2/1) = 1/2; then 2/4
-    np.testing.assert_allclose(w, [0.5, 2.0, 0.0])
+    v, w = limit_unicycle(
+        np.array([2.0, 0.5, 0.0, 0.3]), np.array([1.0, 4.0, 0.0, 0.0]), 1.0, 2.0
+    )
+    # factors min(1/2, 2/1) = 1/2; then 2/4; none for a robot at rest or driving straight
+    np.testing.assert_allclose(v, [1.0, 0.25, 0.0, 0.3])
+    np.testing.assert_allclose(w, [0.5, 2.0, 0.0, 0.0])
 
 
 # ------------------------------------------------------------------ near-identity

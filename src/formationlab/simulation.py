@@ -120,6 +120,18 @@ class SimulationResult:
         """Velocities of :attr:`points`, ``(T, n, 2)`` (``u`` unless the points differ)."""
         return self.model.point_rates(self.x, self.xdot)
 
+    @cached_property
+    def _shape_frame(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The points and their velocities; with marching, relative to their centroid.
+
+        A marching formation never stops: whether it has settled (the outcome, the
+        convergence time, the net speed) is judged in the frame that moves with it.
+        """
+        p, w = self.points, self.point_velocity
+        if self.marching is None:
+            return p, w
+        return p - p.mean(axis=-2, keepdims=True), w - w.mean(axis=-2, keepdims=True)
+
     @property
     def headings(self) -> NDArray[np.float64] | None:
         """Headings ``(T, n)`` in radians, for models that have them (else None)."""
@@ -185,19 +197,22 @@ class SimulationResult:
         least ``window``; None when the saved run is shorter than ``window``.
         """
         tol = tolerances or Tolerances()
-        v = float(net_speed(self.t, self.points, tol.window)[-1])
+        v = float(net_speed(self.t, self._shape_frame[0], tol.window)[-1])
         return v if np.isfinite(v) else None
 
     def outcome(self, tolerances: Tolerances | None = None) -> Outcome:
-        """Outcome of the final state (see :mod:`formationlab.analysis`).
+        """Outcome of the final state (see :mod:`formationlab.analysis`), at the law's points.
+
+        With marching, the state is judged in the frame of the points' centroid.
 
         The robots count as stopped when the final ``max_i |u_i|`` or the net speed over
         the last ``window`` seconds (:meth:`net_speed`) is at most ``tolerances.speed``.
         """
+        p, w = self._shape_frame
         return classify(
             self.formation,
-            self.points[-1],
-            self.point_velocity[-1],
+            p[-1],
+            w[-1],
             tolerances,
             contact=Status(self.status).contact,
             net_speed=self.net_speed(tolerances),
@@ -206,9 +221,8 @@ class SimulationResult:
     def converged_time(self, tolerances: Tolerances | None = None) -> float | None:
         """First saved time after which the robots stay stopped (instantaneous or net speed)."""
         tol = tolerances or Tolerances()
-        return converged_time(
-            self.t, self.point_velocity, tol.speed, q=self.points, window=tol.window
-        )
+        p, w = self._shape_frame
+        return converged_time(self.t, w, tol.speed, q=p, window=tol.window)
 
     def summary(self, tolerances: Tolerances | None = None) -> dict[str, Any]:
         """A JSON-ready summary of the run (the ``summary.json`` of ``run`` and ``paper``).
@@ -222,7 +236,8 @@ class SimulationResult:
         and ``tolerances``; for models with more state ``final_state`` (rows of
         ``state_names``), for unicycles ``final_headings`` and ``heading_spread``
         (radians), and with marching ``marching`` (final shape error, centroid
-        velocity, its error against the reference).
+        velocity, its error against the reference); with marching ``final_speed``,
+        ``converged_time`` and ``net_speed`` are measured relative to the centroid.
         """
         from .analysis import triangle_orientation
 
@@ -252,7 +267,7 @@ class SimulationResult:
             "distance_errors": dict(zip(self.edge_labels, err.tolist(), strict=True)),
             "max_distance_error": float(np.max(np.abs(err))),
             "converged_time": self.converged_time(tol),
-            "final_speed": float(np.max(np.linalg.norm(self.point_velocity[-1], axis=-1))),
+            "final_speed": float(np.max(np.linalg.norm(self._shape_frame[1][-1], axis=-1))),
             "net_speed": self.net_speed(tol),
             "orientation": (
                 triangle_orientation(self.points[-1]) if self.formation.n >= 3 else None

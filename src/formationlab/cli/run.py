@@ -114,9 +114,12 @@ def _simulate(simulate: Any, sc: Any, save_every: int, quiet: bool) -> Any:
     """Run ``sc`` with a progress bar on a terminal (long runs only)."""
     steps = sc.duration / getattr(sc.integrator, "dt", 1e-3)
     show = not quiet and err_console.is_terminal and steps * sc.n**2 > 2e5
-    kwargs = {"duration": sc.duration, "integrator": sc.integrator, "save_every": save_every}
+    kwargs = {
+        "duration": sc.duration, "integrator": sc.integrator, "save_every": save_every,
+        "model": sc.model, "marching": sc.marching,
+    }  # fmt: skip
     if not show:
-        return simulate(sc.formation, sc.law, sc.q0, **kwargs)
+        return simulate(sc.formation, sc.law, sc.x0, **kwargs)
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
     columns = (
@@ -130,7 +133,7 @@ def _simulate(simulate: Any, sc: Any, save_every: int, quiet: bool) -> Any:
         return simulate(
             sc.formation,
             sc.law,
-            sc.q0,
+            sc.x0,
             progress=lambda t: bar.update(task, completed=t),
             **kwargs,
         )
@@ -149,11 +152,17 @@ def _animate(
     if hasattr(result_or_ds, "formation"):
         r = result_or_ds
         t, q, edges, diam = r.t, r.q, r.formation.edges, r.formation.diameters
+        headings, points = r.headings, (None if r.points is r.q else r.points)
     else:
         ds = result_or_ds
         t, q = ds["time"].values, ds["q"].values
         edges, diam = ds["edge_robots"].values - 1, ds["diameter"].values
-    anim = animate_run(t, q, edges=edges, diameters=diam, max_frames=frames, title=title)
+        headings = ds["theta"].values if "theta" in ds else None
+        points = ds["point"].values if "point" in ds else None
+    anim = animate_run(
+        t, q, edges=edges, diameters=diam, max_frames=frames, title=title,
+        headings=headings, points=points,
+    )  # fmt: skip
     return save_animation(anim, folder / ANIMATION_STEM, formats=formats)
 
 
@@ -258,8 +267,9 @@ def validate(
         rigid = "rigid" if f.is_rigid else "not rigid"
         typer.echo(
             f"ok: {path}: {sc.name!r}, {f.n} robots, {len(f.edges)} edges ({rigid}), "
-            f"orientation {f.orientation}, law {sc.law.name}, integrator "
+            f"orientation {f.orientation}, model {sc.model.name}, law {sc.law.name}, integrator "
             f"{json.dumps(sc.parameters['integrator'])}, duration {sc.duration:g} s"
+            + (f", marching ({type(sc.marching).__name__})" if sc.marching is not None else "")
         )
     if bad:
         raise typer.Exit(2)

@@ -34,8 +34,7 @@ def scale_factor(size: NDArray[np.float64], limit: float | None) -> NDArray[np.f
     """``min(1, limit / size)`` elementwise (1 without a limit or where ``size`` is 0)."""
     if limit is None:
         return np.ones_like(size)
-    with np.errstate(divide="ignore"):
-        return np.minimum(1.0, limit / np.where(size > 0, size, np.inf))
+    return np.where(size > limit, limit / np.where(size > limit, size, 1.0), 1.0)
 
 
 def limit_speed(u: NDArray[np.float64], max_speed: float | None) -> NDArray[np.float64]:

@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import ParameterError
-from ..validation import one_of
+from ..validation import check_fields, one_of
 from .base import RobotModel
 from .limits import check_limit, limit_unicycle
 from .registry import register_model
@@ -71,6 +71,7 @@ class Unicycle(RobotModel):
 
     def __post_init__(self) -> None:
         one_of(self.mapping, "mapping", tuple(TRANSFORMS), owner="Unicycle")
+        check_fields(self, positive=("offset",))  # also the length of the stop rule's speed
         check_limit(self, "max_speed", "max_turn_rate")
         _ = self.transform  # validates the transform's parameters
 
