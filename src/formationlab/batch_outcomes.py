@@ -86,10 +86,17 @@ class BatchResult:
         net_speed: NDArray[np.float64],
         dt: float,
         tolerances: Tolerances | None = None,
+        q: NDArray[np.float64] | None = None,
+        u: NDArray[np.float64] | None = None,
     ) -> BatchResult:
-        """Classify final states ``x`` / velocities ``v`` ``(B, n, k)`` (positions first)."""
+        """Classify final states ``x`` / velocities ``v`` ``(B, n, k)`` (positions first).
+
+        ``q``, ``u`` ``(B, n, 2)``: the law's points and their velocities, when the
+        robot model's differ from the positions (near-identity hand points).
+        """
         tol = tolerances or Tolerances()
-        q, u = x[..., :2], v[..., :2]
+        q = x[..., :2] if q is None else q
+        u = v[..., :2] if u is None else u
         contact = np.isin(status, [s.code for s in Status if s.contact])
         outcome = classify_batch(formation, q, u, tol, contact=contact, net_speed=net_speed)
         converged = status == Status.CONVERGED.code
