@@ -56,9 +56,14 @@ def test_a_translated_start_gives_the_translated_run(law, integ, model):
     shift = np.array([40.0, -25.0])
     runs = [
         fl.simulate(
-            TRIANGLE, fl.get_law(law), q0, duration=0.3, integrator=integrator(integ),
-            model=model, **EXTRA[model],
-        )  # fmt: skip
+            TRIANGLE,
+            fl.get_law(law),
+            q0,
+            duration=0.3,
+            integrator=integrator(integ),
+            model=model,
+            **EXTRA[model],
+        )
         for q0 in (START, START + shift)
     ]
     a, b = runs
@@ -134,9 +139,14 @@ def test_the_same_input_gives_the_same_run(law, integ, model):
     q0 = START + rng.normal(0.0, 0.2, size=(3, 2))
     a, b = (
         fl.simulate(
-            TRIANGLE, fl.get_law(law), q0, duration=0.2, integrator=integrator(integ),
-            model=model, **EXTRA[model],
-        )  # fmt: skip
+            TRIANGLE,
+            fl.get_law(law),
+            q0,
+            duration=0.2,
+            integrator=integrator(integ),
+            model=model,
+            **EXTRA[model],
+        )
         for _ in range(2)
     )
     np.testing.assert_array_equal(a.x, b.x)

@@ -1,4 +1,4 @@
-"""Marching: a reference velocity for every robot, a leader, Garcia de Marina et al.'s motion parameters."""
+"""Marching: a reference for every robot, a leader, Garcia de Marina et al.'s motion parameters."""
 
 import numpy as np
 import pytest

@@ -73,9 +73,7 @@ def test_limits_keep_directions_and_the_curvature():
     u = np.array([[3.0, 4.0], [0.3, 0.4], [0.0, 0.0]])
     out = limit_speed(u, 1.0)
     np.testing.assert_allclose(out, [[0.6, 0.8], [0.3, 0.4], [0.0, 0.0]])
-    v, w = limit_unicycle(
-        np.array([2.0, 0.5, 0.0, 0.3]), np.array([1.0, 4.0, 0.0, 0.0]), 1.0, 2.0
-    )
+    v, w = limit_unicycle(np.array([2.0, 0.5, 0.0, 0.3]), np.array([1.0, 4.0, 0.0, 0.0]), 1.0, 2.0)
     # factors min(1/2, 2/1) = 1/2; then 2/4; none for a robot at rest or driving straight
     np.testing.assert_allclose(v, [1.0, 0.25, 0.0, 0.3])
     np.testing.assert_allclose(w, [0.5, 2.0, 0.0, 0.0])
@@ -114,7 +112,7 @@ def test_contact_is_tested_on_the_centres_and_the_start_on_both():
     # hand points of robots 1 and 2 turned towards each other overlap while the centres do not
     model = Unicycle(offset=0.3)
     q0 = [[0.0, 0.0], [0.5, 0.0], [0.2, 2.0]]
-    with pytest.raises(FormationError, match="hand points.*smaller offset"):
+    with pytest.raises(FormationError, match=r"hand points.*smaller offset"):
         fl.simulate(TRIANGLE, DIST, q0, duration=0.1, model=model, headings=[0.0, np.pi, 0.0])
     res = fl.simulate(TRIANGLE, DIST, q0, duration=0.1, model=model, headings=[np.pi, 0, 0])
     assert res.status == "success"

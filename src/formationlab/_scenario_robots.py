@@ -89,7 +89,9 @@ def _initial_value(key: str, value: Any, n: int, fail: Fail) -> NDArray[np.float
     if key == "headings":
         items = value if isinstance(value, list) else [value]
         if not items or not all(_is_number(x) for x in items):
-            raise fail(where, f"headings must be one number or one per robot (radians), got {value!r}")
+            raise fail(
+                where, f"headings must be one number or one per robot (radians), got {value!r}"
+            )
         if not all(math.isfinite(x) for x in items):
             raise fail(where, f"headings must be finite numbers (radians), got {value!r}")
         if isinstance(value, list) and len(value) != n:
@@ -105,7 +107,9 @@ def _initial_value(key: str, value: Any, n: int, fail: Fail) -> NDArray[np.float
             isinstance(r, list) and len(r) == 2 and all(_is_number(x) for x in r) for r in rows
         )
         if not ok:
-            raise fail(where, f"velocities must be [vx, vy] or one [vx, vy] per robot, got {value!r}")
+            raise fail(
+                where, f"velocities must be [vx, vy] or one [vx, vy] per robot, got {value!r}"
+            )
         if not all(math.isfinite(x) for r in rows for x in r):
             raise fail(where, f"velocities must be finite numbers (m/s), got {value!r}")
         if isinstance(value[0], list) and len(value) != n:

@@ -62,7 +62,7 @@ class System:
     def command(
         self, p: NDArray[np.float64], u: NDArray[np.float64], t: float = 0.0
     ) -> NDArray[np.float64]:
-        """The command ``(..., n, 2)``: the law's control ``u`` at the points ``p``, marching added."""
+        """The command ``(..., n, 2)``: the law's control ``u`` at points ``p``, with marching."""
         if self.marching is None:
             return u
         return self.marching.command(self.formation, p, u, t, self.model.velocity_gain)

@@ -239,7 +239,7 @@ class MotionParameters:
         t: float,
         gain: float = 1.0,
     ) -> NDArray[np.float64]:
-        """``u_i + gain sum_k a_ik z_k``, ``(..., n, 2)``: ``a_ik = mu_k`` (``i`` first), ``mu_tilde_k``.
+        """``u_i + gain sum_k a_ik z_k``, ``(..., n, 2)``; ``a_ik`` is ``mu_k`` or ``mu_tilde_k``.
 
         ``gain``: the robot model's ``velocity_gain`` (as for :meth:`Marching.command`).
         """

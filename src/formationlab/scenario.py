@@ -107,7 +107,7 @@ class Scenario:
     equilibria: dict[str, Any] | None = None
     warnings: tuple[str, ...] = field(default=())
     model: RobotModel = field(default_factory=SingleIntegrator)
-    x0: NDArray[np.float64] = field(default=None)  # type: ignore[assignment]
+    x0: NDArray[np.float64] = field(default=None)  # type: ignore[arg-type]
     marching: March | None = None
 
     def __post_init__(self) -> None:

@@ -95,8 +95,8 @@ class SimulationResult:
     status: Status
     message: str
     stats: dict[str, Any] = field(default_factory=dict)
-    x: NDArray[np.float64] = field(default=None)  # type: ignore[assignment]
-    xdot: NDArray[np.float64] = field(default=None)  # type: ignore[assignment]
+    x: NDArray[np.float64] = field(default=None)  # type: ignore[arg-type]
+    xdot: NDArray[np.float64] = field(default=None)  # type: ignore[arg-type]
     model: RobotModel = field(default_factory=SingleIntegrator)
     marching: March | None = None
 

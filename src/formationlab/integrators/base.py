@@ -124,7 +124,8 @@ class FixedStepIntegrator(Integrator):
 
         Returns the next states and the velocity each step followed, both of the
         shape of ``x``. ``t`` is for a field that depends on time
-        (``System.rhs(x, t)``: a marching reference). A scheme may add its own counts to ``counters``
+        (``System.rhs(x, t)``: a marching reference). A scheme may add its own counts to
+        ``counters``
         (``extra_rhs_evaluations`` is added to ``rhs_evaluations``).
         """
         raise NotImplementedError

@@ -185,7 +185,9 @@ def drive(
     try:
         for k in range(n_steps + 1):
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-                x_new, v = stepper.advance(system, x, dt, counters, k * dt)  # judged by step_verdict
+                x_new, v = stepper.advance(
+                    system, x, dt, counters, k * dt
+                )  # judged by step_verdict
             evaluations += live.size
             ending = np.zeros(live.size, dtype=bool)
             if stop is not None and (k % stop.check_every == 0 or k == n_steps):

@@ -130,9 +130,7 @@ class ImplicitEuler(FixedStepIntegrator):
             for members in groups.values():
                 R = np.array(members)
                 J = np.array([involved[r] for r in members])
-                done, free, viol, ends, new = self._assign(
-                    system, flat, sigma0, base, R, J, dt, t
-                )
+                done, free, viol, ends, new = self._assign(system, flat, sigma0, base, R, J, dt, t)
                 out[R[done]] = ends[done]
                 _bump(counters, "sliding_steps", int(np.sum(done & free)))
                 _bump(counters, "extra_rhs_evaluations", (1 + J.shape[1]) * R.size)

@@ -69,7 +69,7 @@ class RobotModel:
         return self.positions(x)
 
     def point_rates(self, x: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Velocities ``(..., n, 2)`` of :meth:`points` given states and their rates ``(..., n, k)``."""
+        """Velocities ``(..., n, 2)`` of :meth:`points`, given states and rates ``(..., n, k)``."""
         return v[..., :2]
 
     def derivative(self, x: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:

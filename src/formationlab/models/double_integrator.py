@@ -45,7 +45,7 @@ __all__ = ["DoubleIntegrator", "energy"]
 
 
 def energy(potential: ArrayLike, x: NDArray[np.float64], k_c: float) -> NDArray[np.float64]:
-    """``E = V + sum_i |q_dot_i|^2 / k_c`` (module docstring); ``V`` ``(...)``, ``x`` ``(..., n, 4)``."""
+    """``E = V + sum_i |q_dot_i|^2 / k_c`` (module docstring); ``V (...)``, ``x (..., n, 4)``."""
     w = x[..., 2:4]
     return np.asarray(potential, dtype=float) + np.sum(w * w, axis=(-2, -1)) / k_c
 

@@ -66,7 +66,7 @@ class Transform:
     def commands(
         self, u: NDArray[np.float64], theta: NDArray[np.float64]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Speed ``v`` and turn rate ``omega`` ``(..., n)`` for the controls ``u`` ``(..., n, 2)``."""
+        """Speed ``v`` and turn rate ``omega`` ``(..., n)`` for controls ``u`` ``(..., n, 2)``."""
         raise NotImplementedError
 
 

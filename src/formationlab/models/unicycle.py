@@ -1,4 +1,4 @@
-"""Differential-drive robots: unicycles ``(x_dot, y_dot, theta_dot) = (v cos theta, v sin theta, omega)``.
+"""Differential-drive robots: unicycles, ``(x, y, theta)_dot = (v cos theta, v sin theta, omega)``.
 
 The law's single-integrator control ``u_i`` becomes a speed and a turn rate
 through a named transform (:mod:`formationlab.models.transforms`):

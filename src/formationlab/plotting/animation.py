@@ -114,9 +114,7 @@ def animate_run(
     theta = None if headings is None else np.asarray(headings, dtype=float)
     hand = None if points is None else np.asarray(points, dtype=float)
     ends = hand if hand is not None else q  # what the edges join
-    noses = LineCollection(
-        list(np.zeros((n, 2, 2))), colors="k", linewidths=1.5, zorder=5
-    )
+    noses = LineCollection(list(np.zeros((n, 2, 2))), colors="k", linewidths=1.5, zorder=5)
     if theta is not None:
         ax.add_collection(noses)
     marks = ax.plot([], [], "k+", ms=6, zorder=5)[0] if hand is not None else None

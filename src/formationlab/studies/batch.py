@@ -133,7 +133,12 @@ def run_batch(
             n_steps=n_steps, stop=StopRule(speed=tol.speed, check_every=int(check_every)),
         )  # fmt: skip
         x, v, status, steps, mc, ns = (
-            out.x, out.v, out.status, out.steps, out.min_clearance, out.net_speed
+            out.x,
+            out.v,
+            out.status,
+            out.steps,
+            out.min_clearance,
+            out.net_speed,
         )
     else:
         raise ParameterError(f'backend must be "numba" or "numpy", got {backend!r}')

@@ -2,9 +2,10 @@
 
 Layout: every chunk of trials keeps its states as ``(n, k, C)`` (``k`` numbers
 per robot, positions first, as the robot model's state) with the trials on the
-innermost, contiguous axis, so that each loop over trials is a plain SIMD loop. Chunks run in parallel (``prange``); inside a chunk, trials
-that stop are swapped out of the live range (compaction), so that early
-stopping saves work instead of masking it.
+innermost, contiguous axis, so that each loop over trials is a plain SIMD loop.
+Chunks run in parallel (``prange``); inside a chunk, trials that stop are
+swapped out of the live range (compaction), so that early stopping saves work
+instead of masking it.
 
 The law enters as a :class:`~formationlab.controllers.terms.KernelTerms`, the
 named arrays and numbers each law builds (``Law.kernel_terms``), so one

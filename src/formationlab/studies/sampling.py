@@ -186,7 +186,9 @@ def model_initial_states(
     theta = np.empty(q0.shape[:2])
     blocks = idx // SEED_BLOCK
     for b in np.unique(blocks):
-        rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(_EXTRA_STREAM, int(b))))
+        rng = np.random.default_rng(
+            np.random.SeedSequence(int(seed), spawn_key=(_EXTRA_STREAM, int(b)))
+        )
         block = rng.uniform(-np.pi, np.pi, size=(SEED_BLOCK, formation.n))
         sel = blocks == b
         theta[sel] = block[idx[sel] % SEED_BLOCK]
