@@ -28,10 +28,25 @@ def integrator(name: str, dt: float = 2e-3):
     return fl.get_integrator(name) if name == "filippov" else fl.get_integrator(name, dt=dt)
 
 
+#: the extra initial state each model is run from (headings that are not all alike,
+#: velocities that are not zero), so that the extra state takes part in every check
+EXTRA = {
+    "single-integrator": {},
+    "unicycle": {"headings": [0.3, 2.0, -1.9]},
+    "double-integrator": {"velocities": [[0.2, -0.1], [0.0, 0.3], [-0.2, 0.0]]},
+}
+
+
+def initial(model: str, q0):
+    """The model's full initial state from positions ``q0`` (..., n, 2)."""
+    return fl.models.get_model(model).initial_state(q0, **EXTRA[model])
+
+
 def test_the_registries_hold_what_the_contract_runs_over():
     assert {"distance", "angle-restricted", "squared-distance", "signed-area"} <= set(LAWS)
     assert {"euler", "rk4", "implicit-euler"} <= set(FIXED) and "filippov" in INTEGRATORS
-    assert "single-integrator" in MODELS
+    assert {"single-integrator", "unicycle", "double-integrator"} <= set(MODELS)
+    assert set(EXTRA) == set(MODELS)  # every model has its start here
 
 
 @pytest.mark.parametrize("model", sorted(MODELS))
@@ -40,24 +55,36 @@ def test_the_registries_hold_what_the_contract_runs_over():
 def test_a_translated_start_gives_the_translated_run(law, integ, model):
     shift = np.array([40.0, -25.0])
     runs = [
-        fl.simulate(TRIANGLE, fl.get_law(law), q0, duration=0.3, integrator=integrator(integ))
+        fl.simulate(
+            TRIANGLE,
+            fl.get_law(law),
+            q0,
+            duration=0.3,
+            integrator=integrator(integ),
+            model=model,
+            **EXTRA[model],
+        )
         for q0 in (START, START + shift)
     ]
     a, b = runs
     assert a.status == b.status == "success"
+    assert a.model.name == model and a.x.shape[-1] == MODELS[model].state_size()
     np.testing.assert_allclose(b.t, a.t, rtol=0, atol=1e-12)
     np.testing.assert_allclose(b.q - shift, a.q, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(b.x[..., 2:], a.x[..., 2:], rtol=0, atol=1e-7)
     np.testing.assert_allclose(b.u, a.u, rtol=0, atol=1e-7)
-    assert np.all(np.isfinite(a.q)) and np.abs(a.q[-1] - a.q[0]).max() > 1e-3  # it moved
+    assert np.all(np.isfinite(a.x)) and np.abs(a.q[-1] - a.q[0]).max() > 1e-3  # it moved
 
 
+@pytest.mark.parametrize("model", sorted(MODELS))
 @pytest.mark.parametrize("integ", FIXED)
 @pytest.mark.parametrize("law", sorted(LAWS))
-def test_a_batch_steps_as_each_trial_alone(law, integ):
+def test_a_batch_steps_as_each_trial_alone(law, integ, model):
     rng = np.random.default_rng(3)
     starts = START + rng.normal(0.0, 0.3, size=(5, 3, 2))
     starts[4] = [[-0.3, 0.0], [0.3, 0.0], [0.0, 3.0]]  # robots 1 and 2 close: fast, may collide
-    system = System(formation=TRIANGLE, law=fl.get_law(law))
+    starts = initial(model, starts)
+    system = System(formation=TRIANGLE, law=fl.get_law(law), model=fl.models.get_model(model))
     stepper = integrator(integ, dt=5e-3)
     n_steps = steps_for(0.5, stepper.dt)
     stop = StopRule(speed=1e-3, check_every=10)
@@ -104,18 +131,50 @@ def test_a_step_into_contact_ends_with_a_contact_status_and_finite_states(law, i
         assert res.status == "success"
 
 
+@pytest.mark.parametrize("model", sorted(MODELS))
 @pytest.mark.parametrize("integ", sorted(INTEGRATORS))
 @pytest.mark.parametrize("law", sorted(LAWS))
-def test_the_same_input_gives_the_same_run(law, integ):
+def test_the_same_input_gives_the_same_run(law, integ, model):
     rng = np.random.default_rng(11)
     q0 = START + rng.normal(0.0, 0.2, size=(3, 2))
     a, b = (
-        fl.simulate(TRIANGLE, fl.get_law(law), q0, duration=0.2, integrator=integrator(integ))
+        fl.simulate(
+            TRIANGLE,
+            fl.get_law(law),
+            q0,
+            duration=0.2,
+            integrator=integrator(integ),
+            model=model,
+            **EXTRA[model],
+        )
         for _ in range(2)
     )
-    np.testing.assert_array_equal(a.q, b.q)
+    np.testing.assert_array_equal(a.x, b.x)
     np.testing.assert_array_equal(a.u, b.u)
     assert a.summary()["outcome"] == b.summary()["outcome"]
+
+
+@pytest.mark.parametrize("model", sorted(MODELS))
+@pytest.mark.parametrize("integ", sorted(INTEGRATORS))
+@pytest.mark.parametrize("law", sorted(LAWS))
+def test_no_model_ever_stores_a_state_in_contact(law, integ, model):
+    # strong gains from a start where robots 1 and 2 rush at each other: whatever the
+    # model does, every stored state is finite and clear, and a contact ends the run
+    # (the cubic laws with a gain whose explicit steps do not blow up)
+    gains = STRONG.get(law, {"k": 0.2})
+    res = fl.simulate(
+        TRIANGLE, fl.get_law(law, **gains), START_APART, duration=1.0,
+        integrator=integrator(integ, dt=0.05), model=model, **EXTRA[model],
+    )  # fmt: skip
+    assert np.all(np.isfinite(res.x))
+    system = System(formation=TRIANGLE, law=fl.get_law(law), model=res.model)
+    assert np.all(system.clearance(res.x) > 0)
+    if integ != "filippov":
+        assert np.all(system.swept_clearance(res.x[:-1], res.x[1:]) > 0)
+    if Status(res.status).contact:
+        assert res.outcome() == "collision" and "dt" in res.message
+    s = res.summary()
+    assert s["model"]["name"] == model and s["state_names"] == list(MODELS[model].state_names)
 
 
 @pytest.mark.parametrize("law", sorted(LAWS))

@@ -32,14 +32,19 @@ class Relay:
 
     a: float
 
-    def rhs_with(self, q, weights):
+    def rhs_with(self, q, weights, t=0.0):  # the time is a state here: t is not used
         q = np.asarray(q, dtype=float)
         w = np.asarray(weights, dtype=float)[..., 0]
         x_dot = 1.0 - 2.0 * w + self.a * np.sin(q[..., 0, 1])
         return np.stack([x_dot, np.ones_like(x_dot)], axis=-1)[..., None, :]
 
-    def rhs(self, q):
+    def rhs(self, q, t=0.0):
         return self.rhs_with(q, np.heaviside(self.sigma(q), 1.0))
+
+    time_dependent = False
+
+    def speed(self, q, v):
+        return np.max(np.abs(np.asarray(v)[..., 0]), axis=-1)
 
     def sigma(self, q):
         return np.asarray(q, dtype=float)[..., 0, :1]

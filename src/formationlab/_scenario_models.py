@@ -23,6 +23,7 @@ __all__ = [
     "ControllerModel",
     "FormationModel",
     "Lattice",
+    "MarchingModel",
     "RobotsModel",
     "ScenarioModel",
     "SimulationModel",
@@ -165,11 +166,17 @@ def _edge_rule(v: dict[str, Any]) -> dict[str, int | float]:
 
 
 class RobotsModel(BaseModel):
-    """``[robots]``: initial positions (a list, or around the template) and diameters."""
+    """``[robots]``: initial positions (a list, or around the template), diameters, the robot
+    model and its keys.
 
-    model_config = _STRICT
+    Keys other than these are kept as given and checked against the chosen
+    model's parameters and initial keys by :mod:`formationlab._scenario_robots`.
+    """
+
+    model_config = ConfigDict(strict=True, extra="allow", allow_inf_nan=False, frozen=True)
     positions: list[list[float]] | StartAround
     diameters: float | list[float] = 0.2
+    model: str = "single-integrator"
 
     @field_validator("positions", mode="before")
     @classmethod
@@ -275,6 +282,28 @@ class SimulationModel(BaseModel):
         return _finite(v, "duration")
 
 
+class MarchingModel(BaseModel):
+    """``[marching]``: a reference velocity, a leader, or motion parameters."""
+
+    model_config = _STRICT
+    velocity: list[float]
+    leader: int | None = Field(default=None, ge=1)
+    kind: Literal["reference", "motion-parameters"] = "reference"
+    angular_velocity: float | None = None
+
+    @field_validator("velocity", mode="before")
+    @classmethod
+    def _velocity(cls, v: Any) -> list[float]:
+        if not isinstance(v, list) or len(v) != 2:
+            raise ValueError(f"velocity must be a pair [vx, vy] in m/s, got {v!r}")
+        return [_finite(x, "velocity") for x in v]
+
+    @field_validator("angular_velocity", mode="before")
+    @classmethod
+    def _angular(cls, v: Any) -> float | None:
+        return None if v is None else _finite(v, "angular_velocity")
+
+
 class ScenarioModel(BaseModel):
     """The whole file. ``[study]`` and ``[equilibria]`` are passed through unvalidated."""
 
@@ -285,6 +314,7 @@ class ScenarioModel(BaseModel):
     formation: FormationModel = FormationModel()
     controller: ControllerModel = ControllerModel()
     simulation: SimulationModel
+    marching: MarchingModel | None = None
     study: dict[str, Any] | None = None
     equilibria: dict[str, Any] | None = None
 
@@ -296,4 +326,5 @@ SECTIONS: dict[str, tuple[str, ...]] = {
     "formation": tuple(FormationModel.model_fields),
     "controller": tuple(ControllerModel.model_fields),
     "simulation": tuple(SimulationModel.model_fields),
+    "marching": tuple(MarchingModel.model_fields),
 }

@@ -96,15 +96,20 @@ class BatchResult:
         tolerances: Tolerances | None = None,
         q_window: NDArray[np.float64] | None = None,
         window_step: int = 0,
+        q: NDArray[np.float64] | None = None,
+        u: NDArray[np.float64] | None = None,
     ) -> BatchResult:
         """Classify final states ``x`` / velocities ``v`` ``(B, n, k)`` (positions first).
 
         ``q_window`` ``(B, n, 2)`` holds the positions at step ``window_step`` (NaN for
         trials that had ended by then, and for all when ``window_step < 0``: a run
         shorter than the drift window); without it no trial counts as moving rigidly.
+        ``q``, ``u`` ``(B, n, 2)``: the law's points and their velocities, when the
+        robot model's differ from the positions (near-identity hand points).
         """
         tol = tolerances or Tolerances()
-        q, u = x[..., :2], v[..., :2]
+        q = x[..., :2] if q is None else q
+        u = v[..., :2] if u is None else u
         contact = np.isin(status, [s.code for s in Status if s.contact])
         if q_window is None:
             motion = RigidMotion.unknown((len(q),))

@@ -3,7 +3,11 @@
 :class:`System` is what every integrator steps. Its state ``x`` has shape
 ``(..., n, k)`` with the robot model's ``k`` numbers per robot, positions
 first (:mod:`formationlab.models.base`); for the paper's single integrators
-``x`` is the positions ``q`` themselves. The law sees ``model.points(x)``.
+``x`` is the positions ``q`` themselves. The law sees ``model.points(x)``; a
+:mod:`~formationlab.marching` term, if any, adds to the law's control
+(:meth:`System.command`) before the model turns it into motion. The field may
+depend on the time through the marching reference only: ``rhs(x, t)`` takes
+``t`` (default 0) and the schemes pass each stage's time.
 
 :meth:`System.step_verdict` is the contact rule of the package, used by the
 stepping driver, the settling of equilibria and (in compiled form) the batch
@@ -23,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .controllers import Law
+from .marching import March
 from .models import RobotModel, SingleIntegrator
 from .spec import DENSE_LIMIT, Formation
 from .status import Status
@@ -34,22 +39,50 @@ __all__ = ["System"]
 class System:
     """A closed loop: a formation, a law and a robot model.
 
-    ``rhs(x)`` is the vector field the integrators step; ``rhs_with(x, w)`` the
-    same with the law's steps replaced by Filippov weights ``w`` (shape of
-    ``law.switching``); ``sigma(x)`` the switching functions.
+    ``rhs(x, t)`` is the vector field the integrators step; ``rhs_with(x, w, t)``
+    the same with the law's steps replaced by Filippov weights ``w`` (shape of
+    ``law.switching``); ``sigma(x)`` the switching functions. ``marching``
+    (:class:`~formationlab.marching.Marching` or
+    :class:`~formationlab.marching.MotionParameters`) adds to the law's control.
     """
 
     formation: Formation
     law: Law
     model: RobotModel = field(default_factory=SingleIntegrator)
+    marching: March | None = None
 
-    def rhs(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
-        u = self.law.control(self.formation, self.model.points(x))
+    def __post_init__(self) -> None:
+        if self.marching is not None:
+            self.marching.check(self.formation)
+
+    @property
+    def time_dependent(self) -> bool:
+        """Whether the field depends on the time (a marching reference that is a function)."""
+        return self.marching is not None and self.marching.time_dependent
+
+    def command(
+        self, p: NDArray[np.float64], u: NDArray[np.float64], t: float = 0.0
+    ) -> NDArray[np.float64]:
+        """The command ``(..., n, 2)``: the law's control ``u`` at points ``p``, with marching."""
+        if self.marching is None:
+            return u
+        return self.marching.command(self.formation, p, u, t, self.model.velocity_gain)
+
+    def rhs(self, x: NDArray[np.float64], t: float = 0.0) -> NDArray[np.float64]:
+        p = self.model.points(x)
+        u = self.command(p, self.law.control(self.formation, p), t)
         return self.model.derivative(x, u)
 
-    def rhs_with(self, x: NDArray[np.float64], weights: NDArray[np.float64]) -> NDArray[np.float64]:
-        u = self.law.control_with(self.formation, self.model.points(x), weights)
+    def rhs_with(
+        self, x: NDArray[np.float64], weights: NDArray[np.float64], t: float = 0.0
+    ) -> NDArray[np.float64]:
+        p = self.model.points(x)
+        u = self.command(p, self.law.control_with(self.formation, p, weights), t)
         return self.model.derivative(x, u)
+
+    def speed(self, x: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Largest robot speed (:meth:`RobotModel.speed`) of states and rates ``(..., n, k)``."""
+        return np.max(self.model.speed(x, v), axis=-1)
 
     def sigma(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         return self.law.switching(self.formation, self.model.points(x))
@@ -159,6 +192,12 @@ class System:
         self, x0: NDArray[np.float64], x1: NDArray[np.float64], status: Status, t: float, dt: float
     ) -> str:
         """Why the step from ``x0`` (one state ``(n, k)``) to ``x1``, ending at ``t``, failed."""
+        with np.errstate(over="ignore", invalid="ignore"):  # a huge but finite step
+            return self._step_message(x0, x1, status, t, dt)
+
+    def _step_message(
+        self, x0: NDArray[np.float64], x1: NDArray[np.float64], status: Status, t: float, dt: float
+    ) -> str:
         if status is Status.NON_FINITE:
             return (
                 f"the step to t = {t:g} s produced NaN or infinite positions; reduce dt "

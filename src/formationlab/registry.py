@@ -113,8 +113,13 @@ class Registry(Mapping[str, type[T]], Generic[T]):
         return f"Registry({self.kind!r}: {', '.join(self.names())})"
 
     def owners(self, key: str) -> tuple[str, ...]:
-        """Names of the entries that take the parameter ``key``."""
-        return tuple(n for n in self.names() if key in parameters_of(self._classes[n]))
+        """Names of the entries that take the parameter ``key`` (or have it in ``initial_keys``)."""
+        return tuple(
+            n
+            for n in self.names()
+            if key in parameters_of(self._classes[n])
+            or key in getattr(self._classes[n], "initial_keys", ())
+        )
 
     # ------------------------------------------------------------------ building
 

@@ -44,9 +44,12 @@ from ._scenario_build import (
 )
 from ._scenario_models import SECTIONS, ScenarioModel
 from ._scenario_parts import build_entry
+from ._scenario_robots import build_marching, build_robot_model
 from .controllers import LAWS, Law
 from .errors import IgnoredKeyWarning, ScenarioError, UserInputError
 from .integrators import INTEGRATORS, Integrator
+from .marching import March
+from .models import MODELS, RobotModel, SingleIntegrator
 from .spec import Formation
 from .validation import line_of, validation_error
 
@@ -76,7 +79,13 @@ class Scenario:
     duration : float
         Simulated time, seconds.
     q0 : ndarray, shape (n, 2)
-        Initial positions; robot 1 is row 0.
+        Initial positions (robot centres); robot 1 is row 0.
+    model : RobotModel
+        The robots (``[robots] model`` and its keys); single integrators by default.
+    x0 : ndarray, shape (n, k)
+        The model's initial state (positions, then headings or velocities).
+    marching : Marching or MotionParameters or None
+        ``[marching]``, if given.
     raw : dict
         The parsed TOML.
     controller : dict
@@ -103,6 +112,13 @@ class Scenario:
     study: dict[str, Any] | None = None
     equilibria: dict[str, Any] | None = None
     warnings: tuple[str, ...] = field(default=())
+    model: RobotModel = field(default_factory=SingleIntegrator)
+    x0: NDArray[np.float64] = field(default=None)  # type: ignore[arg-type]
+    marching: March | None = None
+
+    def __post_init__(self) -> None:
+        if self.x0 is None:
+            object.__setattr__(self, "x0", self.q0)
 
     @property
     def n(self) -> int:
@@ -113,6 +129,7 @@ class Scenario:
     def parameters(self) -> dict[str, Any]:
         """The law's and the integrator's parameters, JSON-ready."""
         return {
+            "model": {"name": self.model.name, **dataclasses.asdict(self.model)},
             "law": {"name": self.law.name, **dataclasses.asdict(self.law)},
             "integrator": {"name": self.integrator.name, **dataclasses.asdict(self.integrator)},
             "duration": self.duration,
@@ -243,6 +260,18 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
     q0 = initial_positions(rob, formation, fail)
     q0.setflags(write=False)  # the scenario is frozen, its arrays too
 
+    robot, initial, ignored_model = build_robot_model(
+        rob, formation.n, source=source, text=text, fail=fail, warnings=warnings
+    )
+    from .simulation import initial_state
+
+    try:
+        x0 = initial_state(formation, robot, q0, **initial)
+    except UserInputError as exc:
+        raise fail(f"robots.{exc.key or 'positions'}", str(exc)) from None
+    x0.setflags(write=False)
+    marching = build_marching(model.marching, formation, fail)
+
     study_laws = (model.study or {}).get("laws")
     used_by = [str(x) for x in study_laws] if isinstance(study_laws, list) else []
     given = dict(ctl.model_extra or {})
@@ -280,6 +309,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         fail=fail,
     )
     for table, registry, name, ignored in (
+        ("robots", MODELS, robot.name, ignored_model),
         ("controller", LAWS, law.name, ignored_law),
         ("simulation", INTEGRATORS, integrator.name, ignored_integrator),
     ):
@@ -304,4 +334,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         study=model.study,
         equilibria=model.equilibria,
         warnings=tuple(warnings),
+        model=robot,
+        x0=x0,
+        marching=marching,
     )

@@ -1,10 +1,12 @@
 """One entry point, :func:`simulate`, and the result it returns.
 
-``simulate(formation, law, q0, duration=..., integrator=...)`` integrates the
-closed loop ``q_dot = u(q)`` (eq. 1) and returns a :class:`SimulationResult`
-holding times, positions ``(T, n, 2)``, controls ``(T, n, 2)``, the law's
-Lyapunov function ``(T,)``, which angular restrictions were active, a status
-with a message, and the integrator's diagnostics.
+``simulate(formation, law, q0, duration=..., integrator=..., model=..., marching=...)``
+integrates the closed loop (``q_dot = u(q)``, eq. 1, for the paper's single
+integrators; any robot model of :mod:`formationlab.models`) and returns a
+:class:`SimulationResult` holding times, the full states ``(T, n, k)`` and the
+positions ``(T, n, 2)``, velocities, the law's Lyapunov function ``(T,)``, which
+angular restrictions were active, a status with a message, and the integrator's
+diagnostics.
 """
 
 from __future__ import annotations
@@ -30,9 +32,11 @@ from .analysis import (
 )
 from .controllers import LAWS, Law
 from .dynamics import System
-from .errors import ParameterError
+from .errors import FormationError, ParameterError
 from .integrators import INTEGRATORS, Euler, Integrator
 from .integrators.compiled import compiled_terms, run_euler_compiled
+from .marching import March, centroid_velocity, heading_spread
+from .models import MODELS, RobotModel, SingleIntegrator
 from .registry import resolve
 from .rigid_motion import RigidMotion
 from .spec import Formation
@@ -53,12 +57,20 @@ class SimulationResult:
     t : ndarray, shape (T,)
         Saved times, seconds.
     q : ndarray, shape (T, n, 2)
-        Positions at those times.
+        Positions (robot centres) at those times.
     u : ndarray, shape (T, n, 2)
-        The velocity each saved state was left with: the step the integrator
-        took (for ``implicit-euler`` and ``filippov`` on a switching surface, the
-        sliding motion, not the field of one side); equal to the control of the
-        law for single integrators away from the surfaces.
+        The velocity of the positions each saved state was left with: the step
+        the integrator took (for ``implicit-euler`` and ``filippov`` on a
+        switching surface, the sliding motion, not the field of one side); equal
+        to the control of the law for single integrators away from the surfaces.
+    x : ndarray, shape (T, n, k)
+        The full states, positions first (``model.state_names``); ``q`` for single integrators.
+    xdot : ndarray, shape (T, n, k)
+        The rate of the full state each saved state was left with (``u`` is its positions).
+    model : RobotModel
+        The robots' motion model.
+    marching : Marching or MotionParameters or None
+        How the formation was made to march, if it was.
     V : ndarray, shape (T,)
         The law's Lyapunov function: eq. (9) for the distance law, eq. (15) for
         the angle-restricted law.
@@ -86,6 +98,64 @@ class SimulationResult:
     status: Status
     message: str
     stats: dict[str, Any] = field(default_factory=dict)
+    x: NDArray[np.float64] = field(default=None)  # type: ignore[arg-type]
+    xdot: NDArray[np.float64] = field(default=None)  # type: ignore[arg-type]
+    model: RobotModel = field(default_factory=SingleIntegrator)
+    marching: March | None = None
+
+    def __post_init__(self) -> None:
+        if self.x is None:
+            object.__setattr__(self, "x", self.q)
+        if self.xdot is None:
+            object.__setattr__(self, "xdot", self.u)
+
+    @cached_property
+    def points(self) -> NDArray[np.float64]:
+        """Where the law acts, ``(T, n, 2)``: the hand points of near-identity unicycles.
+
+        The formation's distances and orientation apply to them: the outcome,
+        the distance errors and the net speed are measured on them.
+        """
+        return self.model.points(self.x)
+
+    @cached_property
+    def point_velocity(self) -> NDArray[np.float64]:
+        """Velocities of :attr:`points`, ``(T, n, 2)`` (``u`` unless the points differ)."""
+        return self.model.point_rates(self.x, self.xdot)
+
+    @cached_property
+    def _shape_frame(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The points and their velocities; with marching, relative to their centroid.
+
+        A marching formation never stops: whether it has settled (the outcome, the
+        convergence time, the net speed) is judged in the frame that moves with it.
+        """
+        p, w = self.points, self.point_velocity
+        if self.marching is None:
+            return p, w
+        return p - p.mean(axis=-2, keepdims=True), w - w.mean(axis=-2, keepdims=True)
+
+    @property
+    def headings(self) -> NDArray[np.float64] | None:
+        """Headings ``(T, n)`` in radians, for models that have them (else None)."""
+        names = type(self.model).state_names
+        return self.x[..., names.index("theta")] if "theta" in names else None
+
+    @cached_property
+    def shape_error(self) -> NDArray[np.float64]:
+        """``max_ij |r_ij - d_ij|`` over the edges, ``(T,)``, at the law's points."""
+        err = distance_errors(self.formation, self.points)
+        return np.max(np.abs(err), axis=-1)
+
+    def centroid_velocity(self) -> NDArray[np.float64]:
+        """Velocity of the centroid of the law's points, ``(T, 2)`` (central differences)."""
+        return centroid_velocity(self.t, self.points)
+
+    @property
+    def heading_spread(self) -> NDArray[np.float64] | None:
+        """Largest angle between a heading and their circular mean, ``(T,)`` (unicycles)."""
+        h = self.headings
+        return None if h is None else heading_spread(h)
 
     @property
     def active(self) -> NDArray[np.bool_]:
@@ -109,8 +179,8 @@ class SimulationResult:
 
     @cached_property
     def distance_errors(self) -> NDArray[np.float64]:
-        """``r_ij - d_ij`` per edge over time, shape ``(T, m)``."""
-        return distance_errors(self.formation, self.q)
+        """``r_ij - d_ij`` per edge over time (at the law's points), shape ``(T, m)``."""
+        return distance_errors(self.formation, self.points)
 
     @property
     def edge_labels(self) -> list[str]:
@@ -125,7 +195,7 @@ class SimulationResult:
         least ``window``; None when the saved run is shorter than ``window``.
         """
         tol = tolerances or Tolerances()
-        v = float(net_speed(self.t, self.q, tol.window)[-1])
+        v = float(net_speed(self.t, self._shape_frame[0], tol.window)[-1])
         return v if np.isfinite(v) else None
 
     def motion(self, tolerances: Tolerances | None = None) -> RigidMotion:
@@ -133,17 +203,20 @@ class SimulationResult:
         return final_motion(self.t, self.q, tolerances)
 
     def outcome(self, tolerances: Tolerances | None = None) -> Outcome:
-        """Outcome of the final state (see :mod:`formationlab.analysis`).
+        """Outcome of the final state (see :mod:`formationlab.analysis`), at the law's points.
+
+        With marching, the state is judged in the frame of the points' centroid.
 
         The robots count as stopped when the final ``max_i |u_i|`` or the net speed over
         the last ``window`` seconds (:meth:`net_speed`) is at most ``tolerances.speed``;
         a moving formation that kept its shape over the last ``drift_window`` seconds
         (:meth:`motion`) is ``drifting`` or ``rotating``.
         """
+        p, w = self._shape_frame
         return classify(
             self.formation,
-            self.q[-1],
-            self.u[-1],
+            p[-1],
+            w[-1],
             tolerances,
             contact=Status(self.status).contact,
             net_speed=self.net_speed(tolerances),
@@ -153,19 +226,26 @@ class SimulationResult:
     def converged_time(self, tolerances: Tolerances | None = None) -> float | None:
         """First saved time after which the robots stay stopped (instantaneous or net speed)."""
         tol = tolerances or Tolerances()
-        return converged_time(self.t, self.u, tol.speed, q=self.q, window=tol.window)
+        p, w = self._shape_frame
+        return converged_time(self.t, w, tol.speed, q=p, window=tol.window)
 
     def summary(self, tolerances: Tolerances | None = None) -> dict[str, Any]:
         """A JSON-ready summary of the run (the ``summary.json`` of ``run`` and ``paper``).
 
-        Keys: ``outcome``, ``status``, ``message``, ``final_positions`` (``[[x, y], ...]``,
+        Keys: ``model`` (name and parameters), ``state_names``, ``outcome``, ``status``,
+        ``message``, ``final_positions`` (``[[x, y], ...]``,
         robot 1 first), ``distance_errors`` (final ``r_ij - d_ij`` keyed by edge label
         ``"i-j"``, 1-based), ``max_distance_error``, ``converged_time`` (or None),
         ``final_time``, ``orientation`` (``"ccw"``/``"cw"`` of robots 1, 2, 3),
         ``active_restrictions_final`` (labels), ``diagnostics`` (integrator statistics),
-        ``tolerances`` and, for a ``drifting`` or ``rotating`` outcome, ``rigid_motion``:
+        ``tolerances``; for a ``drifting`` or ``rotating`` outcome ``rigid_motion``:
         ``velocity`` (of the centroid, ``[vx, vy]``), ``speed``, ``angular_velocity``,
-        ``centre`` (of the rotation; None for a drift), ``shape_rate`` and ``window``.
+        ``centre`` (of the rotation; None for a drift), ``shape_rate`` and ``window``;
+        for models with more state ``final_state`` (rows of ``state_names``), for
+        unicycles ``final_headings`` and ``heading_spread`` (radians), and with
+        marching ``marching`` (final shape error, centroid velocity, its error against
+        the reference); with marching ``final_speed``, ``converged_time`` and
+        ``net_speed`` are measured relative to the centroid.
         """
         from .analysis import triangle_orientation
 
@@ -176,7 +256,19 @@ class SimulationResult:
         active = [
             lab for lab, on in zip(self.restriction_labels, self.active[-1], strict=True) if on
         ]
+        extra: dict[str, Any] = {}
+        if self.headings is not None:
+            extra["final_headings"] = self.headings[-1].tolist()
+            extra["heading_spread"] = float(self.heading_spread[-1])  # type: ignore[index]
+        if type(self.model).state_size() > 2:
+            extra["final_state"] = self.x[-1].tolist()
+        if self.points is not self.q and not np.array_equal(self.points, self.q):
+            extra["final_points"] = self.points[-1].tolist()
+        if self.marching is not None and len(self.t) > 2:
+            extra["marching"] = self._marching_summary()
         return {
+            "model": {"name": self.model.name, **dataclasses.asdict(self.model)},
+            "state_names": list(type(self.model).state_names),
             "outcome": outcome,
             "status": self.status,
             "message": self.message,
@@ -185,14 +277,33 @@ class SimulationResult:
             "distance_errors": dict(zip(self.edge_labels, err.tolist(), strict=True)),
             "max_distance_error": float(np.max(np.abs(err))),
             "converged_time": self.converged_time(tol),
-            "final_speed": float(np.max(np.linalg.norm(self.u[-1], axis=-1))),
+            "final_speed": float(np.max(np.linalg.norm(self._shape_frame[1][-1], axis=-1))),
             "net_speed": self.net_speed(tol),
-            "orientation": triangle_orientation(self.q[-1]) if self.formation.n >= 3 else None,
+            "orientation": (
+                triangle_orientation(self.points[-1]) if self.formation.n >= 3 else None
+            ),
             "active_restrictions_final": active,
             "diagnostics": dict(self.stats),
             "tolerances": dataclasses.asdict(tol),
             **({"rigid_motion": _motion_dict(self.motion(tol), outcome)} if moving else {}),
+            **extra,
         }
+
+    def _marching_summary(self) -> dict[str, Any]:
+        """Final shape error and centroid velocity (against the reference, when there is one)."""
+        from .marching import Marching
+
+        vc = self.centroid_velocity()[-1]
+        out: dict[str, Any] = {
+            "shape_error_final": float(self.shape_error[-1]),
+            "centroid_velocity_final": vc.tolist(),
+        }
+        if isinstance(self.marching, Marching):
+            ref = self.marching.reference(float(self.t[-1]))
+            out["reference_velocity_final"] = ref.tolist()
+            out["centroid_velocity_error_final"] = float(np.linalg.norm(vc - ref))
+            out["leader"] = self.marching.leader
+        return out
 
     def plot(self, kind: str = "trajectories", ax: Any = None, **kwargs: Any) -> Any:
         """Plot the run: ``"trajectories"``, ``"controls"``, ``"lyapunov"`` or ``"errors"``.
@@ -223,12 +334,15 @@ def simulate(
     *,
     duration: float,
     integrator: Integrator | str | None = None,
+    model: RobotModel | str | None = None,
+    marching: March | None = None,
     save_every: int = 1,
     progress: Callable[[float], None] | None = None,
     interruptible: bool = False,
     backend: Literal["auto", "numpy", "numba"] = "auto",
+    **initial: Any,
 ) -> SimulationResult:
-    """Simulate ``q_dot_i = u_i`` (eq. 1) under ``law`` from ``q0``.
+    """Simulate ``law`` on ``formation`` from ``q0`` (``q_dot_i = u_i``, eq. 1, by default).
 
     Parameters
     ----------
@@ -237,12 +351,18 @@ def simulate(
     law : Law or str
         The control law, e.g. :class:`~formationlab.AngleRestrictedLaw`, or its name
         (``"distance"``: built with its defaults).
-    q0 : array_like, shape (n, 2)
-        Initial positions; validated (finite, no overlapping robots).
+    q0 : array_like, shape (n, 2) or (n, k)
+        Initial positions (robot centres), validated (finite, no overlapping
+        robots); or the model's full initial state (``k = model.state_size()``).
     duration : float
         Simulated time, seconds.
     integrator : Integrator or str, optional
         Default ``Euler(dt=1e-3)``; a name (``"rk4"``) gets the integrator's defaults.
+    model : RobotModel or str, optional
+        The robots (:mod:`formationlab.models`): default the paper's single
+        integrators; a name (``"unicycle"``) gets the model's defaults.
+    marching : Marching or MotionParameters, optional
+        Make the formation march (:mod:`formationlab.marching`).
     save_every : int
         Keep every K-th step (thins what is stored, not what is computed).
     progress : callable, optional
@@ -256,6 +376,9 @@ def simulate(
         arrays); ``"numpy"``: the integrator's own ``run`` (the stepping driver);
         ``"auto"`` (default) takes the compiled path wherever it applies. The two agree
         to rounding (tested).
+    **initial
+        The model's extra initial state when ``q0`` holds positions only:
+        ``headings`` (unicycle, radians), ``velocities`` (double integrator).
 
     Returns
     -------
@@ -269,38 +392,43 @@ def simulate(
     ...                   duration=10.0)
     >>> res.outcome()
     'desired'
+    >>> uni = fl.simulate(f, "distance", [[-3, -3], [3, -3], [0, 3]], duration=10.0,
+    ...                   model="unicycle", headings=[0.0, 1.5, 3.0])
+    >>> uni.x.shape[-1], uni.outcome()
+    (3, 'desired')
     """
-    q0 = formation.check_positions(q0)
-    if q0.ndim != 2:
-        raise ParameterError(f"simulate takes one initial state of shape (n, 2), got {q0.shape}")
     save_every = whole(save_every, "save_every")
     law, integrator = resolve(LAWS, law), resolve(INTEGRATORS, integrator or Euler(dt=1e-3))
-    system = System(formation=formation, law=law)
+    robot = resolve(MODELS, model or SingleIntegrator())
+    x0 = initial_state(formation, robot, q0, **initial)
+    system = System(formation=formation, law=law, model=robot, marching=marching)
     terms = compiled_terms(system, integrator) if backend != "numpy" else None
     if backend == "numba" and terms is None:
         raise ParameterError(
-            'backend="numba" runs explicit Euler on single integrators with a law that has '
-            f'kernel data; got {integrator.name!r} and {law.name!r}: use backend="auto"'
+            'backend="numba" runs explicit Euler on single integrators without marching, '
+            f"with a law that has kernel data; got {integrator.name!r}, {robot.name!r} and "
+            f'{law.name!r}: use backend="auto"'
         )
     if terms is not None:
         raw = run_euler_compiled(
-            terms, system, q0, dt=integrator.dt, duration=float(duration),  # type: ignore[attr-defined]
+            terms, system, x0, dt=integrator.dt, duration=float(duration),  # type: ignore[attr-defined]
             save_every=int(save_every), progress=progress, interruptible=interruptible,
         )  # fmt: skip
     else:
         raw = integrator.run(
-            system, q0, float(duration), save_every=int(save_every), progress=progress,
+            system, x0, float(duration), save_every=int(save_every), progress=progress,
             interruptible=interruptible,
         )  # fmt: skip
-    points = system.model.points(raw.x)
+    points = robot.points(raw.x)
     status, message = raw.status, raw.message
     try:
-        V, sigma = law.potential(formation, points), law.switching(formation, points)
+        with np.errstate(over="ignore", invalid="ignore"):  # a diverged run: V is inf
+            V, sigma = law.potential(formation, points), law.switching(formation, points)
     except KeyboardInterrupt:  # while reading the run: keep the states, not V and sigma
         if not interruptible:
             raise
         V = np.full(len(raw.t), np.nan)
-        sigma = np.full((len(raw.t), len(formation.surfaces[0])), np.nan)
+        sigma = np.full((len(raw.t), law.switching(formation, points[:1]).shape[-1]), np.nan)
         status = Status.INTERRUPTED
         message = f"interrupted by the user at t = {raw.t[-1]:g} s"
     return SimulationResult(
@@ -311,8 +439,52 @@ def simulate(
         q=raw.q,
         u=raw.v[..., :2],
         V=V,
-        sigma=sigma if law.switching(formation, points[:1]).shape[-1] else sigma[..., :0],
+        sigma=sigma,
         status=status,
         message=message,
         stats=dict(raw.stats),
+        x=raw.x,
+        xdot=raw.v,
+        model=robot,
+        marching=marching,
     )
+
+
+def initial_state(
+    formation: Formation, model: RobotModel, q0: ArrayLike, **initial: Any
+) -> NDArray[np.float64]:
+    """The validated initial state ``(..., n, k)`` of ``model`` from positions or a full state.
+
+    ``q0`` ``(..., n, 2)`` gets the model's extra state from ``initial``
+    (:meth:`RobotModel.initial_state`); ``(..., n, k)`` is taken as it is. The
+    centres must be clear of contact, and so must the law's points where they
+    differ (near-identity hand points: the law's barrier acts on them).
+    """
+    arr = np.asarray(q0, dtype=float)
+    k = model.state_size()
+    if arr.ndim >= 2 and arr.shape[-1] == k and k > 2:
+        if initial:
+            raise ParameterError(
+                f"q0 is already a full {model.name} state (..., n, {k}); do not also give "
+                + ", ".join(sorted(initial))
+            )
+        if not np.all(np.isfinite(arr)):
+            raise FormationError("the initial state holds NaN or infinite numbers")
+        x0 = arr.copy()
+        formation.check_positions(x0[..., :2])
+    else:
+        q = formation.check_positions(arr)
+        x0 = model.initial_state(q, **initial)
+    if x0.ndim != 2:
+        raise ParameterError(f"simulate takes one initial state of shape (n, k), got {x0.shape}")
+    points = model.points(x0)
+    if not np.array_equal(points, x0[..., :2]):
+        try:
+            formation.check_positions(points, what="initial hand points")
+        except FormationError as exc:
+            raise FormationError(
+                f"{exc} (the law acts on points ahead of the centres: turn the robots or "
+                "use a smaller offset)",
+                key="headings",
+            ) from None
+    return x0

@@ -51,11 +51,17 @@ def write_animation(
     if hasattr(result_or_ds, "formation"):
         r = result_or_ds
         t, q, edges, diam = r.t, r.q, r.formation.edges, r.formation.diameters
+        headings, points = r.headings, (None if r.points is r.q else r.points)
     else:
         ds = result_or_ds
         t, q = ds["time"].values, ds["q"].values
         edges, diam = ds["edge_robots"].values - 1, ds["diameter"].values
-    anim = animate_run(t, q, edges=edges, diameters=diam, max_frames=frames, title=title)
+        headings = ds["theta"].values if "theta" in ds else None
+        points = ds["point"].values if "point" in ds else None
+    anim = animate_run(
+        t, q, edges=edges, diameters=diam, max_frames=frames, title=title,
+        headings=headings, points=points,
+    )  # fmt: skip
     return save_animation(anim, folder / ANIMATION_STEM, formats=formats, written=done)
 
 

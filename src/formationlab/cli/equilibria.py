@@ -91,6 +91,13 @@ def equilibria(
     sc = load_scenario(scenario)
     for w in sc.warnings:
         warn(w if w.startswith(sc.source) else f"{sc.source}: {w}")
+    if sc.model.name != "single-integrator" or sc.marching is not None:
+        warn(
+            f"{sc.source}: equilibria covers single integrators only: it finds and classifies "
+            f"the zeros of the law (u = 0), which the {sc.model.name} robots share at their "
+            "points, but their stability is that of single integrators; [robots] model "
+            "and [marching] are not used"
+        )
     config = parse_equilibria(
         sc,
         starts=starts,

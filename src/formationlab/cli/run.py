@@ -253,9 +253,11 @@ def _simulate(simulate: Any, sc: Any, save_every: int, quiet: bool) -> Any:
         "integrator": sc.integrator,
         "save_every": save_every,
         "interruptible": True,  # Ctrl-C: keep the states so far (status "interrupted")
+        "model": sc.model,
+        "marching": sc.marching,
     }
     if not show:
-        return simulate(sc.formation, sc.law, sc.q0, **kwargs)
+        return simulate(sc.formation, sc.law, sc.x0, **kwargs)
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
     columns = (
@@ -269,7 +271,7 @@ def _simulate(simulate: Any, sc: Any, save_every: int, quiet: bool) -> Any:
         return simulate(
             sc.formation,
             sc.law,
-            sc.q0,
+            sc.x0,
             progress=lambda t: bar.update(task, completed=t),
             **kwargs,
         )
@@ -316,8 +318,9 @@ def validate(
         typer.echo(
             f"ok: {path}: {sc.name!r}, {_count(f.n, 'robot')}, {_count(len(f.edges), 'edge')} "
             f"({rigid}), "
-            f"orientation {f.orientation}, law {sc.law.name}, integrator "
+            f"orientation {f.orientation}, model {sc.model.name}, law {sc.law.name}, integrator "
             f"{json.dumps(sc.parameters['integrator'])}, duration {sc.duration:g} s"
+            + (f", marching ({type(sc.marching).__name__})" if sc.marching is not None else "")
         )
         plan = _plan(sc, 1)
         if plan is not None:

@@ -113,19 +113,28 @@ class FixedStepIntegrator(Integrator):
     evaluations_per_step: ClassVar[int] = 1
 
     def advance(
-        self, system: System, x: NDArray[np.float64], dt: float, counters: dict[str, float]
+        self,
+        system: System,
+        x: NDArray[np.float64],
+        dt: float,
+        counters: dict[str, float],
+        t: float = 0.0,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """One step of length ``dt`` from each state of ``x`` ``(..., n, k)``.
+        """One step of length ``dt`` from each state of ``x`` ``(..., n, k)`` at time ``t``.
 
         Returns the next states and the velocity each step followed, both of the
-        shape of ``x``. A scheme may add its own counts to ``counters``
+        shape of ``x``. ``t`` is for a field that depends on time
+        (``System.rhs(x, t)``: a marching reference). A scheme may add its own counts to
+        ``counters``
         (``extra_rhs_evaluations`` is added to ``rhs_evaluations``).
         """
         raise NotImplementedError
 
-    def step(self, system: System, x: NDArray[np.float64], dt: float) -> NDArray[np.float64]:
-        """The state after one step of ``dt`` from ``x`` (shape ``(..., n, k)``)."""
-        return self.advance(system, np.asarray(x, dtype=float), dt, {})[0]
+    def step(
+        self, system: System, x: NDArray[np.float64], dt: float, t: float = 0.0
+    ) -> NDArray[np.float64]:
+        """The state after one step of ``dt`` from ``x`` (shape ``(..., n, k)``) at time ``t``."""
+        return self.advance(system, np.asarray(x, dtype=float), dt, {}, t)[0]
 
     def run(
         self,

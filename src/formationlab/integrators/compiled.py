@@ -374,13 +374,15 @@ def _run(
 def compiled_terms(system: System, integrator: object) -> KernelTerms | None:
     """The law's kernel data when ``system`` under ``integrator`` can run compiled, else None.
 
-    Explicit Euler (exactly, not a subclass) on single integrators with a law
-    whose ``kernel_terms`` describe its control.
+    Explicit Euler (exactly, not a subclass) on single integrators without
+    marching, with a law whose ``kernel_terms`` describe its control.
     """
     from ..models import SingleIntegrator
     from .explicit import Euler
 
     if type(integrator) is not Euler or type(system.model) is not SingleIntegrator:
+        return None
+    if getattr(system, "marching", None) is not None:
         return None
     try:
         return system.law.compiled_terms(system.formation)

@@ -5,12 +5,14 @@ first, then what the robot model adds) with any fixed-step scheme
 (:class:`~formationlab.integrators.base.FixedStepIntegrator`), each trial on
 its own:
 
-* at step ``k`` the scheme gives the next state ``x_{k+1}`` and the velocity
+* at step ``k`` (time ``t_k = k dt``, passed to the scheme for a field that
+  depends on time) the scheme gives the next state ``x_{k+1}`` and the velocity
   ``v_k`` it followed (``x_{k+1} = x_k + dt v_k`` for explicit Euler; the
   Filippov velocity of a sliding step for implicit Euler);
 * **stopped** (only with a :class:`StopRule`): at a check, a step ``k`` with
   ``k % check_every == 0`` (or the last step), the instantaneous speed
-  ``max_i |v_i|`` of the positions or the net speed since the previous check,
+  ``max_i`` of the robot model's speed (:meth:`RobotModel.speed`; ``|v_i|`` of
+  the positions for single integrators) or the net speed since the previous check,
   ``max_i |q_i(k) - q_i(k')| / ((k - k') dt)``, is at most ``speed``: the trial
   ends at ``x_k`` with :attr:`Status.CONVERGED`. The net speed recognises a
   trial at rest on a switching surface across which explicit Euler chatters;
@@ -200,15 +202,16 @@ def drive(
     try:
         for k in range(n_steps + 1):
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-                x_new, v = stepper.advance(system, x, dt, counters)  # judged by step_verdict
+                x_new, v = stepper.advance(
+                    system, x, dt, counters, k * dt
+                )  # judged by step_verdict
             evaluations += live.size
             if k == window_step:
                 q_window[live] = x[..., :2]
             ending = np.zeros(live.size, dtype=bool)
             if stop is not None and (k % stop.check_every == 0 or k == n_steps):
                 q = x[..., :2]
-                speed = np.sqrt(np.max(np.sum(v[..., :2] ** 2, axis=-1), axis=-1))
-                still = speed <= stop.speed
+                still = system.speed(x, v) <= stop.speed
                 if kc >= 0:
                     d = q - xc
                     net[live] = np.sqrt(np.max(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1], -1))
@@ -252,7 +255,7 @@ def drive(
             raise
         ids = live
         if ids.size:
-            v_now = system.rhs(x)
+            v_now = system.rhs(x, now * dt)
             x_out[ids], v_out[ids], status[ids] = x, v_now, Status.INTERRUPTED.code
             steps[ids] = now
             if save_every is not None and (not saved or saved[-1][0] != now):

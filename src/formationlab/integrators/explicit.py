@@ -26,9 +26,14 @@ class Euler(FixedStepIntegrator):
     name = "euler"
 
     def advance(
-        self, system: System, x: NDArray[np.float64], dt: float, counters: dict[str, float]
+        self,
+        system: System,
+        x: NDArray[np.float64],
+        dt: float,
+        counters: dict[str, float],
+        t: float = 0.0,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        v = system.rhs(x)
+        v = system.rhs(x, t)
         return x + dt * v, v
 
 
@@ -41,11 +46,16 @@ class RK4(FixedStepIntegrator):
     evaluations_per_step = 4
 
     def advance(
-        self, system: System, x: NDArray[np.float64], dt: float, counters: dict[str, float]
+        self,
+        system: System,
+        x: NDArray[np.float64],
+        dt: float,
+        counters: dict[str, float],
+        t: float = 0.0,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        k1 = system.rhs(x)
-        k2 = system.rhs(x + 0.5 * dt * k1)
-        k3 = system.rhs(x + 0.5 * dt * k2)
-        k4 = system.rhs(x + dt * k3)
+        k1 = system.rhs(x, t)
+        k2 = system.rhs(x + 0.5 * dt * k1, t + 0.5 * dt)
+        k3 = system.rhs(x + 0.5 * dt * k2, t + 0.5 * dt)
+        k4 = system.rhs(x + dt * k3, t + dt)
         total = k1 + 2 * k2 + 2 * k3 + k4
         return x + dt / 6.0 * total, total / 6.0

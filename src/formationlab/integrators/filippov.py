@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 from scipy.integrate import solve_ivp
 
 from ..dynamics import System
+from ..errors import ParameterError
 from ..status import Status
 from ..validation import check_fields, one_of
 from .base import Integrator, RawSolution, register_integrator, steps_for
@@ -227,6 +228,11 @@ class Filippov(Integrator):
         interruptible: bool = False,
     ) -> RawSolution:
         steps_for(duration, self.save_dt)  # validates duration
+        if system.time_dependent:
+            raise ParameterError(
+                "filippov steps a field that does not depend on time: give the marching "
+                "reference as a constant velocity, or use a fixed-step integrator"
+            )
         start_clock = time.perf_counter()
         q0 = np.array(q0, dtype=float)
         shape = q0.shape

@@ -96,7 +96,12 @@ class ImplicitEuler(FixedStepIntegrator):
         check_fields(self, positive=("tol",), whole=("max_surfaces",))
 
     def advance(
-        self, system: System, x: NDArray[np.float64], dt: float, counters: dict[str, float]
+        self,
+        system: System,
+        x: NDArray[np.float64],
+        dt: float,
+        counters: dict[str, float],
+        t: float = 0.0,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """One step of each state of ``x`` (``(n, k)`` or a batch ``(..., n, k)``).
 
@@ -107,7 +112,7 @@ class ImplicitEuler(FixedStepIntegrator):
         flat = q.reshape(-1, *q.shape[-2:])
         sigma0 = system.sigma(flat)
         w0 = (sigma0 >= 0).astype(float)  # Upsilon(sigma(q)): the weights of System.rhs
-        base = system.rhs_with(flat, w0)
+        base = system.rhs_with(flat, w0, t)
         out = flat + dt * base
         bad = self._inconsistent(sigma0, system.sigma(out))
         rows = np.flatnonzero(np.any(bad, axis=-1))
@@ -125,7 +130,7 @@ class ImplicitEuler(FixedStepIntegrator):
             for members in groups.values():
                 R = np.array(members)
                 J = np.array([involved[r] for r in members])
-                done, free, viol, ends, new = self._assign(system, flat, sigma0, base, R, J, dt)
+                done, free, viol, ends, new = self._assign(system, flat, sigma0, base, R, J, dt, t)
                 out[R[done]] = ends[done]
                 _bump(counters, "sliding_steps", int(np.sum(done & free)))
                 _bump(counters, "extra_rhs_evaluations", (1 + J.shape[1]) * R.size)
@@ -160,6 +165,7 @@ class ImplicitEuler(FixedStepIntegrator):
         rows: NDArray[np.intp],
         involved: NDArray[np.intp],
         dt: float,
+        t: float = 0.0,
     ) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
         """Weights of the ``m`` involved surfaces ``(R, m)`` of the batch members ``rows``.
 
@@ -179,7 +185,7 @@ class ImplicitEuler(FixedStepIntegrator):
             w = w0.copy()
             w[r_, involved[:, i]] = 1.0 - w0J[:, i]
             turn = (1.0 - 2.0 * w0J[:, i])[:, None, None]
-            directions.append(dt * (system.rhs_with(q[rows], w) - base[rows]) * turn)
+            directions.append(dt * (system.rhs_with(q[rows], w, t) - base[rows]) * turn)
 
         def end(x: NDArray[np.float64], sel: NDArray[np.intp] = r_) -> NDArray[np.float64]:
             """``q+`` for the weights ``x`` ``(k, m)`` of the members ``sel``."""

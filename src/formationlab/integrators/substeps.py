@@ -51,26 +51,37 @@ class Substepped(FixedStepIntegrator):
             raise ParameterError(f"Substepped.reach must be a number > 0, got {self.reach!r}")
 
     def advance(
-        self, system: System, x: NDArray[np.float64], dt: float, counters: dict[str, float]
+        self,
+        system: System,
+        x: NDArray[np.float64],
+        dt: float,
+        counters: dict[str, float],
+        t: float = 0.0,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         with np.errstate(all="ignore"):
-            pos = system.rhs(x)[..., :2]
+            pos = system.rhs(x, t)[..., :2]
             speed = np.sqrt(np.max(np.sum(pos * pos, axis=-1), axis=-1))
         need = np.clip(np.ceil(np.log2(np.maximum(speed * dt / self.reach, 1.0))), 0, 8)
         need = np.minimum(need, self.max_level).astype(int)
         out = np.empty_like(x)
         for level in np.unique(need):
             sel = need == level
-            out[sel] = self._substeps(system, x[sel], dt, 2**level, counters)
+            out[sel] = self._substeps(system, x[sel], dt, 2**level, counters, t)
         bad = system.step_verdict(x, out)[0] > 0
         if bad.any():  # near contact the field is stiff: retry in substeps
-            out[bad] = self._substeps(system, x[bad], dt, self.retry, counters)
+            out[bad] = self._substeps(system, x[bad], dt, self.retry, counters, t)
         return out, (out - x) / dt
 
     def _substeps(
-        self, system: System, x: NDArray, dt: float, count: int, counters: dict[str, float]
+        self,
+        system: System,
+        x: NDArray,
+        dt: float,
+        count: int,
+        counters: dict[str, float],
+        t: float,
     ) -> NDArray:
         with np.errstate(all="ignore"):
-            for _ in range(count):
-                x = self.inner.advance(system, x, dt / count, counters)[0]
+            for s in range(count):
+                x = self.inner.advance(system, x, dt / count, counters, t + s * dt / count)[0]
         return x

@@ -5,8 +5,14 @@ Layout of the file (CF-style names, robots numbered from 1):
 ========================  ============================  ======================================
 variable                  dimensions                    meaning
 ========================  ============================  ======================================
-``q``                     ``(time, robot, axis)``       positions
-``u``                     ``(time, robot, axis)``       controls (= velocities, eq. 1)
+``q``                     ``(time, robot, axis)``       positions (robot centres)
+``u``                     ``(time, robot, axis)``       velocities of the positions (= the
+                                                        controls for single integrators, eq. 1)
+``x``                     ``(time, robot, state)``      the robot model's full state (models
+                                                        with more than positions only)
+``theta``                 ``(time, robot)``             headings, radians (unicycles)
+``point``                 ``(time, robot, axis)``       where the law acts, when not the
+                                                        centres (near-identity hand points)
 ``V``                     ``(time,)``                   the law's Lyapunov function (eq. 9/15)
 ``sigma``                 ``(time, surface)``           switching functions (angle-restricted
                                                         laws only); active where ``>= 0``
@@ -19,7 +25,8 @@ variable                  dimensions                    meaning
 Coordinates: ``time`` in seconds, ``robot`` = 1..n, ``axis`` = ``"x"``, ``"y"``,
 ``edge`` = labels ``"i-j"``, ``surface`` = labels ``"alpha_ijk"``. Global
 attributes: ``scenario`` (the scenario's TOML text), ``formationlab_version``,
-``law`` and ``integrator`` (JSON of their parameters), ``status``, ``message``.
+``law``, ``integrator`` and ``model`` (JSON of their parameters), ``status``,
+``message``. ``state`` = the model's ``state_names`` (``"x", "y", "theta"``).
 """
 
 from __future__ import annotations
@@ -75,6 +82,16 @@ def trajectory_dataset(result: Any, *, attrs: dict[str, Any] | None = None) -> A
         "edge_robots": (("edge", "end"), f.edges + 1, {"long_name": "robots i, j (1-based)"}),
         "desired_distance": (("edge",), f.distances, {"long_name": "desired distance d_ij"}),
     }
+    names = list(type(result.model).state_names)
+    if len(names) > 2:
+        coords["state"] = ("state", np.array(names))
+        data["x"] = (("time", "robot", "state"), result.x, {"long_name": "full state"})
+    if result.headings is not None:
+        data["theta"] = (("time", "robot"), result.headings, {"units": "rad"})
+    if not np.array_equal(result.points, result.q):
+        data["point"] = (
+            ("time", "robot", "axis"), result.points, {"long_name": "point the law acts on"}
+        )  # fmt: skip
     if result.sigma.shape[-1]:
         coords["surface"] = ("surface", np.array(result.restriction_labels))
         data["sigma"] = (
@@ -87,6 +104,7 @@ def trajectory_dataset(result: Any, *, attrs: dict[str, Any] | None = None) -> A
         "formationlab_version": __version__,
         "law": json.dumps(to_jsonable(_params(result.law))),
         "integrator": json.dumps(to_jsonable(_params(result.integrator))),
+        "model": json.dumps(to_jsonable(_params(result.model))),
         "status": str(result.status),
         "message": result.message,
         "Conventions": "CF-1.8",

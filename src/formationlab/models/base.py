@@ -13,7 +13,8 @@ model's parameters (validated in ``__post_init__``), set ``name``,
 ``state_names`` (which fixes ``state_size``) and ``initial_keys`` (the keys of a
 scenario's ``[robots]`` table that build the extra state), implement
 :meth:`derivative`, and where needed :meth:`points` (the points the law acts
-on, e.g. a unicycle's hand point) and :meth:`initial_state`. Register it with
+on, e.g. a unicycle's hand point), :meth:`initial_state` and :meth:`speed`
+(how fast a robot moves, for the stop rule). Register it with
 :func:`formationlab.models.register_model`. Nothing else in the package
 changes: the integrators step ``System.rhs``, contact is tested on
 :meth:`positions`, the law sees :meth:`points`.
@@ -50,6 +51,15 @@ class RobotModel:
         """The model's parameters (its dataclass fields), as scenario keys."""
         return tuple(f.name for f in fields(cls))
 
+    @property
+    def velocity_gain(self) -> float:
+        """The command that holds a robot at velocity ``v`` is ``velocity_gain * v``.
+
+        1 for models whose command is a velocity; a marching reference velocity
+        (:mod:`formationlab.marching`) is scaled by it.
+        """
+        return 1.0
+
     def positions(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Robot centres ``(..., n, 2)`` of states ``(..., n, k)`` (contact is tested on them)."""
         return x[..., :2]
@@ -58,9 +68,24 @@ class RobotModel:
         """Points the law acts on, ``(..., n, 2)``; the centres unless the model says otherwise."""
         return self.positions(x)
 
+    def point_rates(self, x: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Velocities ``(..., n, 2)`` of :meth:`points`, given states and rates ``(..., n, k)``."""
+        return v[..., :2]
+
     def derivative(self, x: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
         """``x_dot`` ``(..., n, k)`` given the law's control ``u`` ``(..., n, 2)`` at the points."""
         raise NotImplementedError
+
+    def speed(self, x: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+        """How fast each robot moves, ``(..., n)``, given states and their rates ``(..., n, k)``.
+
+        The stop rule of the driver and the kernel (a trial has stopped when every
+        robot's speed is at most ``StopRule.speed``). The centre's speed unless the
+        model says otherwise: a robot that turns on the spot or is being
+        accelerated from rest is not stopped.
+        """
+        w = v[..., :2]
+        return np.sqrt(w[..., 0] * w[..., 0] + w[..., 1] * w[..., 1])
 
     def initial_state(self, q0: ArrayLike, **initial: Any) -> NDArray[np.float64]:
         """The state ``(..., n, k)`` whose positions are ``q0`` ``(..., n, 2)``.

@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .base import RobotModel
+from .limits import check_limit, limit_speed
 from .registry import register_model
 
 __all__ = ["SingleIntegrator"]
@@ -16,9 +17,20 @@ __all__ = ["SingleIntegrator"]
 @register_model
 @dataclass(frozen=True, kw_only=True)
 class SingleIntegrator(RobotModel):
-    """``q_dot_i = u_i`` (eq. 1): the state is the positions, shape ``(..., n, 2)``."""
+    """``q_dot_i = sat(u_i)`` (eq. 1): the state is the positions, shape ``(..., n, 2)``.
+
+    Parameters
+    ----------
+    max_speed : float, optional
+        Largest speed, m/s: the command is scaled down to it, keeping its direction
+        (:func:`~formationlab.models.limits.limit_speed`). None: no limit (eq. 1 as printed).
+    """
 
     name = "single-integrator"
+    max_speed: float | None = None
+
+    def __post_init__(self) -> None:
+        check_limit(self, "max_speed")
 
     def derivative(self, x: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
-        return u  # eq. (1)
+        return limit_speed(u, self.max_speed)  # eq. (1)

@@ -51,6 +51,8 @@ def animate_run(
     title: str = "",
     size: float = 5.0,
     dpi: int = 90,
+    headings: ArrayLike | None = None,
+    points: ArrayLike | None = None,
 ) -> FuncAnimation:
     """An animation of a run.
 
@@ -76,6 +78,11 @@ def animate_run(
         Title; the time is appended.
     size, dpi : float, int
         Figure side in inches and resolution.
+    headings : array_like, shape (T, n), optional
+        Headings in radians (unicycles): a line from each centre to its rim.
+    points : array_like, shape (T, n, 2), optional
+        Where the law acts when not the centres (near-identity hand points):
+        drawn as small crosses; the graph's edges join them.
 
     Returns
     -------
@@ -107,6 +114,13 @@ def animate_run(
     ax.set_xlabel("x")
     ax.set_ylabel("y")
 
+    theta = None if headings is None else np.asarray(headings, dtype=float)
+    hand = None if points is None else np.asarray(points, dtype=float)
+    ends = hand if hand is not None else q  # what the edges join
+    noses = LineCollection(list(np.zeros((n, 2, 2))), colors="k", linewidths=1.5, zorder=5)
+    if theta is not None:
+        ax.add_collection(noses)
+    marks = ax.plot([], [], "k+", ms=6, zorder=5)[0] if hand is not None else None
     graph = LineCollection(
         list(np.zeros((len(edges), 2, 2))), colors="0.3", linewidths=1.0, zorder=2
     )
@@ -128,7 +142,18 @@ def animate_run(
     def draw(k: int) -> list[Any]:
         idx = frames[k]
         now = q[idx]
-        graph.set_segments(list(np.stack([now[edges[:, 0]], now[edges[:, 1]]], axis=1)))
+        joined = ends[idx]
+        graph.set_segments(list(np.stack([joined[edges[:, 0]], joined[edges[:, 1]]], axis=1)))
+        extra: list[Any] = []
+        if theta is not None:
+            rim = now + (diameters / 2)[:, None] * np.stack(
+                [np.cos(theta[idx]), np.sin(theta[idx])], axis=-1
+            )
+            noses.set_segments(list(np.stack([now, rim], axis=1)))
+            extra.append(noses)
+        if marks is not None and hand is not None:
+            marks.set_data(hand[idx, :, 0], hand[idx, :, 1])
+            extra.append(marks)
         since = -np.inf if trail is None else t[idx] - trail
         sel = path[(path < idx) & (t[path] >= since)]
         sel = np.append(sel, idx)
@@ -137,7 +162,7 @@ def animate_run(
             discs[i].center = (now[i, 0], now[i, 1])
             labels[i].xy = (now[i, 0], now[i, 1])
         clock.set_text(f"{title + ': ' if title else ''}t = {t[idx]:.2f} s")
-        return [graph, *trails, *discs, *labels, clock]
+        return [graph, *trails, *discs, *labels, clock, *extra]
 
     draw(0)
     return FuncAnimation(fig, draw, frames=len(frames), interval=1000 / fps, blit=False)

@@ -73,16 +73,30 @@ def plot_trajectories(
 ) -> list[Any]:
     """Robot paths in the plane: start (hollow circle), end (disc of the robot's diameter).
 
-    The graph's edges are drawn dashed at the start and solid at the end.
+    The graph's edges are drawn dashed at the start and solid at the end, between
+    the law's points (the hand points of near-identity unicycles, drawn as
+    crosses). Unicycles show their final heading as a line from the centre to the rim.
     """
     ax = _axes(ax, (5.5, 5.5))
     f = result.formation
     q = result.q
+    p = getattr(result, "points", q)
     colors = robot_colors(f.n)
     artists: list[Any] = []
     if show_graph:
-        artists.append(_draw_graph(ax, f, q[0], colors="0.6", linestyles="--", linewidths=0.8))
-        artists.append(_draw_graph(ax, f, q[-1], colors="0.2", linewidths=1.2))
+        artists.append(_draw_graph(ax, f, p[0], colors="0.6", linestyles="--", linewidths=0.8))
+        artists.append(_draw_graph(ax, f, p[-1], colors="0.2", linewidths=1.2))
+    if p is not q and not np.array_equal(p, q):
+        artists.append(ax.plot(p[-1, :, 0], p[-1, :, 1], "k+", ms=7, zorder=5)[0])
+    headings = getattr(result, "headings", None)
+    if headings is not None:
+        h = np.stack([np.cos(headings[-1]), np.sin(headings[-1])], axis=-1)
+        rim = q[-1] + (f.diameters / 2)[:, None] * h
+        artists.append(
+            ax.add_collection(
+                LineCollection(list(np.stack([q[-1], rim], axis=1)), colors="k", zorder=5)
+            )
+        )
     for i in range(f.n):
         (line,) = ax.plot(q[:, i, 0], q[:, i, 1], color=colors[i], lw=1.4, label=f"robot {i + 1}")
         artists.append(line)
@@ -94,7 +108,9 @@ def plot_trajectories(
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x")
     ax.set_ylabel("y")
-    ax.set_title(title or f"trajectories ({result.law.name} law)")
+    model = getattr(result, "model", None)
+    on = "" if model is None or model.name == "single-integrator" else f", {model.name}"
+    ax.set_title(title or f"trajectories ({result.law.name} law{on})")
     ax.legend(loc="best", fontsize="small")
     ax.autoscale_view()
     return artists

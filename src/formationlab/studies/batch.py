@@ -1,7 +1,8 @@
 """Many independent trials of one law on one formation, batched: :func:`run_batch`.
 
-``run_batch(formation, law, q0)`` steps ``B`` initial states ``q0`` of shape
-``(B, n, 2)`` with explicit Euler in float64 -- the same stepping as
+``run_batch(formation, law, q0, model=...)`` steps ``B`` initial states ``q0`` of
+shape ``(B, n, k)`` (the robot model's states, positions first; ``(B, n, 2)`` for
+the paper's single integrators) with explicit Euler in float64 -- the same stepping as
 ``formationlab.simulate(..., integrator=Euler(dt=dt))``, trial by trial -- and
 stops each trial when it has stopped moving (tested every ``check_every`` steps,
 ``round(tolerances.window / dt)`` by default: the instantaneous speed
@@ -18,7 +19,8 @@ vectorised twin).
 Two backends compute the same thing: ``"numba"`` (compiled, parallel over
 chunks of trials, for the laws ``distance``, ``angle-restricted``,
 ``squared-distance`` and ``signed-area``: those whose ``Law.kernel_terms``
-gives their data) and ``"numpy"`` (the stepping driver,
+gives their data; and the robot models ``single-integrator``, ``unicycle``
+and ``double-integrator``) and ``"numpy"`` (the stepping driver,
 :func:`formationlab.integrators.drive`, with explicit Euler and a stop rule:
 the readable specification, for any law).
 """
@@ -38,6 +40,7 @@ from ..dynamics import System
 from ..errors import FormationError, ParameterError
 from ..integrators import Euler, StopRule, drive
 from ..integrators.base import steps_for
+from ..models import RobotModel, SingleIntegrator
 from ..spec import Formation
 from ..validation import positive, whole
 
@@ -75,6 +78,7 @@ def run_batch(
     tolerances: Tolerances | None = None,
     backend: Backend = "numba",
     check_every: int | None = None,
+    model: RobotModel | None = None,
 ) -> BatchResult:
     """Simulate ``B`` trials of ``law`` on ``formation`` with explicit Euler (module docstring).
 
@@ -86,8 +90,9 @@ def run_batch(
         ``DistanceLaw``, ``AngleRestrictedLaw``, ``SquaredDistanceLaw`` or
         ``SignedAreaLaw`` (any law with ``backend="numpy"``); its parameters are
         read from the object.
-    q0 : array_like, shape (B, n, 2)
-        Initial positions; finite, no overlapping robots.
+    q0 : array_like, shape (B, n, k)
+        Initial states of ``model`` (positions first; ``k = 2`` for single
+        integrators); finite, no overlapping robots.
     dt : float
         Euler step, seconds.
     duration : float
@@ -102,40 +107,54 @@ def run_batch(
         ``max(1, round(tolerances.window / dt))`` (every 10 ms of simulated time by
         default). The net speed is measured over this interval. A trial is stopped
         at the first test it passes.
+    model : RobotModel, optional
+        The robots; default the paper's single integrators. The outcome is judged at
+        the law's points (``model.points``: near-identity hand points).
 
     Returns
     -------
     BatchResult
     """
     tol = tolerances or Tolerances()
-    q0 = _check_initial(formation, q0)
+    model = model or SingleIntegrator()
+    q0 = _check_initial(formation, q0, model.state_size())
     dt, duration = positive(dt, "dt"), positive(duration, "duration")
     n_steps = steps_for(float(duration), float(dt))
     if check_every is None:
         check_every = max(1, round(tol.window / dt))
     check_every = whole(check_every, "check_every")
     if backend == "numba":
-        return _run_numba(formation, law, q0, float(dt), n_steps, int(check_every), tol)
-    if backend != "numpy":
+        x, v, status, steps, mc, ns, qw, window_step = _run_numba(
+            formation, law, model, q0, float(dt), n_steps, int(check_every), tol
+        )
+    elif backend == "numpy":
+        out = drive(
+            System(formation=formation, law=law, model=model), Euler(dt=float(dt)), q0,
+            n_steps=n_steps, stop=StopRule(speed=tol.speed, check_every=int(check_every)),
+            window=tol.drift_steps(float(dt)),
+        )  # fmt: skip
+        x, v, status, steps, mc, ns = (
+            out.x, out.v, out.status, out.steps, out.min_clearance, out.net_speed,
+        )  # fmt: skip
+        qw, window_step = out.q_window, out.window_step
+    else:
         raise ParameterError(f'backend must be "numba" or "numpy", got {backend!r}')
-    out = drive(
-        System(formation=formation, law=law), Euler(dt=float(dt)), q0, n_steps=n_steps,
-        stop=StopRule(speed=tol.speed, check_every=int(check_every)),
-        window=tol.drift_steps(float(dt)),
-    )  # fmt: skip
+    at = {} if model.state_size() == 2 else {  # the law's points and their velocities
+        "q": model.points(x), "u": model.point_rates(x, v)
+    }  # fmt: skip
     return BatchResult.from_final(
-        formation, x=out.x, v=out.v, status=out.status, steps=out.steps,
-        min_clearance=out.min_clearance, net_speed=out.net_speed, dt=float(dt), tolerances=tol,
-        q_window=out.q_window, window_step=out.window_step,
+        formation, x=x, v=v, status=status, steps=steps, min_clearance=mc, net_speed=ns,
+        dt=float(dt), tolerances=tol, q_window=qw, window_step=window_step, **at,
     )  # fmt: skip
 
 
-def _check_initial(formation: Formation, q0: ArrayLike) -> NDArray[np.float64]:
-    """``q0`` as a C-contiguous float array ``(B, n, 2)``; finite, no overlapping robots."""
+def _check_initial(formation: Formation, q0: ArrayLike, k: int = 2) -> NDArray[np.float64]:
+    """``q0`` as a C-contiguous float array ``(B, n, k)``; finite, no overlapping robots."""
     q = np.require(np.asarray(q0, dtype=float), requirements=["C", "W"])  # one kernel signature
     n = formation.n
-    if q.ndim != 3 or q.shape[1:] != (n, 2) or q.shape[0] == 0:
-        raise FormationError(f"initial positions must have shape (B, {n}, 2), got {q.shape}")
+    if q.ndim != 3 or q.shape[1:] != (n, k) or q.shape[0] == 0:
+        what = "positions" if k == 2 else "states"
+        raise FormationError(f"initial {what} must have shape (B, {n}, {k}), got {q.shape}")
     if not np.all(np.isfinite(q)):
         raise FormationError("initial positions hold NaN or infinite numbers")
     for i, j in zip(*np.triu_indices(n, k=1), strict=True):
@@ -155,20 +174,23 @@ def _check_initial(formation: Formation, q0: ArrayLike) -> NDArray[np.float64]:
 def _run_numba(
     formation: Formation,
     law: Law,
+    model: RobotModel,
     q0: NDArray[np.float64],
     dt: float,
     n_steps: int,
     check_every: int,
     tol: Tolerances,
-) -> BatchResult:
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, int]:
     import numba
 
     from . import kernels
+    from .model_terms import model_terms
 
     terms = law.compiled_terms(formation)
-    n_trials, n, _ = q0.shape
-    q_out = np.empty((n_trials, n, 2))
-    u_out = np.empty((n_trials, n, 2))
+    robots = model_terms(model)
+    n_trials, n, k = q0.shape
+    q_out = np.empty((n_trials, n, k))
+    u_out = np.empty((n_trials, n, k))
     steps = np.zeros(n_trials, dtype=np.int64)
     status = np.zeros(n_trials, dtype=np.int8)
     mc = np.full(n_trials, np.inf)
@@ -183,15 +205,12 @@ def _run_numba(
         previous = numba.set_parallel_chunksize(1)
         try:
             kernels.run_chunks(
-                q0, chunk, terms, dt, n_steps, check_every, tol.speed,
+                q0, chunk, terms, robots, dt, n_steps, check_every, tol.speed,
                 q_out, u_out, steps, status, mc, ns, window_step, qw,
             )  # fmt: skip
         finally:
             numba.set_parallel_chunksize(previous)
-    return BatchResult.from_final(
-        formation, x=q_out, v=u_out, status=status, steps=steps, min_clearance=mc,
-        net_speed=ns, dt=dt, tolerances=tol, q_window=qw, window_step=window_step,
-    )  # fmt: skip
+    return q_out, u_out, status, steps, mc, ns, qw, window_step
 
 
 def _chunk_size(n_trials: int, threads: int) -> int:

@@ -21,11 +21,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..analysis import Tolerances
 from ..controllers import Law
+from ..models import RobotModel, SingleIntegrator
 from ..rigid_motion import RigidMotion
 from ..spec import Formation
 from .config import BoxInitial, GaussianInitial, SettleModel, StudyConfig
 from .groups import Group
-from .sampling import trial_initial_states
+from .sampling import model_initial_states, trial_initial_states
 
 __all__ = ["ChunkTask", "motion_columns", "plan_chunks", "run_chunk", "settle_trials"]
 
@@ -47,6 +48,7 @@ class ChunkTask:
     backend: Literal["numba", "numpy"]
     sweep_keys: tuple[str, ...] = ()
     settle: SettleModel = field(default_factory=SettleModel)
+    model: RobotModel = field(default_factory=SingleIntegrator)
 
     @property
     def id(self) -> str:
@@ -66,8 +68,10 @@ def plan_chunks(
     dt: float,
     duration: float,
     center: ArrayLike | None = None,
+    model: RobotModel | None = None,
 ) -> list[ChunkTask]:
     """Cut every group's ``config.trials`` trials into chunks of ``config.chunk_size``."""
+    model = model or SingleIntegrator()
     c = None if center is None else np.asarray(center, dtype=float)
     tasks = []
     n, size = config.trials, config.chunk_size
@@ -88,6 +92,7 @@ def plan_chunks(
                     backend=config.backend,
                     sweep_keys=tuple(config.sweep),
                     settle=config.settle,
+                    model=model,
                 )
             )
     return tasks
@@ -101,14 +106,16 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
     f = g.formation
     trials = np.arange(task.start, task.stop, dtype=np.int64)
     q0 = trial_initial_states(f, task.initial, task.seed, trials, center=task.center)
+    x0 = model_initial_states(f, task.model, q0, task.seed, trials)
     res = run_batch(
         f,
         g.law,
-        q0,
+        x0,
         dt=task.dt,
         duration=task.duration,
         tolerances=task.tolerances,
         backend=task.backend,
+        model=task.model,
     )
     outcome = np.asarray(res.outcome, dtype=object)
     settled, settled_outcome = settle_trials(
@@ -136,6 +143,9 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
     for i in range(f.n):
         cols[f"x{i + 1}_init"] = q0[:, i, 0]
         cols[f"y{i + 1}_init"] = q0[:, i, 1]
+    if "theta" in type(task.model).state_names:
+        for i in range(f.n):
+            cols[f"theta{i + 1}_init"] = x0[:, i, 2]
     qf = np.asarray(res.q_final, dtype=float)
     for i in range(f.n):
         cols[f"x{i + 1}"] = qf[:, i, 0]

@@ -1,10 +1,11 @@
 """Numba kernels of the batched Euler stepping (the numpy specification is the stepping driver).
 
-Layout: every chunk of trials keeps its positions as ``(n, 2, C)`` with the
-trials on the innermost, contiguous axis, so that each loop over trials is a
-plain SIMD loop. Chunks run in parallel (``prange``); inside a chunk, trials
-that stop are swapped out of the live range (compaction), so that early
-stopping saves work instead of masking it.
+Layout: every chunk of trials keeps its states as ``(n, k, C)`` (``k`` numbers
+per robot, positions first, as the robot model's state) with the trials on the
+innermost, contiguous axis, so that each loop over trials is a plain SIMD loop.
+Chunks run in parallel (``prange``); inside a chunk, trials that stop are
+swapped out of the live range (compaction), so that early stopping saves work
+instead of masking it.
 
 The law enters as a :class:`~formationlab.controllers.terms.KernelTerms`, the
 named arrays and numbers each law builds (``Law.kernel_terms``), so one
@@ -15,6 +16,14 @@ compiled kernel serves every law and formation. Each pair contributes
 :func:`formationlab.potentials.triangle_products` and
 ``beta_s c_abc + theta``, so the kernel switches exactly where the numpy law
 does; elsewhere trajectories agree with :func:`formationlab.simulate` to rounding.
+
+The robot model enters as a :class:`~formationlab.studies.model_terms.ModelTerms`
+(single integrators, unicycles through either transform, double integrators,
+each with its limits): :func:`_points` gives the points the law acts on,
+:func:`_rates` the state's rate from the law's control (``RobotModel.derivative``),
+:func:`_speed` the stop rule's speed (``RobotModel.speed``). Contact is decided
+on the centres: for near-identity unicycles, whose law acts on hand points,
+:func:`_contact` recomputes the clearances on the centres.
 
 The step rule is the one of :meth:`formationlab.dynamics.System.step_verdict`:
 a step is rejected when it is not finite, when it ends with a pair in contact
@@ -33,6 +42,7 @@ from numba import njit, prange
 
 from ..controllers.terms import LOG_BARRIER
 from ..status import Status
+from .model_terms import DOUBLE, HEADING, NEAR_IDENTITY, SINGLE
 
 __all__ = ["run_chunks"]
 
@@ -171,17 +181,135 @@ def _controls(q, qp, disp, u, gap, swept, sigma, nact, terms):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def _contact(x, xp, disp, gap, swept, nact, terms):
+    """``gap`` and ``swept`` of the centres ``x`` (``_controls`` computed them at the points)."""
+    for b in range(nact):
+        gap[b] = np.inf
+        swept[b] = np.inf
+    for p in range(terms.pair_i.shape[0]):
+        i = terms.pair_i[p]
+        j = terms.pair_j[p]
+        a = terms.pair_contact[p]
+        for b in range(nact):
+            dx = x[j, 0, b] - x[i, 0, b]
+            dy = x[j, 1, b] - x[i, 1, b]
+            clr = math.sqrt(dx * dx + dy * dy) - a
+            gap[b] = min(gap[b], clr)
+            if clr <= _SWEPT_MARGIN * disp[b]:
+                swept[b] = min(swept[b], _swept(x, xp, i, j, b, a))
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def _points(x, p, nact, model):
+    """Near-identity hand points ``p = q + l (cos theta, sin theta)`` (``Unicycle.points``)."""
+    ell = model.offset
+    for i in range(x.shape[0]):
+        for b in range(nact):
+            th = x[i, 2, b]
+            p[i, 0, b] = x[i, 0, b] + ell * math.cos(th)
+            p[i, 1, b] = x[i, 1, b] + ell * math.sin(th)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def _rates(x, u, f, nact, model):
+    """``f = x_dot`` from the law's controls ``u`` (``RobotModel.derivative``, with limits)."""
+    n = x.shape[0]
+    vmax = model.max_speed
+    wmax = model.max_turn_rate
+    if model.kind == SINGLE:
+        for i in range(n):
+            for b in range(nact):
+                ux = u[i, 0, b]
+                uy = u[i, 1, b]
+                size = math.sqrt(ux * ux + uy * uy)
+                s = vmax / size if size > vmax else 1.0  # limit_speed
+                f[i, 0, b] = ux * s
+                f[i, 1, b] = uy * s
+    elif model.kind == DOUBLE:
+        kd = model.damping
+        for i in range(n):
+            for b in range(nact):
+                wx = x[i, 2, b]
+                wy = x[i, 3, b]
+                ax = -kd * wx + u[i, 0, b]
+                ay = -kd * wy + u[i, 1, b]
+                w2 = wx * wx + wy * wy
+                push = wx * ax + wy * ay
+                if w2 >= vmax * vmax and push > 0:  # extra damping at the limit
+                    brake = push / w2 if w2 > 0 else 0.0
+                    ax -= brake * wx
+                    ay -= brake * wy
+                size = math.sqrt(w2)
+                s = vmax / size if size > vmax else 1.0
+                f[i, 0, b] = wx * s
+                f[i, 1, b] = wy * s
+                f[i, 2, b] = ax
+                f[i, 3, b] = ay
+    else:  # unicycles: (v, omega) by the transform, limited together (limit_unicycle)
+        ell = model.offset
+        for i in range(n):
+            for b in range(nact):
+                c = math.cos(x[i, 2, b])
+                sn = math.sin(x[i, 2, b])
+                along = c * u[i, 0, b] + sn * u[i, 1, b]
+                across = -sn * u[i, 0, b] + c * u[i, 1, b]
+                if model.kind == NEAR_IDENTITY:
+                    v = along
+                    w = across / ell
+                else:
+                    if model.backwards:
+                        if along == 0.0:
+                            turn = math.copysign(0.5 * math.pi, across) if across != 0 else 0.0
+                        else:
+                            turn = math.atan(across / along)
+                    else:
+                        turn = math.atan2(across, along)
+                    v = model.linear_gain * along
+                    w = model.turn_gain * turn / (math.pi / 2)
+                av = abs(v)
+                aw = abs(w)
+                s = vmax / av if av > vmax else 1.0
+                s2 = wmax / aw if aw > wmax else 1.0
+                s = min(s, s2)
+                v *= s
+                w *= s
+                f[i, 0, b] = v * c
+                f[i, 1, b] = v * sn
+                f[i, 2, b] = w
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
+def _speed(f, b, model):
+    """Largest robot speed of trial ``b`` (``RobotModel.speed``) from its rates ``f``."""
+    top = 0.0
+    for i in range(f.shape[0]):
+        s = math.sqrt(f[i, 0, b] * f[i, 0, b] + f[i, 1, b] * f[i, 1, b])
+        if model.kind == NEAR_IDENTITY or model.kind == HEADING:
+            s += model.offset * abs(f[i, 2, b])
+        elif model.kind == DOUBLE:
+            tx = f[i, 0, b] + f[i, 2, b] / model.damping
+            ty = f[i, 1, b] + f[i, 3, b] / model.damping
+            s = max(s, math.sqrt(tx * tx + ty * ty))
+        top = max(top, s)
+    return top
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
 def _run_chunk(
-    q0, start, stop, terms, dt, n_steps, check_every, speed,
-    q_out, u_out, steps_out, status_out, mc_out, ns_out, window_step, qw_out,
+    x0, start, stop, terms, model, dt, n_steps, check_every, speed,
+    x_out, v_out, steps_out, status_out, mc_out, ns_out, window_step, qw_out,
 ):  # fmt: skip
-    n = q0.shape[1]
+    n = x0.shape[1]
+    k = x0.shape[2]
     m = stop - start
-    # double buffers: (q, u) at step k, (qp, up) at step k - 1
-    q = np.empty((n, 2, m))
+    hand = model.kind == NEAR_IDENTITY  # the law acts on points other than the centres
+    # double buffers: (x, f) at step k, (xp, fp) at step k - 1; u the law's control at x
+    x = np.empty((n, k, m))
+    f = np.empty((n, k, m))
+    xp = np.empty((n, k, m))
+    fp = np.empty((n, k, m))
     u = np.empty((n, 2, m))
-    qp = np.empty((n, 2, m))
-    up = np.empty((n, 2, m))
+    p = np.empty((n, 2, m) if hand else (1, 2, 1))  # hand points
     ids = np.arange(start, stop)
     mc = np.full(m, np.inf)  # least clearance over accepted states
     gap = np.empty(m)  # clearance of the current state
@@ -195,17 +323,22 @@ def _run_chunk(
     dbuf = np.empty(m)  # largest squared displacement since the previous check
     for b in range(m):
         for i in range(n):
-            q[i, 0, b] = q0[start + b, i, 0]
-            q[i, 1, b] = q0[start + b, i, 1]
-            qp[i, 0, b] = q[i, 0, b]
-            qp[i, 1, b] = q[i, 1, b]
+            for d in range(k):
+                x[i, d, b] = x0[start + b, i, d]
+                xp[i, d, b] = x[i, d, b]
     nact = m
-    k = 0
+    step = 0
     kc = -1  # step of the previous check (the same for every live trial)
     while nact > 0:
-        _controls(q, qp, disp, u, gap, swept, sigma, nact, terms)
+        if hand:
+            _points(x, p, nact, model)
+            _controls(p, p, disp, u, gap, swept, sigma, nact, terms)
+            _contact(x, xp, disp, gap, swept, nact, terms)
+        else:
+            _controls(x, xp, disp, u, gap, swept, sigma, nact, terms)
+        _rates(x, u, f, nact, model)
         stopping = 0
-        if k > 0:  # reject the step that led here (System.step_verdict)
+        if step > 0:  # reject the step that led here (System.step_verdict)
             for b in range(nact):
                 if fin[b] != 0.0:
                     code[b] = _NON_FINITE
@@ -218,41 +351,39 @@ def _run_chunk(
                     stopping += 1
         for b in range(nact):
             mc[b] = min(mc[b], gap[b]) if code[b] < 0 else mc[b]
-        if k == window_step:  # start of the drift window (the driver's q_window)
+        if step == window_step:  # start of the drift window (the driver's q_window)
             for b in range(nact):
                 if code[b] < 0:
                     for i in range(n):
-                        qw_out[ids[b], i, 0] = q[i, 0, b]
-                        qw_out[ids[b], i, 1] = q[i, 1, b]
-        if k % check_every == 0 or k == n_steps:
-            # stopped: instantaneous speed max |u_i| or net speed since the previous
-            # check, max |q_i(k) - q_i(kc)| / ((k - kc) dt), at most `speed`
+                        qw_out[ids[b], i, 0] = x[i, 0, b]
+                        qw_out[ids[b], i, 1] = x[i, 1, b]
+        if step % check_every == 0 or step == n_steps:
+            # stopped: instantaneous speed (RobotModel.speed) or net speed of the positions
+            # since the previous check, max |q_i(k) - q_i(kc)| / ((k - kc) dt), at most `speed`
             for b in range(nact):
                 dbuf[b] = 0.0
             if kc >= 0:
                 for i in range(n):
                     for b in range(nact):
-                        dx = q[i, 0, b] - qc[i, 0, b]
-                        dy = q[i, 1, b] - qc[i, 1, b]
+                        dx = x[i, 0, b] - qc[i, 0, b]
+                        dy = x[i, 1, b] - qc[i, 1, b]
                         dbuf[b] = max(dbuf[b], dx * dx + dy * dy)
-            elapsed = (k - kc) * dt
+            elapsed = (step - kc) * dt
             for b in range(nact):
                 if code[b] >= 0:  # the step to this state was rejected
                     continue
-                top = 0.0
-                for i in range(n):
-                    top = max(top, u[i, 0, b] * u[i, 0, b] + u[i, 1, b] * u[i, 1, b])
+                top = _speed(f, b, model)
                 net = math.sqrt(dbuf[b]) / elapsed if kc >= 0 else np.nan
                 ns[b] = net
-                if math.sqrt(top) <= speed or net <= speed:
+                if top <= speed or net <= speed:
                     code[b] = _CONVERGED
                     stopping += 1
             for i in range(n):
                 for d in range(2):
                     for b in range(nact):
-                        qc[i, d, b] = q[i, d, b]
-            kc = k
-        if k == n_steps:
+                        qc[i, d, b] = x[i, d, b]
+            kc = step
+        if step == n_steps:
             for b in range(nact):
                 if code[b] < 0:
                     code[b] = _END
@@ -265,20 +396,21 @@ def _run_chunk(
                 g = ids[b]
                 rejected = code[b] == _COLLISION or code[b] == _TOO_LARGE or code[b] == _NON_FINITE
                 for i in range(n):
-                    for d in range(2):
+                    for d in range(k):
                         # a rejected step ends the trial at the previous, accepted state
-                        q_out[g, i, d] = qp[i, d, b] if rejected else q[i, d, b]
-                        u_out[g, i, d] = up[i, d, b] if rejected else u[i, d, b]
-                steps_out[g] = k - 1 if rejected else k
+                        x_out[g, i, d] = xp[i, d, b] if rejected else x[i, d, b]
+                        v_out[g, i, d] = fp[i, d, b] if rejected else f[i, d, b]
+                steps_out[g] = step - 1 if rejected else step
                 status_out[g] = code[b]
                 mc_out[g] = mc[b]
                 ns_out[g] = ns[b]
                 last = nact - 1
                 if b != last:  # the trial at `last` is running (visited already)
                     for i in range(n):
+                        for d in range(k):
+                            x[i, d, b] = x[i, d, last]
+                            f[i, d, b] = f[i, d, last]
                         for d in range(2):
-                            q[i, d, b] = q[i, d, last]
-                            u[i, d, b] = u[i, d, last]
                             qc[i, d, b] = qc[i, d, last]
                     ids[b] = ids[last]
                     mc[b] = mc[last]
@@ -293,41 +425,48 @@ def _run_chunk(
             disp[b] = 0.0
         for i in range(n):
             for b in range(nact):
-                x = q[i, 0, b] + dt * u[i, 0, b]  # explicit Euler
-                y = q[i, 1, b] + dt * u[i, 1, b]
-                ex = x - q[i, 0, b]
-                ey = y - q[i, 1, b]
+                nx = x[i, 0, b] + dt * f[i, 0, b]  # explicit Euler
+                ny = x[i, 1, b] + dt * f[i, 1, b]
+                ex = nx - x[i, 0, b]
+                ey = ny - x[i, 1, b]
                 disp[b] = max(disp[b], ex * ex + ey * ey)
-                qp[i, 0, b] = x  # the next state, written over the older one
-                qp[i, 1, b] = y
-                fin[b] += (x + y) * 0.0  # NaN unless x and y are finite
+                xp[i, 0, b] = nx  # the next state, written over the older one
+                xp[i, 1, b] = ny
+                fin[b] += (nx + ny) * 0.0  # NaN unless x and y are finite
+            for d in range(2, k):
+                for b in range(nact):
+                    z = x[i, d, b] + dt * f[i, d, b]
+                    xp[i, d, b] = z
+                    fin[b] += z * 0.0
         for b in range(nact):
             disp[b] = math.sqrt(disp[b])
-        q, qp = qp, q
-        u, up = up, u
-        k += 1
+        x, xp = xp, x
+        f, fp = fp, f
+        step += 1
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", parallel=True)
 def run_chunks(
-    q0, chunk, terms, dt, n_steps, check_every, speed,
-    q_out, u_out, steps_out, status_out, mc_out, ns_out, window_step, qw_out,
+    x0, chunk, terms, model, dt, n_steps, check_every, speed,
+    x_out, v_out, steps_out, status_out, mc_out, ns_out, window_step, qw_out,
 ):  # fmt: skip
-    """Step every trial of ``q0`` ``(B, n, 2)``; chunks of ``chunk`` trials run in parallel.
+    """Step every trial of ``x0`` ``(B, n, k)``; chunks of ``chunk`` trials run in parallel.
 
-    ``terms`` is the law's :class:`~formationlab.controllers.terms.KernelTerms`.
-    Fills ``q_out``, ``u_out`` ``(B, n, 2)``, ``steps_out`` (int64), ``status_out``
-    (int8, :attr:`formationlab.status.Status.code`), ``mc_out`` (least clearance)
-    and ``ns_out`` (net speed over the last check interval), all of length ``B``;
+    ``terms`` is the law's :class:`~formationlab.controllers.terms.KernelTerms`,
+    ``model`` the robot model's :class:`~formationlab.studies.model_terms.ModelTerms`.
+    Fills ``x_out``, ``v_out`` ``(B, n, k)`` (final states and their rates),
+    ``steps_out`` (int64), ``status_out`` (int8, :attr:`formationlab.status.Status.code`),
+    ``mc_out`` (least clearance) and ``ns_out`` (net speed over the last check
+    interval), all of length ``B``;
     ``qw_out`` ``(B, n, 2)`` (filled with NaN by the caller) gets the positions of the
     trials still running at step ``window_step``, the start of the drift window.
     """
-    n_trials = q0.shape[0]
+    n_trials = x0.shape[0]
     n_chunks = (n_trials + chunk - 1) // chunk
     for c in prange(n_chunks):
         start = c * chunk
         stop = min(n_trials, start + chunk)
         _run_chunk(
-            q0, start, stop, terms, dt, n_steps, check_every, speed,
-            q_out, u_out, steps_out, status_out, mc_out, ns_out, window_step, qw_out,
+            x0, start, stop, terms, model, dt, n_steps, check_every, speed,
+            x_out, v_out, steps_out, status_out, mc_out, ns_out, window_step, qw_out,
         )  # fmt: skip

@@ -33,6 +33,7 @@ this module ties them together and touches no files: the store does.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import time
@@ -47,6 +48,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..controllers import LAWS, Law
 from ..errors import ParameterError
+from ..models import RobotModel, SingleIntegrator
 from ..spec import Formation
 from ..validation import positive, whole
 from .chunks import ChunkTask, plan_chunks, run_chunk
@@ -115,6 +117,7 @@ def study_identity(
     dt: float,
     duration: float,
     center: ArrayLike | None = None,
+    model: RobotModel | None = None,
 ) -> dict[str, Any]:
     """Everything the trials depend on, JSON-ready, with its SHA-256 ``fingerprint``.
 
@@ -142,6 +145,9 @@ def study_identity(
         "groups": [g.describe() for g in groups],
         "formations": h.hexdigest(),
     }
+    if model is not None and model != SingleIntegrator():
+        # (single-integrator studies keep the identity they had)
+        ident["model"] = {"name": model.name, **dataclasses.asdict(model)}
     text = json.dumps(ident, sort_keys=True, default=float)
     ident["fingerprint"] = hashlib.sha256(text.encode()).hexdigest()[:16]
     return ident
@@ -167,6 +173,9 @@ class StudySetup:
     laws : mapping, optional
         The base law of each name of ``config.laws`` (default: it takes the parameters
         it shares with ``law``).
+    model : RobotModel
+        The robots (``[robots] model``); unicycles start with random headings,
+        double integrators at rest (:func:`~formationlab.studies.sampling.model_initial_states`).
     """
 
     formation: Formation
@@ -176,8 +185,15 @@ class StudySetup:
     duration: float
     center: NDArray[np.float64] | None = None
     laws: Mapping[str, Law] | None = None
+    model: RobotModel = field(default_factory=SingleIntegrator)
 
     def __post_init__(self) -> None:
+        if self.config.settle.enabled and not isinstance(self.model, SingleIntegrator):
+            raise ParameterError(
+                "settling (study.settle) covers single integrators only; disable it for "
+                f"the robot model {self.model.name!r}",
+                key="settle",
+            )
         object.__setattr__(self, "dt", positive(self.dt, "dt"))
         object.__setattr__(self, "duration", positive(self.duration, "duration"))
         center = self.center
@@ -214,6 +230,12 @@ class StudySetup:
         center = None  # of gaussian starts: the template, else the scenario's positions
         if isinstance(config.initial, GaussianInitial):
             center = sc.formation.template if sc.formation.template is not None else sc.q0
+        if sc.marching is not None:
+            raise sc.error(
+                "marching",
+                "a study classifies formations that come to rest: remove [marching] "
+                "(or run the scenario with `formationlab run`)",
+            )
         names = [n for n in config.laws or (sc.law.name,) if n in LAWS]
         laws = {LAWS.canonical(n): sc.law_named(n) for n in names}
         setup = cls(
@@ -224,6 +246,7 @@ class StudySetup:
             duration=duration,
             center=center,
             laws=laws,
+            model=sc.model,
         )
         try:
             setup.groups  # noqa: B018 - checks laws and sweep keys now, with the file's lines
@@ -245,6 +268,7 @@ class StudySetup:
             dt=self.dt,
             duration=self.duration,
             center=self.center,
+            model=self.model,
         )
 
 
@@ -297,8 +321,9 @@ def run_study(
     config, dt, duration = setup.config, setup.dt, setup.duration
     groups = setup.groups
     tasks = plan_chunks(
-        groups, config, seed=int(seed), dt=dt, duration=duration, center=setup.center
-    )
+        groups, config, seed=int(seed), dt=dt, duration=duration, center=setup.center,
+        model=setup.model,
+    )  # fmt: skip
     total = sum(t.size for t in tasks)
     # compiled (or loaded from numba's cache) here, timed apart from the trials; dask
     # workers compile for themselves
@@ -345,6 +370,7 @@ def run_study(
         "backend": config.backend,
         "settle": config.settle.model_dump(mode="json"),
         "laws": list(dict.fromkeys(g.law.name for g in groups)),
+        "model": {"name": setup.model.name, **dataclasses.asdict(setup.model)},
         "sweep": {k: list(v) for k, v in config.sweep.items()},
         "outcomes": study_outcomes(trials),
         "groups": summarize_groups(trials, [g.describe() for g in groups]),

@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import ParameterError
+from ..models import RobotModel
 from ..spec import Formation
 from .config import BoxInitial, GaussianInitial
 
@@ -34,6 +35,7 @@ __all__ = [
     "SEED_BLOCK",
     "block_generator",
     "draw_block",
+    "model_initial_states",
     "overlapping",
     "trial_initial_states",
 ]
@@ -155,3 +157,52 @@ def trial_initial_states(
         sel = blocks == b
         out[sel] = states[idx[sel] % SEED_BLOCK]
     return out
+
+
+#: spawn key of the extra state's generators (distinct from the positions' blocks)
+_EXTRA_STREAM = 2**32 + 1
+
+
+def model_initial_states(
+    formation: Formation,
+    model: RobotModel,
+    q0: NDArray[np.float64],
+    seed: int,
+    trials: ArrayLike,
+) -> NDArray[np.float64]:
+    """The robot model's initial states ``(B, n, k)`` of trials starting at ``q0`` ``(B, n, 2)``.
+
+    Unicycles get headings uniform in ``[-pi, pi)``, drawn per seed block like the
+    positions (so a trial's headings depend on ``(seed, trial)`` only) and drawn
+    again while two of the law's points (near-identity hand points) overlap;
+    double integrators start at rest. Single integrators: ``q0`` itself.
+    """
+    k = model.state_size()
+    if k == 2:
+        return q0
+    if "theta" not in type(model).state_names:
+        return model.initial_state(q0)  # at rest
+    idx = np.asarray(trials, dtype=np.int64).reshape(-1)
+    theta = np.empty(q0.shape[:2])
+    blocks = idx // SEED_BLOCK
+    for b in np.unique(blocks):
+        rng = np.random.default_rng(
+            np.random.SeedSequence(int(seed), spawn_key=(_EXTRA_STREAM, int(b)))
+        )
+        block = rng.uniform(-np.pi, np.pi, size=(SEED_BLOCK, formation.n))
+        sel = blocks == b
+        theta[sel] = block[idx[sel] % SEED_BLOCK]
+    x = model.initial_state(q0, headings=theta)
+    for draw in range(MAX_DRAWS):
+        bad = np.flatnonzero(overlapping(formation, model.points(x)))
+        if bad.size == 0:
+            return x
+        for t in bad:  # rare: per trial, from its own stream
+            rng = np.random.default_rng(
+                np.random.SeedSequence(int(seed), spawn_key=(_EXTRA_STREAM, int(idx[t]), draw + 1))
+            )
+            x[t, :, 2] = rng.uniform(-np.pi, np.pi, size=formation.n)
+    raise ParameterError(
+        f"{MAX_DRAWS} draws of headings in a row put two hand points on top of each other; "
+        "use a smaller offset or widen study.initial"
+    )
