@@ -9,10 +9,10 @@ with a message, and the integrator's diagnostics.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -34,6 +34,9 @@ from .registry import resolve
 from .spec import Formation
 from .status import Status
 from .validation import whole
+
+if TYPE_CHECKING:
+    from .safety import Obstacle, SafetyFilter, SafetyRecord
 
 __all__ = ["SimulationResult", "simulate"]
 
@@ -69,6 +72,10 @@ class SimulationResult:
         Why, in words.
     stats : dict
         Integrator diagnostics (steps, cost, switches, ...).
+    safety : SafetyRecord or None
+        With obstacles or a safety filter: the obstacles, and which robots, pairs and
+        obstacle constraints the filter held active at each saved state
+        (:class:`formationlab.safety.SafetyRecord`); None otherwise.
     """
 
     formation: Formation
@@ -82,6 +89,7 @@ class SimulationResult:
     status: Status
     message: str
     stats: dict[str, Any] = field(default_factory=dict)
+    safety: SafetyRecord | None = None
 
     @property
     def active(self) -> NDArray[np.bool_]:
@@ -156,8 +164,9 @@ class SimulationResult:
         robot 1 first), ``distance_errors`` (final ``r_ij - d_ij`` keyed by edge label
         ``"i-j"``, 1-based), ``max_distance_error``, ``converged_time`` (or None),
         ``final_time``, ``orientation`` (``"ccw"``/``"cw"`` of robots 1, 2, 3),
-        ``active_restrictions_final`` (labels), ``diagnostics`` (integrator statistics)
-        and ``tolerances``.
+        ``active_restrictions_final`` (labels), ``diagnostics`` (integrator statistics),
+        ``tolerances`` and, with obstacles or a filter, ``safety``
+        (:meth:`formationlab.safety.SafetyRecord.summary`).
         """
         from .analysis import triangle_orientation
 
@@ -166,6 +175,7 @@ class SimulationResult:
         active = [
             lab for lab, on in zip(self.restriction_labels, self.active[-1], strict=True) if on
         ]
+        extra = {} if self.safety is None else {"safety": self.safety.summary()}
         return {
             "outcome": self.outcome(tol),
             "status": self.status,
@@ -181,6 +191,7 @@ class SimulationResult:
             "active_restrictions_final": active,
             "diagnostics": dict(self.stats),
             "tolerances": {"distance": tol.distance, "speed": tol.speed, "window": tol.window},
+            **extra,
         }
 
     def plot(self, kind: str = "trajectories", ax: Any = None, **kwargs: Any) -> Any:
@@ -203,6 +214,8 @@ def simulate(
     save_every: int = 1,
     progress: Callable[[float], None] | None = None,
     interruptible: bool = False,
+    obstacles: Sequence[Obstacle] = (),
+    safety: SafetyFilter | str | None = None,
 ) -> SimulationResult:
     """Simulate ``q_dot_i = u_i`` (eq. 1) under ``law`` from ``q0``.
 
@@ -226,6 +239,13 @@ def simulate(
     interruptible : bool
         On Ctrl-C, return the run so far with status ``"interrupted"`` instead of
         raising ``KeyboardInterrupt`` (fixed-step integrators).
+    obstacles : sequence of Circle or Polygon
+        Static obstacles (:mod:`formationlab.safety`): the law gains Khatib's repulsion
+        from them, and touching one is contact (status ``"step-collision"``).
+    safety : SafetyFilter or str, optional
+        A safety filter between the law and the robots (``"barrier"``,
+        ``"barrier-decentralized"`` with their defaults, or a configured
+        :class:`~formationlab.safety.SafetyFilter`); default none.
 
     Returns
     -------
@@ -245,12 +265,24 @@ def simulate(
         raise ParameterError(f"simulate takes one initial state of shape (n, 2), got {q0.shape}")
     save_every = whole(save_every, "save_every")
     law, integrator = resolve(LAWS, law), resolve(INTEGRATORS, integrator or Euler(dt=1e-3))
-    system = System(formation=formation, law=law)
+    system = _system(formation, law, q0, obstacles, safety)
     raw: RawSolution = integrator.run(
         system, q0, float(duration), save_every=int(save_every), progress=progress,
         interruptible=interruptible,
     )  # fmt: skip
     points = system.model.points(raw.x)
+    record = None
+    if system.obstacles or system.filtered:
+        from .safety import SafetyRecord
+
+        clear = system.obstacle_clearances(raw.x)
+        least = clear.min(axis=(-2, -1)) if clear.size else np.full(len(raw.t), np.inf)
+        record = SafetyRecord.from_states(
+            raw.q, filter=system.safety if system.filtered else None,
+            obstacles=system.obstacles,
+            result=system.filter_result(raw.x) if system.filtered else None,
+            obstacle_clearance=least,
+        )  # fmt: skip
     return SimulationResult(
         formation=formation,
         law=law,
@@ -258,9 +290,28 @@ def simulate(
         t=raw.t,
         q=raw.q,
         u=raw.v[..., :2],
-        V=law.potential(formation, points),
+        V=system.potential(raw.x),
         sigma=law.switching(formation, points),
         status=raw.status,
         message=raw.message,
         stats=dict(raw.stats),
+        safety=record,
     )
+
+
+def _system(
+    formation: Formation,
+    law: Law,
+    q0: NDArray[np.float64],
+    obstacles: Sequence[Obstacle],
+    safety: SafetyFilter | str | None,
+) -> System:
+    """The closed loop, with obstacles and filter validated against ``q0``."""
+    if not obstacles and (safety is None or safety == "none"):
+        return System(formation=formation, law=law)
+    from .safety import SafetyFilter, check_obstacle_starts
+
+    if isinstance(safety, str):
+        safety = SafetyFilter(filter=safety)  # type: ignore[arg-type]
+    check_obstacle_starts(q0, formation.diameters / 2, tuple(obstacles))
+    return System(formation=formation, law=law, obstacles=tuple(obstacles), safety=safety)
