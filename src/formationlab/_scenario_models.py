@@ -19,6 +19,7 @@ __all__ = [
     "ControllerModel",
     "FormationModel",
     "RobotsModel",
+    "SafetyModel",
     "ScenarioModel",
     "SimulationModel",
 ]
@@ -159,6 +160,48 @@ class SimulationModel(BaseModel):
         return _finite(v, "duration")
 
 
+class SafetyModel(BaseModel):
+    """``[safety]``: the safety filter between the law and the robots (``docs/safety.md``).
+
+    Contact distances and obstacles are checked by :mod:`formationlab._scenario_safety`.
+    """
+
+    model_config = _STRICT
+    filter: Literal["none", "barrier", "barrier-decentralized"] = "none"
+    distance: float = 0.25
+    gamma: float = 100.0
+    max_speed: float | None = None
+    speed_sides: int = 8
+    sensing_radius: float | None = None
+    obstacle_distance: float | None = None
+
+    @field_validator("distance", "sensing_radius", "obstacle_distance", "max_speed", mode="before")
+    @classmethod
+    def _positive(cls, v: Any, info: Any) -> float:
+        x = _finite(v, info.field_name)
+        if x <= 0:
+            raise ValueError(f"{info.field_name} must be > 0 (m), got {v!r}")
+        return x
+
+    @field_validator("gamma", mode="before")
+    @classmethod
+    def _gamma(cls, v: Any) -> float:
+        x = _finite(v, "gamma")
+        if x < 0:
+            raise ValueError(
+                f"gamma must be >= 0 (the barrier gain: 0 lets no pair approach at all, "
+                f"larger values let pairs approach faster; default 100), got {v!r}"
+            )
+        return x
+
+    @field_validator("speed_sides", mode="before")
+    @classmethod
+    def _sides(cls, v: Any) -> int:
+        if isinstance(v, bool) or not isinstance(v, int) or v < 4:
+            raise ValueError(f"speed_sides must be a whole number >= 4, got {v!r}")
+        return v
+
+
 class ScenarioModel(BaseModel):
     """The whole file. ``[study]`` and ``[equilibria]`` are passed through unvalidated."""
 
@@ -171,6 +214,8 @@ class ScenarioModel(BaseModel):
     simulation: SimulationModel
     study: dict[str, Any] | None = None
     equilibria: dict[str, Any] | None = None
+    obstacles: list[dict[str, Any]] | None = None
+    safety: SafetyModel | None = None
 
 
 #: The keys each table accepts (the fixed ones; laws and integrators add theirs).
@@ -180,4 +225,5 @@ SECTIONS: dict[str, tuple[str, ...]] = {
     "formation": tuple(FormationModel.model_fields),
     "controller": tuple(ControllerModel.model_fields),
     "simulation": tuple(SimulationModel.model_fields),
+    "safety": tuple(SafetyModel.model_fields),
 }

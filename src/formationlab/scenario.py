@@ -38,6 +38,7 @@ from pydantic import ValidationError
 from ._scenario_build import FIXED, build_formation, stem
 from ._scenario_models import SECTIONS, ScenarioModel
 from ._scenario_parts import build_entry
+from ._scenario_safety import build_safety
 from .controllers import LAWS, Law
 from .errors import IgnoredKeyWarning, ScenarioError, UserInputError
 from .integrators import INTEGRATORS, Integrator
@@ -81,6 +82,10 @@ class Scenario:
     warnings : tuple of str
         Things that are allowed but probably unintended (a non-rigid graph, keys
         that have no effect, ...).
+    obstacles : tuple of Circle or Polygon
+        The ``[[obstacles]]`` tables (:mod:`formationlab.safety`), clear of the starts.
+    safety : SafetyFilter or None
+        The ``[safety]`` table (None when absent), checked against the contact distances.
     """
 
     name: str
@@ -97,6 +102,8 @@ class Scenario:
     study: dict[str, Any] | None = None
     equilibria: dict[str, Any] | None = None
     warnings: tuple[str, ...] = field(default=())
+    obstacles: tuple[Any, ...] = ()
+    safety: Any = None
 
     @property
     def n(self) -> int:
@@ -239,6 +246,9 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
     except UserInputError as exc:
         raise fail("robots.positions", str(exc)) from None
     q0.setflags(write=False)  # the scenario is frozen, its arrays too
+    obstacles, safety = build_safety(
+        model.obstacles, model.safety, formation, q0, source=source, text=text, warnings=warnings
+    )
 
     study_laws = (model.study or {}).get("laws")
     used_by = [str(x) for x in study_laws] if isinstance(study_laws, list) else []
@@ -298,4 +308,6 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         study=model.study,
         equilibria=model.equilibria,
         warnings=tuple(warnings),
+        obstacles=obstacles,
+        safety=safety,
     )

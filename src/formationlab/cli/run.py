@@ -114,7 +114,10 @@ def _simulate(simulate: Any, sc: Any, save_every: int, quiet: bool) -> Any:
     """Run ``sc`` with a progress bar on a terminal (long runs only)."""
     steps = sc.duration / getattr(sc.integrator, "dt", 1e-3)
     show = not quiet and err_console.is_terminal and steps * sc.n**2 > 2e5
-    kwargs = {"duration": sc.duration, "integrator": sc.integrator, "save_every": save_every}
+    kwargs = {
+        "duration": sc.duration, "integrator": sc.integrator, "save_every": save_every,
+        "obstacles": sc.obstacles, "safety": sc.safety,
+    }  # fmt: skip
     if not show:
         return simulate(sc.formation, sc.law, sc.q0, **kwargs)
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
@@ -146,14 +149,26 @@ def _animate(
     from ..io.animation import save_animation
     from ..plotting.animation import animate_run
 
+    safety: dict[str, Any] = {}
     if hasattr(result_or_ds, "formation"):
         r = result_or_ds
         t, q, edges, diam = r.t, r.q, r.formation.edges, r.formation.diameters
+        if r.safety is not None:
+            safety = {
+                "obstacles": r.safety.obstacles, "active": r.safety.active,
+                "active_pairs": r.safety.active_pairs,
+            }  # fmt: skip
     else:
         ds = result_or_ds
         t, q = ds["time"].values, ds["q"].values
         edges, diam = ds["edge_robots"].values - 1, ds["diameter"].values
-    anim = animate_run(t, q, edges=edges, diameters=diam, max_frames=frames, title=title)
+        if "filter_active" in ds:
+            safety = {
+                "obstacles": json.loads(str(ds.attrs.get("obstacles", "[]"))),
+                "active": ds["filter_active"].values.astype(bool),
+                "active_pairs": ds["active_pair"].values.reshape(-1, 3) - [0, 1, 1],
+            }
+    anim = animate_run(t, q, edges=edges, diameters=diam, max_frames=frames, title=title, **safety)
     return save_animation(anim, folder / ANIMATION_STEM, formats=formats)
 
 
@@ -256,10 +271,15 @@ def validate(
             warn(w if w.startswith(sc.source) else f"{path}: {w}")
         f = sc.formation
         rigid = "rigid" if f.is_rigid else "not rigid"
+        safety = ""
+        if sc.obstacles:
+            safety += f", {len(sc.obstacles)} obstacles"
+        if sc.safety is not None and sc.safety.enabled:
+            safety += f", safety filter {sc.safety.filter} (D_s = {sc.safety.distance:g})"
         typer.echo(
             f"ok: {path}: {sc.name!r}, {f.n} robots, {len(f.edges)} edges ({rigid}), "
             f"orientation {f.orientation}, law {sc.law.name}, integrator "
-            f"{json.dumps(sc.parameters['integrator'])}, duration {sc.duration:g} s"
+            f"{json.dumps(sc.parameters['integrator'])}, duration {sc.duration:g} s{safety}"
         )
     if bad:
         raise typer.Exit(2)

@@ -58,6 +58,14 @@ def study(
             "(overrides study.settle.enabled; default off: it can cost many times the study).",
         ),
     ] = None,
+    safety_filter: Annotated[
+        str | None,
+        typer.Option(
+            "--filter",
+            help='Safety filter of every trial: "none", "barrier" or "barrier-decentralized" '
+            "(overrides safety.filter; the other [safety] keys apply).",
+        ),
+    ] = None,
     resume: Annotated[
         bool, typer.Option("--resume", help="Finish an interrupted study in OUT.")
     ] = False,
@@ -96,7 +104,12 @@ def study(
         source=sc.source,
         text=sc.text,
     )
+    if safety_filter is not None:
+        sc = _with_filter(sc, safety_filter)
     setup = StudySetup.from_scenario(sc, config)
+    _, note = setup.backend
+    if note:
+        err_console.print(f"note: {note}", highlight=False)
     identity = setup.identity(seed)
     store = ChunkFolder(out, identity)
     if resume:
@@ -130,6 +143,22 @@ def study(
         resume=resume,
     )
     _write_outputs(out, sc, result, identity)
+
+
+def _with_filter(sc: Any, name: str) -> Any:
+    """The scenario with ``safety.filter = name`` (validated against its contact distances)."""
+    import dataclasses
+
+    from ..errors import UserInputError
+    from ..safety import SafetyFilter
+
+    base = sc.safety if sc.safety is not None else SafetyFilter()
+    try:
+        safety = dataclasses.replace(base, filter=name)
+        safety.check_contact(sc.formation.contact_matrix)
+    except UserInputError as exc:
+        raise UserInputError(f"--filter {name}: {exc}") from None
+    return dataclasses.replace(sc, safety=safety)
 
 
 def _run_with_progress(run: Any, *args: Any, store: Any, **kwargs: Any) -> Any:

@@ -9,6 +9,7 @@ HTML player stay bounded whatever the run's length. Saving is done by
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -19,6 +20,7 @@ from matplotlib.patches import Circle
 from numpy.typing import ArrayLike, NDArray
 
 from .runs import robot_colors
+from .safety import ACTIVE_COLOR, draw_obstacles
 
 __all__ = ["animate_run", "frame_indices"]
 
@@ -50,6 +52,9 @@ def animate_run(
     title: str = "",
     size: float = 5.0,
     dpi: int = 90,
+    obstacles: Sequence[Any] = (),
+    active: ArrayLike | None = None,
+    active_pairs: ArrayLike | None = None,
 ) -> FuncAnimation:
     """An animation of a run.
 
@@ -75,6 +80,12 @@ def animate_run(
         Title; the time is appended.
     size, dpi : float, int
         Figure side in inches and resolution.
+    obstacles : sequence
+        Obstacles to draw (:mod:`formationlab.safety` objects or their scenario form).
+    active : array_like of bool, shape (T, n), optional
+        Robots with an active safety constraint at each saved time: drawn with a red ring.
+    active_pairs : array_like of int, shape (k, 3), optional
+        Active pair constraints ``(time index, i, j)``, 0-based: drawn as red lines.
 
     Returns
     -------
@@ -103,6 +114,14 @@ def animate_run(
     ax.set_aspect("equal")
     ax.set_xlabel("x")
     ax.set_ylabel("y")
+    if len(obstacles):
+        draw_obstacles(ax, obstacles)
+    on = np.zeros((len(t), n), bool) if active is None else np.asarray(active, bool)
+    pairs = np.zeros((0, 3), np.int64) if active_pairs is None else np.asarray(active_pairs)
+    pairs = pairs.reshape(-1, 3).astype(np.int64)
+    red = ACTIVE_COLOR
+    constrained = LineCollection([], colors=red, linewidths=2.0, zorder=2.5)
+    ax.add_collection(constrained)
 
     graph = LineCollection(
         list(np.zeros((len(edges), 2, 2))), colors="0.3", linewidths=1.0, zorder=2
@@ -129,12 +148,16 @@ def animate_run(
         since = -np.inf if trail is None else t[idx] - trail
         sel = path[(path < idx) & (t[path] >= since)]
         sel = np.append(sel, idx)
+        hit = pairs[pairs[:, 0] == idx]
+        constrained.set_segments(list(np.stack([now[hit[:, 1]], now[hit[:, 2]]], axis=1)))
         for i in range(n):
             trails[i].set_data(q[sel, i, 0], q[sel, i, 1])
             discs[i].center = (now[i, 0], now[i, 1])
+            discs[i].set_edgecolor(red if on[idx, i] else colors[i])
+            discs[i].set_linewidth(2.0 if on[idx, i] else 1.0)
             labels[i].xy = (now[i, 0], now[i, 1])
         clock.set_text(f"{title + ': ' if title else ''}t = {t[idx]:.2f} s")
-        return [graph, *trails, *discs, *labels, clock]
+        return [graph, constrained, *trails, *discs, *labels, clock]
 
     draw(0)
     return FuncAnimation(fig, draw, frames=len(frames), interval=1000 / fps, blit=False)

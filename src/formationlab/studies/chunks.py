@@ -46,6 +46,8 @@ class ChunkTask:
     backend: Literal["numba", "numpy"]
     sweep_keys: tuple[str, ...] = ()
     settle: SettleModel = field(default_factory=SettleModel)
+    obstacles: tuple[Any, ...] = ()
+    safety: Any = None
 
     @property
     def id(self) -> str:
@@ -65,8 +67,14 @@ def plan_chunks(
     dt: float,
     duration: float,
     center: ArrayLike | None = None,
+    obstacles: tuple[Any, ...] = (),
+    safety: Any = None,
 ) -> list[ChunkTask]:
-    """Cut every group's ``config.trials`` trials into chunks of ``config.chunk_size``."""
+    """Cut every group's ``config.trials`` trials into chunks of ``config.chunk_size``.
+
+    ``obstacles`` and ``safety`` (a :class:`~formationlab.safety.SafetyFilter`) go to
+    every chunk.
+    """
     c = None if center is None else np.asarray(center, dtype=float)
     tasks = []
     n, size = config.trials, config.chunk_size
@@ -87,6 +95,8 @@ def plan_chunks(
                     backend=config.backend,
                     sweep_keys=tuple(config.sweep),
                     settle=config.settle,
+                    obstacles=obstacles,
+                    safety=safety,
                 )
             )
     return tasks
@@ -99,7 +109,9 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
     g = task.group
     f = g.formation
     trials = np.arange(task.start, task.stop, dtype=np.int64)
-    q0 = trial_initial_states(f, task.initial, task.seed, trials, center=task.center)
+    q0 = trial_initial_states(
+        f, task.initial, task.seed, trials, center=task.center, obstacles=task.obstacles
+    )
     res = run_batch(
         f,
         g.law,
@@ -108,10 +120,15 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
         duration=task.duration,
         tolerances=task.tolerances,
         backend=task.backend,
+        obstacles=task.obstacles,
+        safety=task.safety,
     )
     outcome = np.asarray(res.outcome, dtype=object)
+    # settling steps the law alone: not the closed loop with obstacles or a filter
+    plain = not task.obstacles and (task.safety is None or not task.safety.enabled)
+    settle = task.settle if plain else SettleModel(enabled=False)
     settled, settled_outcome = settle_trials(
-        f, g.law, res.q_final, outcome, settle=task.settle, tolerances=task.tolerances
+        f, g.law, res.q_final, outcome, settle=settle, tolerances=task.tolerances
     )
     cols: dict[str, Any] = {
         "group": np.full(trials.size, g.index, dtype=np.int64),

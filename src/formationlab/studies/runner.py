@@ -116,6 +116,7 @@ def study_identity(
     dt: float,
     duration: float,
     center: ArrayLike | None = None,
+    safety: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Everything the trials depend on, JSON-ready, with its SHA-256 ``fingerprint``.
 
@@ -142,6 +143,8 @@ def study_identity(
         "groups": [g.describe() for g in groups],
         "formations": h.hexdigest(),
     }
+    if safety is not None:  # obstacles and filter (absent without them: fingerprints kept)
+        ident["safety"] = safety
     text = json.dumps(ident, sort_keys=True, default=float)
     ident["fingerprint"] = hashlib.sha256(text.encode()).hexdigest()[:16]
     return ident
@@ -167,6 +170,11 @@ class StudySetup:
     laws : mapping, optional
         The base law of each name of ``config.laws`` (default: it takes the parameters
         it shares with ``law``).
+    obstacles : tuple of Circle or Polygon
+        Static obstacles of every trial (starts touching one are drawn again).
+    safety : SafetyFilter, optional
+        Safety filter of every trial. With obstacles or a filter the trials run on the
+        numpy driver path (:func:`~formationlab.studies.batch.batch_backend`).
     """
 
     formation: Formation
@@ -176,6 +184,8 @@ class StudySetup:
     duration: float
     center: NDArray[np.float64] | None = None
     laws: Mapping[str, Law] | None = None
+    obstacles: tuple[Any, ...] = ()
+    safety: Any = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "dt", positive(self.dt, "dt"))
@@ -224,6 +234,8 @@ class StudySetup:
             duration=duration,
             center=center,
             laws=laws,
+            obstacles=sc.obstacles,
+            safety=sc.safety,
         )
         try:
             setup.groups  # noqa: B018 - checks laws and sweep keys now, with the file's lines
@@ -236,6 +248,34 @@ class StudySetup:
         """The groups (:func:`study_groups`)."""
         return study_groups(self.formation, self.law, self.config, laws=self.laws)
 
+    @property
+    def backend(self) -> tuple[str, str]:
+        """The backend the trials run on and why it is not ``config.backend`` ("" if it is)."""
+        from .batch import batch_backend
+
+        return batch_backend(self.config.backend, self.obstacles, self.safety)
+
+    def safety_description(self) -> dict[str, Any] | None:
+        """JSON-ready obstacles and filter (None without either)."""
+        filtered = self.safety is not None and self.safety.enabled
+        if not self.obstacles and not filtered:
+            return None
+        from ..safety import describe_obstacle
+
+        f = self.safety
+        return {
+            "obstacles": [describe_obstacle(ob) for ob in self.obstacles],
+            "filter": None
+            if not filtered
+            else {
+                "filter": f.filter,
+                "distance": f.distance,
+                "gamma": f.gamma,
+                "max_speed": f.max_speed,
+                "obstacle_distance": f.d_obstacle,
+            },
+        }
+
     def identity(self, seed: int) -> dict[str, Any]:
         """:func:`study_identity` of this study with ``seed``."""
         return study_identity(
@@ -245,6 +285,7 @@ class StudySetup:
             dt=self.dt,
             duration=self.duration,
             center=self.center,
+            safety=self.safety_description(),
         )
 
 
@@ -294,8 +335,9 @@ def run_study(
     config, dt, duration = setup.config, setup.dt, setup.duration
     groups = setup.groups
     tasks = plan_chunks(
-        groups, config, seed=int(seed), dt=dt, duration=duration, center=setup.center
-    )
+        groups, config, seed=int(seed), dt=dt, duration=duration, center=setup.center,
+        obstacles=setup.obstacles, safety=setup.safety,
+    )  # fmt: skip
     total = sum(t.size for t in tasks)
     start = time.perf_counter()
     frames: dict[str, pd.DataFrame] = {}
@@ -337,6 +379,7 @@ def run_study(
         "initial": config.initial.model_dump(mode="json"),
         "tolerances": config.tolerances.model_dump(mode="json"),
         "backend": config.backend,
+        **_backend_used(setup),
         "settle": config.settle.model_dump(mode="json"),
         "laws": list(dict.fromkeys(g.law.name for g in groups)),
         "sweep": {k: list(v) for k, v in config.sweep.items()},
@@ -350,3 +393,12 @@ def run_study(
         "workers": workers,
     }
     return StudyResult(trials=trials, summary=summary, groups=groups)
+
+
+def _backend_used(setup: StudySetup) -> dict[str, Any]:
+    """``backend_used``, ``backend_note`` and ``safety`` of a study with obstacles or a filter."""
+    used, note = setup.backend
+    safety = setup.safety_description()
+    if safety is None:
+        return {}
+    return {"backend_used": used, "backend_note": note, "safety": safety}
