@@ -204,9 +204,14 @@ class System:
         """Least ``r_ij - a_ij`` over the straight step from ``x0`` to ``x1``; shape ``(...)``.
 
         Catches a step that carries two robots through each other, which the
-        clearance at the end of the step alone would miss.
+        clearance at the end of the step alone would miss. With obstacles, also the
+        least robot-obstacle clearance along the step.
         """
-        return np.min(self.pair_swept_clearances(x0, x1), axis=-1)
+        least = np.min(self.pair_swept_clearances(x0, x1), axis=-1)
+        if self.obstacles:
+            swept = self.swept_obstacle_clearances(x0, x1)
+            least = np.minimum(least, np.min(swept, axis=(-2, -1)))
+        return least
 
     def step_verdict(
         self, x0: NDArray[np.float64], x1: NDArray[np.float64]
