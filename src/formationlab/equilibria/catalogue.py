@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from ..analysis import Tolerances
 from ..controllers import Law
+from ..dynamics import System
 from ..spec import Formation
 from .classify import Equilibrium, classify_equilibrium
 from .dedup import canonical_pose, same_equilibrium
@@ -73,6 +74,8 @@ class Catalogue:
                     "active_restrictions": list(eq.active),
                     "switching_surfaces": list(eq.surfaces),
                     "attractive": eq.attractive,
+                    "safety_constraints": list(eq.constraints),
+                    "multipliers": eq.multipliers.tolist(),
                     "growth_rate": eq.growth_rate,
                     "e_folding_time": (1.0 / eq.growth_rate if eq.growth_rate > 0 else None),
                 }
@@ -94,6 +97,7 @@ def catalogue(
     extra: list[NDArray[np.float64]] | None = None,
     tolerances: Tolerances | None = None,
     match_tol: float = 1e-3,
+    system: System | None = None,
 ) -> Catalogue:
     """Refine, classify and merge the end states ``candidates`` (``(B, n, 2)``).
 
@@ -106,6 +110,11 @@ def catalogue(
     match_tol : float
         A raw candidate within this (pairwise distances, RMS fit) of an
         equilibrium already found is counted there without refining it.
+    system : System, optional
+        The closed loop with obstacles and a safety filter: a candidate where the
+        filter holds a constraint active is refined and classified as a deadlock
+        (:mod:`~formationlab.equilibria.constrained`); the others as equilibria of
+        ``law``.
     """
     cand = np.asarray(candidates, dtype=float).reshape(-1, formation.n, 2)
     outs = np.asarray(outcomes) if outcomes is not None else np.full(len(cand), "")
@@ -125,11 +134,11 @@ def catalogue(
     for q, weight in pending:
         k = attribute(q, match_tol) if weight else None
         if k is None:
-            ref = refine(formation, law, q)
-            if not ref.success:
+            eq_or_none = _refined(formation, law, q, tolerances, system)
+            if eq_or_none is None:
                 skipped["not-refined"] += weight
                 continue
-            eq = classify_equilibrium(formation, law, ref, tolerances)
+            eq = eq_or_none
             k = attribute(eq.q, 1e-6)
             if k is None:
                 found.append(_posed(eq))
@@ -144,6 +153,26 @@ def catalogue(
         counts=[counts[k] for k in order],
         skipped={k: v for k, v in skipped.items() if v},
     )
+
+
+def _refined(
+    formation: Formation,
+    law: Law,
+    q: NDArray[np.float64],
+    tolerances: Tolerances | None,
+    system: System | None,
+) -> Equilibrium | None:
+    """The classified equilibrium near ``q``, a deadlock if the filter is active there."""
+    if system is not None and system.filtered:
+        from .constrained import active_set, classify_deadlock, refine_deadlock
+
+        if len(active_set(system, q)):
+            dead = refine_deadlock(system, q)
+            return classify_deadlock(system, dead, tolerances) if dead.success else None
+    ref = refine(formation, law, q)
+    if not ref.success:
+        return None
+    return classify_equilibrium(formation, law, ref, tolerances)
 
 
 def _posed(eq: Equilibrium) -> Equilibrium:

@@ -77,7 +77,13 @@ class Equilibrium:
         Step of each surface (Filippov weight on the surfaces ``q`` lies on).
     attractive : bool or None
         Filippov equilibria: whether the surfaces attract from both sides
-        (a sliding mode exists there). None otherwise.
+        (a sliding mode exists there); deadlocks of a safety filter: whether the
+        active barriers attract (:mod:`formationlab.equilibria.constrained`). None otherwise.
+    constraints : tuple of str
+        Deadlocks of a safety filter: the active barrier constraints (``"pair 1-2"``,
+        ``"robot 3 - obstacle 1"``); empty otherwise.
+    multipliers : ndarray
+        Their KKT multipliers (all positive at a deadlock).
     """
 
     q: NDArray[np.float64]
@@ -93,6 +99,8 @@ class Equilibrium:
     surfaces: tuple[str, ...] = ()
     weights: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     attractive: bool | None = None
+    constraints: tuple[str, ...] = ()
+    multipliers: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
 
     @property
     def growth_rate(self) -> float:

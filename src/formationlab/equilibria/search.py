@@ -85,6 +85,7 @@ def settle(
     integrator: FixedStepIntegrator | None = None,
     speed: float = 1e-6,
     tolerances: Tolerances | None = None,
+    system: System | None = None,
 ) -> BatchResult:
     """Integrate a batch of starts ``q0`` (``(B, n, 2)``) until they stop or ``duration``.
 
@@ -105,6 +106,9 @@ def settle(
     equilibrium and leave it by a spurious drift, the implicit one lands on
     the surface and slides (``formationlab.integrators.implicit``).
 
+    ``system`` (default ``System(formation, law)``) is the closed loop to settle, e.g.
+    with obstacles and a safety filter.
+
     Returns
     -------
     BatchResult
@@ -118,7 +122,7 @@ def settle(
         integrator = RK4(dt=0.01) if law.smooth else ImplicitEuler(dt=0.01)
     stepper = Substepped(inner=integrator, reach=0.05 * float(formation.distances.min()))
     out = drive(
-        System(formation=formation, law=law), stepper, q,
+        system or System(formation=formation, law=law), stepper, q,
         n_steps=int(np.ceil(duration / integrator.dt)), stop=StopRule(speed=speed, check_every=10),
     )  # fmt: skip
     return BatchResult.from_final(
