@@ -15,7 +15,11 @@ filter's QP at ``u = 0`` says
 with ``G_c`` the row (``-grad h_c``, one multiplier per pair for the centralized QP;
 one per robot and pair for the decentralized filter, each robot's half). That square
 (or underdetermined) smooth system in ``(q, lambda)`` is what :func:`refine_deadlock`
-solves (scipy's ``least_squares``), starting from a settled end state.
+solves (scipy's ``least_squares``), starting from a settled end state. A settled state
+approaches a deadlock only polynomially (``h ~ (gamma t)^(-1/2)``), so its active set
+may still lack constraints that will bind: the candidates are the active rows plus
+the rows with ``h <= D^2`` (``D = D_s`` or ``D_o``) into which ``u_hat`` pushes; a
+candidate whose multiplier comes out ``<= 0`` is dropped and the system solved again.
 
 Classification (:func:`classify_deadlock`). Near a deadlock with strictly positive
 multipliers the active set does not change, so the motion splits into
@@ -71,6 +75,28 @@ def active_set(system: System, q: NDArray[np.float64]) -> ActiveSet:
         pairs=tuple(sorted({(int(i), int(j)) for _, i, j in res.active_pairs})),
         obstacles=tuple(sorted({(int(i), int(o)) for _, i, o in res.active_obstacles})),
     )
+
+
+def _candidates(system: System, q: NDArray[np.float64]) -> ActiveSet:
+    """Active rows, plus rows with ``h <= D^2`` that ``u_hat`` pushes into (module docstring)."""
+    act = active_set(system, q)
+    assert system.safety is not None
+    cfg = system.safety
+    u = _u_hat(system, q)
+    pairs, obs = set(act.pairs), set(act.obstacles)
+    n = q.shape[0]
+    for i in range(n):
+        for j in range(i + 1, n):
+            w = q[i] - q[j]
+            if w @ w - cfg.distance**2 <= cfg.distance**2 and -2 * w @ (u[i] - u[j]) > 0:
+                pairs.add((i, j))
+    for o in range(len(system.obstacles)):
+        for i in range(n):
+            probe = ActiveSet(pairs=(), obstacles=((i, o),))
+            grads, h = _rows(system, q, probe)
+            if h[0] <= cfg.d_obstacle**2 and -np.sum(grads[0] * u) > 0:
+                obs.add((i, o))
+    return ActiveSet(pairs=tuple(sorted(pairs)), obstacles=tuple(sorted(obs)))
 
 
 def _u_hat(system: System, q: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -148,35 +174,70 @@ def refine_deadlock(system: System, q0: NDArray[np.float64], *, tol: float = 1e-
     """Solve the KKT system of a deadlock (module docstring) from ``q0`` ``(n, 2)``.
 
     ``success`` when the residual is below ``tol`` times the size of ``u_hat`` (at
-    least 1) and every multiplier is positive.
+    least 1) and every free multiplier is positive. Under the decentralized filter each
+    robot's half of a pair row has its own multiplier; a half whose multiplier comes out
+    negative is fixed at zero (that robot moves away: only its partner's half binds).
     """
     q0 = np.asarray(q0, dtype=float)
-    act = active_set(system, q0)
-    shape, m = q0.shape, _n_multipliers(system, act)
-    if len(act) == 0:
-        return Deadlock(
-            q=q0, active=act, multipliers=np.zeros(0), residual=np.inf, success=False,
-            message="no active constraint",
-        )  # fmt: skip
+    act = _candidates(system, q0)
+    free = np.ones(_n_multipliers(system, act), bool)
+    dead = Deadlock(
+        q=q0, active=act, multipliers=np.zeros(0), residual=np.inf, success=False,
+        message="no active constraint",
+    )  # fmt: skip
+    while len(act) and free.any():
+        dead = _solve(system, q0, act, free, tol)
+        lam = np.where(free, dead.multipliers, np.inf)
+        if dead.success or np.all(lam > 0):
+            return dead
+        k = int(np.argmin(lam))
+        free[k] = False
+        split = _split(system)
+        pairs, p = list(act.pairs), len(act.pairs)
+        if split and k < 2 * p and free[2 * (k // 2) : 2 * (k // 2) + 2].any():
+            continue  # the other half of the pair still binds
+        drop = k // 2 if split and k < 2 * p else k if k < p else None
+        if drop is not None and drop < p:
+            lo = 2 * drop if split else drop
+            free = np.delete(free, slice(lo, lo + (2 if split else 1)))
+            pairs.pop(drop)
+            act = ActiveSet(pairs=tuple(pairs), obstacles=act.obstacles)
+        else:
+            o = k - (2 * p if split else p)
+            free = np.delete(free, k)
+            act = ActiveSet(
+                pairs=act.pairs, obstacles=tuple(x for c, x in enumerate(act.obstacles) if c != o)
+            )
+    return dead
+
+
+def _solve(
+    system: System, q0: NDArray[np.float64], act: ActiveSet, free: NDArray[np.bool_], tol: float
+) -> Deadlock:
+    """The KKT system of the constraints ``act`` (free multipliers ``free``) solved from ``q0``."""
+    shape, m = q0.shape, int(free.sum())
+
+    def full(lam: NDArray) -> NDArray:
+        out = np.zeros(free.size)
+        out[free] = lam
+        return out
+
     # initial multipliers: least squares of u_hat = sum lambda G^T at q0
-    basis = np.stack([_kkt(system, q0, e, act)[: q0.size] for e in np.eye(m)], axis=1)
-    offset = _kkt(system, q0, np.zeros(m), act)[: q0.size]
+    offset = _kkt(system, q0, np.zeros(free.size), act)[: q0.size]
+    basis = np.stack([_kkt(system, q0, full(e), act)[: q0.size] for e in np.eye(m)], axis=1)
     lam0 = np.linalg.lstsq(basis - offset[:, None], -offset, rcond=None)[0]
     scale = max(1.0, float(np.max(np.abs(_u_hat(system, q0)))))
 
     def fun(x: NDArray) -> NDArray:
-        return _kkt(system, x[: q0.size].reshape(shape), x[q0.size :], act) / scale
+        return _kkt(system, x[: q0.size].reshape(shape), full(x[q0.size :]), act) / scale
 
     sol = least_squares(fun, np.concatenate([q0.ravel(), lam0]), xtol=1e-15, ftol=1e-15, gtol=1e-15)
     q = sol.x[: q0.size].reshape(shape)
-    lam = sol.x[q0.size :]
+    lam = full(sol.x[q0.size :])
     res = float(np.max(np.abs(fun(sol.x)))) * scale
-    ok = res <= tol * scale and bool(np.all(lam > 0))
-    why = (
-        ""
-        if ok
-        else (f"KKT residual {res:.3g}" + ("" if np.all(lam > 0) else "; a multiplier <= 0"))
-    )
+    positive = bool(np.all(lam[free] > 0))
+    ok = res <= tol * scale and positive
+    why = "" if ok else f"KKT residual {res:.3g}" + ("" if positive else "; a multiplier <= 0")
     return Deadlock(q=q, active=act, multipliers=lam, residual=res, success=ok, message=why)
 
 
@@ -216,6 +277,20 @@ def classify_deadlock(
         q=q, distances=r, residual=dead.residual, stability=stability,
         unstable_directions=unstable, eigenvalues=lam, desired=outcome == "desired",
         outcome=outcome, zero_directions=zero,
-        attractive=bool(system.safety.gamma > 0 and np.all(dead.multipliers > 0)),
+        attractive=bool(
+            system.safety.gamma > 0
+            and np.all(dead.multipliers >= 0)
+            and _per_pair_positive(system, dead)
+        ),
         constraints=dead.active.labels(), multipliers=dead.multipliers,
     )  # fmt: skip
+
+
+def _per_pair_positive(system: System, dead: Deadlock) -> bool:
+    """Every active constraint has a positive multiplier (one of a pair's halves at least)."""
+    lam = dead.multipliers
+    if not _split(system):
+        return bool(np.all(lam > 0))
+    p = len(dead.active.pairs)
+    halves = lam[: 2 * p].reshape(p, 2)
+    return bool(np.all(halves.max(axis=1) > 0) and np.all(lam[2 * p :] > 0))
