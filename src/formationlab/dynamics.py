@@ -285,7 +285,7 @@ class System:
             s_pair = self.pair_swept_clearances(x0, x1)
         if not s_obs.min() <= min(0.0, float(s_pair.min())):
             return ""
-        i, o = np.unravel_index(int(np.argmin(s_obs)), s_obs.shape)
+        i, o = (int(v) for v in np.unravel_index(int(np.argmin(s_obs)), s_obs.shape))
         what = f"obstacle {o + 1} ({self.obstacles[o].describe()})"
         fix = f"reduce dt (now {dt:g} s), e.g. to {dt / 10:g} s"
         if status is Status.COLLISION:

@@ -340,7 +340,7 @@ def barrier_filter(
     status = np.zeros(trials, np.int8)
     active = np.zeros((trials, n), bool)
     act_pairs, act_obs, notes = [], [], []
-    for t in np.flatnonzero(_maybe_violated(config, fq, fu, obstacles, all_pairs)):
+    for t in map(int, np.flatnonzero(_maybe_violated(config, fq, fu, obstacles, all_pairs))):
         pairs = all_pairs[starts[t] : starts[t + 1], 1:]
         c = barrier_constraints(config, fq[t], obstacles, pairs)
         x_hat = fu[t].reshape(-1)
