@@ -223,7 +223,12 @@ def _print_table(summary: dict[str, Any]) -> None:
     from rich.table import Table
 
     outs = summary["outcomes"]
-    table = Table(title=f"{summary['scenario']}: outcome fractions (95% Wilson interval)")
+    safety = summary.get("safety") or {}
+    extra = ""
+    if safety:
+        f = safety.get("filter")
+        extra = f", filter {f['filter'] if f else 'none'}, {len(safety['obstacles'])} obstacles"
+    table = Table(title=f"{summary['scenario']}{extra}: outcome fractions (95% Wilson interval)")
     table.add_column("law")
     table.add_column("parameters")
     table.add_column("trials", justify="right")
