@@ -39,7 +39,7 @@ class Catalogue:
         Trials that ended at each equilibrium.
     skipped : dict of str to int
         Candidates not attributed to an equilibrium, by reason
-        (``"collision"``, ``"not-refined"``).
+        (``"collision"``, ``"not-refined"``, ``"non-finite"``: the field overflows there).
     """
 
     formation: Formation
@@ -128,8 +128,13 @@ def catalogue(
                 return k
         return None
 
-    pending = [(q, 1) for q, o in zip(cand, outs, strict=True) if o != "collision"]
+    with np.errstate(over="ignore", invalid="ignore"):  # a trial thrown far away overflows
+        finite = np.array([bool(np.isfinite(law.control(formation, q)).all()) for q in cand])
+    finite = finite.reshape(-1) if finite.size else np.zeros(0, bool)
+    keep = (outs != "collision") & finite
+    pending = [(q, 1) for q, k in zip(cand, keep, strict=True) if k]
     skipped["collision"] += int(np.sum(outs == "collision"))
+    skipped["non-finite"] += int(np.sum((outs != "collision") & ~finite))
     pending += [(np.asarray(q, dtype=float), 0) for q in (extra or [])]
     for q, weight in pending:
         k = attribute(q, match_tol) if weight else None
