@@ -227,3 +227,35 @@ def test_head_on_deadlock_is_found_and_classified(kind):
         assert eq.stability == "saddle" and eq.unstable_directions == 2
     lines = report.lines()
     assert "deadlock on pair 1-2, pair 1-4, pair 2-3" in lines[0]
+
+
+@pytest.mark.slow
+def test_square_deadlock_of_the_squared_distance_law_is_stable():
+    """The deadlock that takes 45 % of the square's trials under the decentralized filter.
+
+    Robots 3 and 4 on the wrong sides of each other, squeezed to D_s: an isosceles
+    trapezoid. Refined from a rough hand-made guess, classified stable; the filtered
+    closed loop started near it (pair 3-4 kept at D_s, the rest moved by 0.02) comes back.
+    """
+    sc = load_scenario(EXAMPLES / "square-safety.toml")
+    system = System(formation=sc.formation, law=sc.law, safety=sc.safety)
+    guess = np.array([[-0.45, -0.55], [0.45, -0.55], [-0.15, 0.55], [0.15, 0.55]])
+    from formationlab.equilibria.constrained import classify_deadlock, refine_deadlock
+
+    dead = refine_deadlock(system, guess)
+    assert dead.success and dead.active.labels() == ("pair 3-4",)
+    eq = classify_deadlock(system, dead)
+    assert eq.stability == "stable" and eq.attractive and eq.outcome == "incorrect"
+    assert np.linalg.norm(dead.q[2] - dead.q[3]) == pytest.approx(0.3, abs=1e-12)
+    assert (
+        np.abs(system.rhs(dead.q)).max() < 1e-9 < np.abs(sc.law.control(sc.formation, dead.q)).max()
+    )
+    start = dead.q.copy()
+    start[:2] += np.array([[0.02, -0.01], [0.01, 0.02]])
+    import formationlab as fl
+
+    run = fl.simulate(sc.formation, sc.law, start, duration=12.0, safety=sc.safety)
+    iu, ju = np.triu_indices(4, 1)
+    r_end = np.linalg.norm(run.q[-1][ju] - run.q[-1][iu], axis=-1)
+    r_eq = np.linalg.norm(dead.q[ju] - dead.q[iu], axis=-1)
+    np.testing.assert_allclose(r_end, r_eq, atol=5e-3)
