@@ -25,6 +25,7 @@ __all__ = [
     "Lattice",
     "MarchingModel",
     "RobotsModel",
+    "SafetyModel",
     "ScenarioModel",
     "SimulationModel",
     "StartAround",
@@ -304,6 +305,48 @@ class MarchingModel(BaseModel):
         return None if v is None else _finite(v, "angular_velocity")
 
 
+class SafetyModel(BaseModel):
+    """``[safety]``: the safety filter between the law and the robots (``docs/safety.md``).
+
+    Contact distances and obstacles are checked by :mod:`formationlab._scenario_safety`.
+    """
+
+    model_config = _STRICT
+    filter: Literal["none", "barrier", "barrier-decentralized"] = "none"
+    distance: float = 0.25
+    gamma: float = 100.0
+    max_speed: float | None = None
+    speed_sides: int = 8
+    sensing_radius: float | None = None
+    obstacle_distance: float | None = None
+
+    @field_validator("distance", "sensing_radius", "obstacle_distance", "max_speed", mode="before")
+    @classmethod
+    def _positive(cls, v: Any, info: Any) -> float:
+        x = _finite(v, info.field_name)
+        if x <= 0:
+            raise ValueError(f"{info.field_name} must be > 0 (m), got {v!r}")
+        return x
+
+    @field_validator("gamma", mode="before")
+    @classmethod
+    def _gamma(cls, v: Any) -> float:
+        x = _finite(v, "gamma")
+        if x < 0:
+            raise ValueError(
+                f"gamma must be >= 0 (the barrier gain: 0 lets no pair approach at all, "
+                f"larger values let pairs approach faster; default 100), got {v!r}"
+            )
+        return x
+
+    @field_validator("speed_sides", mode="before")
+    @classmethod
+    def _sides(cls, v: Any) -> int:
+        if isinstance(v, bool) or not isinstance(v, int) or v < 4:
+            raise ValueError(f"speed_sides must be a whole number >= 4, got {v!r}")
+        return v
+
+
 class ScenarioModel(BaseModel):
     """The whole file. ``[study]`` and ``[equilibria]`` are passed through unvalidated."""
 
@@ -317,6 +360,8 @@ class ScenarioModel(BaseModel):
     marching: MarchingModel | None = None
     study: dict[str, Any] | None = None
     equilibria: dict[str, Any] | None = None
+    obstacles: list[dict[str, Any]] | None = None
+    safety: SafetyModel | None = None
 
 
 #: The keys each table accepts (the fixed ones; laws and integrators add theirs).
@@ -327,4 +372,5 @@ SECTIONS: dict[str, tuple[str, ...]] = {
     "controller": tuple(ControllerModel.model_fields),
     "simulation": tuple(SimulationModel.model_fields),
     "marching": tuple(MarchingModel.model_fields),
+    "safety": tuple(SafetyModel.model_fields),
 }

@@ -15,13 +15,25 @@ kernel: a step from ``x0`` to ``x1`` is rejected when it is not finite, when it
 ends with two robots in contact (``r_ij <= a_ij``: :attr:`Status.COLLISION`)
 or when the straight path of the step passes through contact while both ends
 are clear (:attr:`Status.STEP_TOO_LARGE`: robots jumped through each other).
+
+Obstacles and a safety filter (:mod:`formationlab.safety`) belong to the closed
+loop too: the command of robot ``i`` is the law's ``u_i`` plus Khatib's repulsion
+``-k grad_i Gamma_o`` from the obstacles (``k`` the law's repulsion gain,
+:meth:`~formationlab.controllers.Law.obstacle_repulsion`), then minimally changed by
+the filter (:meth:`~formationlab.safety.SafetyFilter.apply` on the law's points), then
+turned into motion by the robot model. A robot touching an obstacle (clearance
+``delta - rho_i / 2 <= 0``) is contact like two robots touching, at the end of a step
+and along it (:func:`formationlab.safety.swept_clearances`). Without obstacles and
+with no filter every method computes exactly what it did before they existed.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from itertools import pairwise
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,41 +44,69 @@ from .models import RobotModel, SingleIntegrator
 from .spec import DENSE_LIMIT, Formation
 from .status import Status
 
+if TYPE_CHECKING:  # the safety package needs the optional "safety" extra at run time
+    from .safety import FilterResult, Obstacle, SafetyFilter
+
 __all__ = ["System"]
 
 
 @dataclass(frozen=True, kw_only=True)
 class System:
-    """A closed loop: a formation, a law and a robot model.
+    """A closed loop: a formation, a law, a robot model, obstacles and a safety filter.
 
     ``rhs(x, t)`` is the vector field the integrators step; ``rhs_with(x, w, t)``
     the same with the law's steps replaced by Filippov weights ``w`` (shape of
     ``law.switching``); ``sigma(x)`` the switching functions. ``marching``
     (:class:`~formationlab.marching.Marching` or
     :class:`~formationlab.marching.MotionParameters`) adds to the law's control.
+
+    ``obstacles`` are static :class:`~formationlab.safety.Circle` and
+    :class:`~formationlab.safety.Polygon` obstacles; ``safety`` a
+    :class:`~formationlab.safety.SafetyFilter` (None or ``filter = "none"``: commands
+    unchanged). The filter's ``D_s`` and ``D_o`` are checked against the contact
+    distances when the system is built.
     """
 
     formation: Formation
     law: Law
     model: RobotModel = field(default_factory=SingleIntegrator)
     marching: March | None = None
+    obstacles: Sequence[Obstacle] = ()
+    safety: SafetyFilter | None = None
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "obstacles", tuple(self.obstacles))
         if self.marching is not None:
             self.marching.check(self.formation)
+        if self.filtered:
+            assert self.safety is not None
+            self.safety.check_contact(self.formation.contact_matrix)
+        if self.obstacles:
+            self.law.obstacle_repulsion()  # a law without one refuses obstacles now
 
     @property
     def time_dependent(self) -> bool:
         """Whether the field depends on the time (a marching reference that is a function)."""
         return self.marching is not None and self.marching.time_dependent
 
+    @property
+    def filtered(self) -> bool:
+        """Whether a safety filter changes the commands (``safety.filter != "none"``)."""
+        return self.safety is not None and self.safety.enabled
+
     def command(
         self, p: NDArray[np.float64], u: NDArray[np.float64], t: float = 0.0
     ) -> NDArray[np.float64]:
-        """The command ``(..., n, 2)``: the law's control ``u`` at points ``p``, with marching."""
-        if self.marching is None:
-            return u
-        return self.marching.command(self.formation, p, u, t, self.model.velocity_gain)
+        """The command ``(..., n, 2)``: the law's control ``u`` at points ``p``, with marching,
+        obstacle repulsion and then the safety filter."""
+        if self.marching is not None:
+            u = self.marching.command(self.formation, p, u, t, self.model.velocity_gain)
+        if self.obstacles:
+            u = self._repelled(p, u)
+        if self.filtered:
+            assert self.safety is not None
+            u = self.safety.apply(p, u, obstacles=self.obstacles).u
+        return u
 
     def rhs(self, x: NDArray[np.float64], t: float = 0.0) -> NDArray[np.float64]:
         p = self.model.points(x)
@@ -83,6 +123,68 @@ class System:
     def speed(self, x: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
         """Largest robot speed (:meth:`RobotModel.speed`) of states and rates ``(..., n, k)``."""
         return np.max(self.model.speed(x, v), axis=-1)
+
+    def filter_result(self, x: NDArray[np.float64]) -> FilterResult:
+        """What the safety filter does at states ``x`` ``(..., n, k)``: command, status, active set.
+
+        Trials of the result are the flattened batch axes of ``x``. Needs a filter.
+        """
+        from .errors import ParameterError
+
+        if not self.filtered:
+            raise ParameterError("this system has no safety filter (safety.filter is 'none')")
+        assert self.safety is not None
+        p = self.model.points(np.asarray(x, dtype=float))
+        u = self.law.control(self.formation, p)
+        if self.obstacles:
+            u = self._repelled(p, u)
+        return self.safety.apply(p, u, obstacles=self.obstacles)
+
+    def _repelled(self, p: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``u - k grad Gamma_o``: Khatib's repulsion from the obstacles added to ``u``."""
+        from .safety import grad_obstacle_potential
+
+        rep = self.law.obstacle_repulsion()
+        return u - rep.gain * grad_obstacle_potential(
+            p, self._radii, self.obstacles, eta=rep.repulsion.eta, influence=rep.repulsion.influence
+        )
+
+    def potential(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The law's Lyapunov function at ``x``, with the obstacles' repulsion; shape ``(...)``.
+
+        ``law.potential`` plus ``weight Gamma_o`` (:class:`~formationlab.controllers.base.
+        ObstacleRepulsion`), so that the obstacle-repelled law still descends it. A safety
+        filter only removes descent directions, so it is not part of ``V``.
+        """
+        p = self.model.points(np.asarray(x, dtype=float))
+        v = self.law.potential(self.formation, p)
+        if self.obstacles:
+            from .safety import obstacle_potential
+
+            rep = self.law.obstacle_repulsion()
+            v = v + rep.weight * obstacle_potential(
+                p, self._radii, self.obstacles,
+                eta=rep.repulsion.eta, influence=rep.repulsion.influence,
+            )  # fmt: skip
+        return v
+
+    @cached_property
+    def _radii(self) -> NDArray[np.float64]:
+        return np.asarray(self.formation.diameters, dtype=float) / 2
+
+    def obstacle_clearances(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Clearance ``delta - rho_i / 2`` of every robot to every obstacle; ``(..., n, O)``."""
+        from .safety import clearances
+
+        return clearances(self.positions(x), self._radii, self.obstacles)[0]
+
+    def swept_obstacle_clearances(
+        self, x0: NDArray[np.float64], x1: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """Least robot-obstacle clearance along the straight step ``x0 -> x1``; ``(..., n, O)``."""
+        from .safety import swept_clearances
+
+        return swept_clearances(self.positions(x0), self.positions(x1), self._radii, self.obstacles)
 
     def sigma(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         return self.law.switching(self.formation, self.model.points(x))
@@ -130,13 +232,16 @@ class System:
         return np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) - a
 
     def clearance(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Least ``r_ij - a_ij`` over all pairs; shape ``(...)``.
+        """Least ``r_ij - a_ij`` over all pairs, and robot-obstacle clearance; shape ``(...)``.
 
         For large formations the pairs a k-d tree finds close; when none is, a floor
         (every clearance is at least that).
         """
         iu, ju, a, floor = self._pairs(x)
-        return np.min(self._clearances(x, iu, ju, a), axis=-1, initial=floor)
+        least = np.min(self._clearances(x, iu, ju, a), axis=-1, initial=floor)
+        if self.obstacles:
+            least = np.minimum(least, np.min(self.obstacle_clearances(x), axis=(-2, -1)))
+        return least
 
     def pair_swept_clearances(
         self, x0: NDArray[np.float64], x1: NDArray[np.float64]
@@ -157,10 +262,15 @@ class System:
         """Least ``r_ij - a_ij`` over the straight step from ``x0`` to ``x1``; shape ``(...)``.
 
         Catches a step that carries two robots through each other, which the
-        clearance at the end of the step alone would miss.
+        clearance at the end of the step alone would miss. With obstacles, also the
+        least robot-obstacle clearance along the step.
         """
         floor = self._pairs(x0, x1)[3]
-        return np.min(self.pair_swept_clearances(x0, x1), axis=-1, initial=floor)
+        least = np.min(self.pair_swept_clearances(x0, x1), axis=-1, initial=floor)
+        if self.obstacles:
+            swept = self.swept_obstacle_clearances(x0, x1)
+            least = np.minimum(least, np.min(swept, axis=(-2, -1)))
+        return least
 
     def step_verdict(
         self, x0: NDArray[np.float64], x1: NDArray[np.float64]
@@ -206,6 +316,10 @@ class System:
         iu, ju, a, _ = self._pairs(x0, x1)
         q0, q1 = self.positions(x0), self.positions(x1)
         jump = float(np.max(np.linalg.norm(q1 - q0, axis=-1)))
+        if self.obstacles:
+            hit = self._obstacle_message(x0, x1, status, t, dt, jump)
+            if hit:
+                return hit
         if status is Status.COLLISION:
             i, j, a_ij = self.closest_pair(x1)
             r = self.clearance(x1) + a_ij
@@ -222,4 +336,31 @@ class System:
             f"(the largest move in that step is {jump:.3g}, against a contact distance "
             f"a_{i}{j} = {a[p]:g}); the step is too large for the field: reduce dt "
             f"(now {dt:g} s), e.g. to {dt / 10:g} s"
+        )
+
+    def _obstacle_message(
+        self, x0: NDArray[np.float64], x1: NDArray[np.float64], status: Status, t: float,
+        dt: float, jump: float,
+    ) -> str:  # fmt: skip
+        """The message of a step rejected for an obstacle, or "" when a pair of robots did it."""
+        if status is Status.COLLISION:
+            s_obs, s_pair = self.obstacle_clearances(x1), self.pair_clearances(x1)
+        else:
+            s_obs = self.swept_obstacle_clearances(x0, x1)
+            s_pair = self.pair_swept_clearances(x0, x1)
+        if not s_obs.min() <= min(0.0, float(s_pair.min())):
+            return ""
+        i, o = (int(v) for v in np.unravel_index(int(np.argmin(s_obs)), s_obs.shape))
+        what = f"obstacle {o + 1} ({self.obstacles[o].describe()})"
+        fix = f"reduce dt (now {dt:g} s), e.g. to {dt / 10:g} s"
+        if status is Status.COLLISION:
+            return (
+                f"the step to t = {t:g} s would bring robot {i + 1} into contact with {what}: "
+                f"clearance {s_obs[i, o]:.4g} <= 0; Khatib's repulsion from the obstacles (a "
+                f"positive repulsion gain) keeps the exact flow off them, so the step is too "
+                f"large: {fix}"
+            )
+        return (
+            f"robot {i + 1} passes through {what} during the step to t = {t:g} s (the largest "
+            f"move in that step is {jump:.3g}); the step is too large for the field: {fix}"
         )

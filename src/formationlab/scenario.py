@@ -45,6 +45,7 @@ from ._scenario_build import (
 from ._scenario_models import SECTIONS, ScenarioModel
 from ._scenario_parts import build_entry
 from ._scenario_robots import build_marching, build_robot_model
+from ._scenario_safety import build_safety
 from .controllers import LAWS, Law
 from .errors import IgnoredKeyWarning, ScenarioError, UserInputError
 from .integrators import INTEGRATORS, Integrator
@@ -96,6 +97,10 @@ class Scenario:
     warnings : tuple of str
         Things that are allowed but probably unintended (a non-rigid graph, keys
         that have no effect, ...).
+    obstacles : tuple of Circle or Polygon
+        The ``[[obstacles]]`` tables (:mod:`formationlab.safety`), clear of the starts.
+    safety : SafetyFilter or None
+        The ``[safety]`` table (None when absent), checked against the contact distances.
     """
 
     name: str
@@ -119,6 +124,8 @@ class Scenario:
     def __post_init__(self) -> None:
         if self.x0 is None:
             object.__setattr__(self, "x0", self.q0)
+    obstacles: tuple[Any, ...] = ()
+    safety: Any = None
 
     @property
     def n(self) -> int:
@@ -259,6 +266,9 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
     formation = build_formation(rob, frm, ctl.alpha_values, fail, warnings)
     q0 = initial_positions(rob, formation, fail)
     q0.setflags(write=False)  # the scenario is frozen, its arrays too
+    obstacles, safety = build_safety(
+        model.obstacles, model.safety, formation, q0, source=source, text=text, warnings=warnings
+    )
 
     robot, initial, ignored_model = build_robot_model(
         rob, formation.n, source=source, text=text, fail=fail, warnings=warnings
@@ -337,4 +347,6 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         model=robot,
         x0=x0,
         marching=marching,
+        obstacles=obstacles,
+        safety=safety,
     )

@@ -12,10 +12,10 @@ diagnostics.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -42,6 +42,9 @@ from .rigid_motion import RigidMotion
 from .spec import Formation
 from .status import Status
 from .validation import whole
+
+if TYPE_CHECKING:
+    from .safety import Obstacle, SafetyFilter, SafetyRecord
 
 __all__ = ["SimulationResult", "simulate"]
 
@@ -85,6 +88,10 @@ class SimulationResult:
         Why, in words.
     stats : dict
         Integrator diagnostics (steps, cost, switches, ...).
+    safety : SafetyRecord or None
+        With obstacles or a safety filter: the obstacles, and which robots, pairs and
+        obstacle constraints the filter held active at each saved state
+        (:class:`formationlab.safety.SafetyRecord`); None otherwise.
     """
 
     formation: Formation
@@ -156,6 +163,7 @@ class SimulationResult:
         """Largest angle between a heading and their circular mean, ``(T,)`` (unicycles)."""
         h = self.headings
         return None if h is None else heading_spread(h)
+    safety: SafetyRecord | None = None
 
     @property
     def active(self) -> NDArray[np.bool_]:
@@ -246,6 +254,8 @@ class SimulationResult:
         marching ``marching`` (final shape error, centroid velocity, its error against
         the reference); with marching ``final_speed``, ``converged_time`` and
         ``net_speed`` are measured relative to the centroid.
+        With obstacles or a filter also ``safety``
+        (:meth:`formationlab.safety.SafetyRecord.summary`).
         """
         from .analysis import triangle_orientation
 
@@ -266,6 +276,8 @@ class SimulationResult:
             extra["final_points"] = self.points[-1].tolist()
         if self.marching is not None and len(self.t) > 2:
             extra["marching"] = self._marching_summary()
+        if self.safety is not None:
+            extra["safety"] = self.safety.summary()
         return {
             "model": {"name": self.model.name, **dataclasses.asdict(self.model)},
             "state_names": list(type(self.model).state_names),
@@ -339,6 +351,8 @@ def simulate(
     save_every: int = 1,
     progress: Callable[[float], None] | None = None,
     interruptible: bool = False,
+    obstacles: Sequence[Obstacle] = (),
+    safety: SafetyFilter | str | None = None,
     backend: Literal["auto", "numpy", "numba"] = "auto",
     **initial: Any,
 ) -> SimulationResult:
@@ -379,6 +393,13 @@ def simulate(
     **initial
         The model's extra initial state when ``q0`` holds positions only:
         ``headings`` (unicycle, radians), ``velocities`` (double integrator).
+    obstacles : sequence of Circle or Polygon
+        Static obstacles (:mod:`formationlab.safety`): the law gains Khatib's repulsion
+        from them, and touching one is contact (status ``"step-collision"``).
+    safety : SafetyFilter or str, optional
+        A safety filter between the law and the robots (``"barrier"``,
+        ``"barrier-decentralized"`` with their defaults, or a configured
+        :class:`~formationlab.safety.SafetyFilter`); default none.
 
     Returns
     -------
@@ -401,7 +422,7 @@ def simulate(
     law, integrator = resolve(LAWS, law), resolve(INTEGRATORS, integrator or Euler(dt=1e-3))
     robot = resolve(MODELS, model or SingleIntegrator())
     x0 = initial_state(formation, robot, q0, **initial)
-    system = System(formation=formation, law=law, model=robot, marching=marching)
+    system = _system(formation, law, robot, x0, marching, obstacles, safety)
     terms = compiled_terms(system, integrator) if backend != "numpy" else None
     if backend == "numba" and terms is None:
         raise ParameterError(
@@ -420,10 +441,22 @@ def simulate(
             interruptible=interruptible,
         )  # fmt: skip
     points = robot.points(raw.x)
+    record = None
+    if system.obstacles or system.filtered:
+        from .safety import SafetyRecord
+
+        clear = system.obstacle_clearances(raw.x)
+        least = clear.min(axis=(-2, -1)) if clear.size else np.full(len(raw.t), np.inf)
+        record = SafetyRecord.from_states(
+            raw.q, filter=system.safety if system.filtered else None,
+            obstacles=system.obstacles,
+            result=system.filter_result(raw.x) if system.filtered else None,
+            obstacle_clearance=least,
+        )  # fmt: skip
     status, message = raw.status, raw.message
     try:
         with np.errstate(over="ignore", invalid="ignore"):  # a diverged run: V is inf
-            V, sigma = law.potential(formation, points), law.switching(formation, points)
+            V, sigma = system.potential(raw.x), law.switching(formation, points)
     except KeyboardInterrupt:  # while reading the run: keep the states, not V and sigma
         if not interruptible:
             raise
@@ -447,6 +480,7 @@ def simulate(
         xdot=raw.v,
         model=robot,
         marching=marching,
+        safety=record,
     )
 
 
@@ -488,3 +522,26 @@ def initial_state(
                 key="headings",
             ) from None
     return x0
+
+
+def _system(
+    formation: Formation,
+    law: Law,
+    model: RobotModel,
+    x0: NDArray[np.float64],
+    marching: March | None,
+    obstacles: Sequence[Obstacle],
+    safety: SafetyFilter | str | None,
+) -> System:
+    """The closed loop, with obstacles and filter validated against the start ``x0``."""
+    if not obstacles and (safety is None or safety == "none"):
+        return System(formation=formation, law=law, model=model, marching=marching)
+    from .safety import SafetyFilter, check_obstacle_starts
+
+    if isinstance(safety, str):
+        safety = SafetyFilter(filter=safety)  # type: ignore[arg-type]
+    check_obstacle_starts(model.positions(x0), formation.diameters / 2, tuple(obstacles))
+    return System(
+        formation=formation, law=law, model=model, marching=marching,
+        obstacles=tuple(obstacles), safety=safety,
+    )  # fmt: skip

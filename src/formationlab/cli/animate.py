@@ -48,19 +48,31 @@ def write_animation(
     from ..io.animation import save_animation
     from ..plotting.animation import animate_run
 
+    safety: dict[str, Any] = {}
     if hasattr(result_or_ds, "formation"):
         r = result_or_ds
         t, q, edges, diam = r.t, r.q, r.formation.edges, r.formation.diameters
         headings, points = r.headings, (None if r.points is r.q else r.points)
+        if r.safety is not None:
+            safety = {
+                "obstacles": r.safety.obstacles, "active": r.safety.active,
+                "active_pairs": r.safety.active_pairs,
+            }  # fmt: skip
     else:
         ds = result_or_ds
         t, q = ds["time"].values, ds["q"].values
         edges, diam = ds["edge_robots"].values - 1, ds["diameter"].values
         headings = ds["theta"].values if "theta" in ds else None
         points = ds["point"].values if "point" in ds else None
+        if "filter_active" in ds:
+            safety = {
+                "obstacles": json.loads(str(ds.attrs.get("obstacles", "[]"))),
+                "active": ds["filter_active"].values.astype(bool),
+                "active_pairs": ds["active_pair"].values.reshape(-1, 3) - [0, 1, 1],
+            }
     anim = animate_run(
         t, q, edges=edges, diameters=diam, max_frames=frames, title=title,
-        headings=headings, points=points,
+        headings=headings, points=points, **safety,
     )  # fmt: skip
     return save_animation(anim, folder / ANIMATION_STEM, formats=formats, written=done)
 

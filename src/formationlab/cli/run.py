@@ -255,6 +255,8 @@ def _simulate(simulate: Any, sc: Any, save_every: int, quiet: bool) -> Any:
         "interruptible": True,  # Ctrl-C: keep the states so far (status "interrupted")
         "model": sc.model,
         "marching": sc.marching,
+        "obstacles": sc.obstacles,
+        "safety": sc.safety,
     }
     if not show:
         return simulate(sc.formation, sc.law, sc.x0, **kwargs)
@@ -315,11 +317,16 @@ def validate(
             warn(w if w.startswith(sc.source) else f"{path}: {w}")
         f = sc.formation
         rigid = "rigid" if f.is_rigid else "not rigid"
+        safety = ""
+        if sc.obstacles:
+            safety += f", {len(sc.obstacles)} obstacles"
+        if sc.safety is not None and sc.safety.enabled:
+            safety += f", safety filter {sc.safety.filter} (D_s = {sc.safety.distance:g})"
         typer.echo(
             f"ok: {path}: {sc.name!r}, {_count(f.n, 'robot')}, {_count(len(f.edges), 'edge')} "
             f"({rigid}), "
             f"orientation {f.orientation}, model {sc.model.name}, law {sc.law.name}, integrator "
-            f"{json.dumps(sc.parameters['integrator'])}, duration {sc.duration:g} s"
+            f"{json.dumps(sc.parameters['integrator'])}, duration {sc.duration:g} s{safety}"
             + (f", marching ({type(sc.marching).__name__})" if sc.marching is not None else "")
         )
         plan = _plan(sc, 1)

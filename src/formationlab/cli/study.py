@@ -61,6 +61,14 @@ def study(
             "(overrides study.settle.enabled; default off: it can cost many times the study).",
         ),
     ] = None,
+    safety_filter: Annotated[
+        str | None,
+        typer.Option(
+            "--filter",
+            help='Safety filter of every trial: "none", "barrier" or "barrier-decentralized" '
+            "(overrides safety.filter; the other [safety] keys apply).",
+        ),
+    ] = None,
     resume: Annotated[
         bool, typer.Option("--resume", help="Finish an interrupted study in OUT.")
     ] = False,
@@ -99,7 +107,12 @@ def study(
         source=sc.source,
         text=sc.text,
     )
+    if safety_filter is not None:
+        sc = _with_filter(sc, safety_filter)
     setup = StudySetup.from_scenario(sc, config)
+    _, note = setup.backend
+    if note:
+        err_console.print(f"note: {note}", highlight=False)
     identity = setup.identity(seed)
     store = ChunkFolder(out, identity)
     if resume:
@@ -150,6 +163,22 @@ def _clear_earlier_study(out: Path, store: Any) -> None:
         for old in store.root.iterdir():
             if old.is_dir() and (old / "manifest.json").is_file():
                 shutil.rmtree(old)
+
+
+def _with_filter(sc: Any, name: str) -> Any:
+    """The scenario with ``safety.filter = name`` (validated against its contact distances)."""
+    import dataclasses
+
+    from ..errors import UserInputError
+    from ..safety import SafetyFilter
+
+    base = sc.safety if sc.safety is not None else SafetyFilter()
+    try:
+        safety = dataclasses.replace(base, filter=name)
+        safety.check_contact(sc.formation.contact_matrix)
+    except UserInputError as exc:
+        raise UserInputError(f"--filter {name}: {exc}") from None
+    return dataclasses.replace(sc, safety=safety)
 
 
 def _run_with_progress(run: Any, *args: Any, store: Any, **kwargs: Any) -> Any:
@@ -230,7 +259,12 @@ def _wide_table(summary: dict[str, Any]) -> Any:
     from rich.table import Table
 
     outs = summary["outcomes"]
-    table = Table(title=f"{summary['scenario']}: outcome fractions (95% Wilson interval)")
+    safety = summary.get("safety") or {}
+    extra = ""
+    if safety:
+        f = safety.get("filter")
+        extra = f", filter {f['filter'] if f else 'none'}, {len(safety['obstacles'])} obstacles"
+    table = Table(title=f"{summary['scenario']}{extra}: outcome fractions (95% Wilson interval)")
     table.add_column("law")
     table.add_column("parameters")
     table.add_column("trials", justify="right")

@@ -4,7 +4,7 @@
 """
 
 from .angle_restricted import AngleRestrictedLaw, active_restrictions, grad_psi, psi_sum
-from .base import LAWS, Law, Repulsion, get_law, register
+from .base import LAWS, Law, ObstacleRepulsion, Repulsion, get_law, register
 from .distance import DistanceLaw, grad_phi, phi_sum
 from .signed_area import SignedAreaLaw
 from .squared_distance import SquaredDistanceLaw
@@ -14,6 +14,7 @@ __all__ = [
     "AngleRestrictedLaw",
     "DistanceLaw",
     "Law",
+    "ObstacleRepulsion",
     "Repulsion",
     "SignedAreaLaw",
     "SquaredDistanceLaw",

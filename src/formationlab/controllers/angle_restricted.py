@@ -18,7 +18,7 @@ from ..geometry import cross, perp
 from ..potentials import scatter_rows, triangle_products, upsilon
 from ..spec import DENSE_LIMIT, Formation
 from ..validation import check_fields
-from .base import Law, Repulsion, register
+from .base import Law, ObstacleRepulsion, Repulsion, register
 from .distance import grad_phi, pair_geometry, phi_sum
 from .terms import LOG_BARRIER, KernelTerms, build_terms
 
@@ -180,6 +180,10 @@ class AngleRestrictedLaw(Law):
         self, formation: Formation, q: NDArray[np.float64], weights: NDArray[np.float64]
     ) -> NDArray[np.float64]:
         return self._control(formation, q, triple_steps(formation, weights))
+
+    def obstacle_repulsion(self) -> ObstacleRepulsion:
+        """``-k_c grad Gamma_o``; ``u = -(k_c / 2) grad V``, so ``V`` gains ``2 Gamma_o``."""
+        return ObstacleRepulsion(gain=self.k_c, weight=2.0, repulsion=self.repulsion)
 
     def kernel_terms(self, formation: Formation) -> KernelTerms:
         rep = self.repulsion

@@ -20,7 +20,7 @@ compiled kernels can evaluate returns its data from :meth:`Law.kernel_terms`.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar, TypeVar
+from typing import ClassVar, NamedTuple, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,7 +31,7 @@ from ..spec import Formation
 from ..validation import check_fields
 from .terms import KernelTerms
 
-__all__ = ["LAWS", "Law", "Repulsion", "get_law", "register"]
+__all__ = ["LAWS", "Law", "ObstacleRepulsion", "Repulsion", "get_law", "register"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -52,6 +52,21 @@ class Repulsion:
 
     def __post_init__(self) -> None:
         check_fields(self, positive=("eta", "influence"))
+
+
+class ObstacleRepulsion(NamedTuple):
+    """How a law repels robots from static obstacles (Khatib, IJRR 5(1), 1986).
+
+    The closed loop adds ``-gain grad_i Gamma_o`` to robot ``i``'s command, with
+    ``Gamma_o = sum_i sum_o gamma(s_io)`` Khatib's repulsion on the robot-obstacle
+    clearances (:func:`formationlab.safety.obstacle_potential`, parameters ``eta`` and
+    ``influence`` of ``repulsion``), and ``weight Gamma_o`` to the law's Lyapunov function,
+    so the run's ``V`` is still the function the law descends.
+    """
+
+    gain: float
+    weight: float
+    repulsion: Repulsion
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -85,6 +100,18 @@ class Law:
         ``weights`` has the shape of :meth:`switching`. For a smooth law it is ignored.
         """
         return self.control(formation, q)
+
+    def obstacle_repulsion(self) -> ObstacleRepulsion:
+        """The gain, potential weight and Khatib parameters of the law's obstacle repulsion.
+
+        The paper's laws use their repulsion gain: ``k_c`` for the distance and
+        angle-restricted laws, ``k_r`` for the squared-distance and signed-area laws.
+        A law without one refuses obstacles.
+        """
+        raise ParameterError(
+            f"the law {self.name!r} ({type(self).__name__}) has no obstacle repulsion; "
+            "implement Law.obstacle_repulsion or run it without obstacles"
+        )
 
     def kernel_terms(self, formation: Formation) -> KernelTerms:
         """The law as the arrays the compiled kernels step (:mod:`.terms`).

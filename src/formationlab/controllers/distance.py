@@ -16,7 +16,7 @@ from ..neighbours import close_pairs, non_edges
 from ..potentials import dkhatib_ds, dphi_dr, khatib, pair_vectors, phi, scatter_rows
 from ..spec import DENSE_LIMIT, Formation
 from ..validation import check_fields
-from .base import Law, Repulsion, register
+from .base import Law, ObstacleRepulsion, Repulsion, register
 from .terms import LOG_BARRIER, KernelTerms, build_terms
 
 __all__ = ["DistanceLaw", "grad_phi", "pair_geometry", "phi_sum", "repulsion_pairs"]
@@ -169,6 +169,10 @@ class DistanceLaw(Law):
 
     def potential(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
         return phi_sum(formation, q, self.repulsion)  # eq. (9)
+
+    def obstacle_repulsion(self) -> ObstacleRepulsion:
+        """``-k_c grad Gamma_o``; ``u = -(k_c / 2) grad V``, so ``V`` gains ``2 Gamma_o``."""
+        return ObstacleRepulsion(gain=self.k_c, weight=2.0, repulsion=self.repulsion)
 
     def kernel_terms(self, formation: Formation) -> KernelTerms:
         rep = self.repulsion

@@ -41,7 +41,7 @@ from ..errors import FormationError
 from ..geometry import cross, parity, perp
 from ..spec import Formation
 from ..validation import check_fields
-from .base import Law, Repulsion, register
+from .base import Law, ObstacleRepulsion, Repulsion, register
 from .squared_distance import (
     grad_repulsion,
     grad_squared_distance,
@@ -201,6 +201,10 @@ class SignedAreaLaw(Law):
         if self.k_r > 0:
             v = v + (self.k_r / self.k) * repulsion_sum(formation, q, self.repulsion)
         return v
+
+    def obstacle_repulsion(self) -> ObstacleRepulsion:
+        """``-k_r grad Gamma_o``; ``u = -k grad W``, so ``W`` gains ``(k_r / k) Gamma_o``."""
+        return ObstacleRepulsion(gain=self.k_r, weight=self.k_r / self.k, repulsion=self.repulsion)
 
     def kernel_terms(self, formation: Formation) -> KernelTerms:
         rep = self.repulsion

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from ..potentials import dkhatib_ds, khatib
 from ..spec import DENSE_LIMIT, Formation
 from ..validation import check_fields
-from .base import Law, Repulsion, register
+from .base import Law, ObstacleRepulsion, Repulsion, register
 from .distance import _grad_listed, pair_geometry, repulsion_pairs
 from .terms import SQUARED, KernelTerms, build_terms
 
@@ -153,6 +153,10 @@ class SquaredDistanceLaw(Law):
         if self.k_r > 0:
             v = v + (self.k_r / self.k) * repulsion_sum(formation, q, self.repulsion)
         return v
+
+    def obstacle_repulsion(self) -> ObstacleRepulsion:
+        """``-k_r grad Gamma_o``; ``u = -k grad W``, so ``W`` gains ``(k_r / k) Gamma_o``."""
+        return ObstacleRepulsion(gain=self.k_r, weight=self.k_r / self.k, repulsion=self.repulsion)
 
     def kernel_terms(self, formation: Formation) -> KernelTerms:
         rep = self.repulsion

@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from ..analysis import Tolerances
 from ..controllers import Law
+from ..dynamics import System
 from ..spec import Formation
 from .classify import Equilibrium, classify_equilibrium
 from .dedup import canonical_pose, same_equilibrium
@@ -43,7 +44,7 @@ class Catalogue:
         Trials that ended at each equilibrium.
     skipped : dict of str to int
         Candidates not attributed to an equilibrium, by reason
-        (``"collision"``, ``"not-refined"``).
+        (``"collision"``, ``"not-refined"``, ``"non-finite"``: the field overflows there).
     """
 
     formation: Formation
@@ -78,6 +79,8 @@ class Catalogue:
                     "active_restrictions": list(eq.active),
                     "switching_surfaces": list(eq.surfaces),
                     "attractive": eq.attractive,
+                    "safety_constraints": list(eq.constraints),
+                    "multipliers": eq.multipliers.tolist(),
                     "growth_rate": eq.growth_rate,
                     "e_folding_time": (1.0 / eq.growth_rate if eq.growth_rate > 0 else None),
                     "velocity": eq.velocity.tolist(),
@@ -104,6 +107,7 @@ def catalogue(
     tolerances: Tolerances | None = None,
     match_tol: float = 1e-3,
     moving_match_tol: float = 2e-2,
+    system: System | None = None,
 ) -> Catalogue:
     """Refine, classify and merge the end states ``candidates`` (``(B, n, 2)``).
 
@@ -119,6 +123,11 @@ def catalogue(
     moving_match_tol : float
         The same for the end states of ``drifting`` and ``rotating`` runs: explicit
         Euler leaves them within its chatter (about 5e-3) of the relative equilibrium.
+    system : System, optional
+        The closed loop with obstacles and a safety filter: a candidate where the
+        filter holds a constraint active is refined and classified as a deadlock
+        (:mod:`~formationlab.equilibria.constrained`); the others as equilibria of
+        ``law``.
     """
     cand = np.asarray(candidates, dtype=float).reshape(-1, formation.n, 2)
     outs = np.asarray(outcomes) if outcomes is not None else np.full(len(cand), "")
@@ -132,17 +141,22 @@ def catalogue(
                 return k
         return None
 
-    pending = [(q, 1, o in MOVING) for q, o in zip(cand, outs, strict=True) if o != "collision"]
+    with np.errstate(over="ignore", invalid="ignore"):  # a trial thrown far away overflows
+        finite = np.array([bool(np.isfinite(law.control(formation, q)).all()) for q in cand])
+    finite = finite.reshape(-1) if finite.size else np.zeros(0, bool)
+    keep = (outs != "collision") & finite
+    pending = [(q, 1, o in MOVING) for q, o, k in zip(cand, outs, keep, strict=True) if k]
     skipped["collision"] += int(np.sum(outs == "collision"))
+    skipped["non-finite"] += int(np.sum((outs != "collision") & ~finite))
     pending += [(np.asarray(q, dtype=float), 0, False) for q in (extra or [])]
     for q, weight, moving in pending:
         k = attribute(q, moving_match_tol if moving else match_tol) if weight else None
         if k is None:
-            ref = refine(formation, law, q, moving=moving)
-            if not ref.success:
+            eq_or_none = _refined(formation, law, q, tolerances, system, moving)
+            if eq_or_none is None:
                 skipped["not-refined"] += weight
                 continue
-            eq = classify_equilibrium(formation, law, ref, tolerances)
+            eq = eq_or_none
             k = attribute(eq.q, 1e-6)
             if k is None:
                 found.append(_posed(eq))
@@ -157,6 +171,28 @@ def catalogue(
         counts=[counts[k] for k in order],
         skipped={k: v for k, v in skipped.items() if v},
     )
+
+
+def _refined(
+    formation: Formation,
+    law: Law,
+    q: NDArray[np.float64],
+    tolerances: Tolerances | None,
+    system: System | None,
+    moving: bool = False,
+) -> Equilibrium | None:
+    """The classified equilibrium near ``q``, a deadlock if the filter is active there
+    (a relative equilibrium for the end state of a moving run)."""
+    if system is not None and system.filtered:
+        from .constrained import active_set, classify_deadlock, refine_deadlock
+
+        if len(active_set(system, q)):
+            dead = refine_deadlock(system, q)
+            return classify_deadlock(system, dead, tolerances) if dead.success else None
+    ref = refine(formation, law, q, moving=moving)
+    if not ref.success:
+        return None
+    return classify_equilibrium(formation, law, ref, tolerances)
 
 
 def _posed(eq: Equilibrium) -> Equilibrium:

@@ -90,6 +90,13 @@ class Equilibrium:
         Relative equilibria: velocity of the centroid, m/s (in the frame of ``q``).
     omega : float
         Relative equilibria: angular velocity, rad/s (counter-clockwise positive).
+        (a sliding mode exists there); deadlocks of a safety filter: whether the
+        active barriers attract (:mod:`formationlab.equilibria.constrained`). None otherwise.
+    constraints : tuple of str
+        Deadlocks of a safety filter: the active barrier constraints (``"pair 1-2"``,
+        ``"robot 3 - obstacle 1"``); empty otherwise.
+    multipliers : ndarray
+        Their KKT multipliers (all positive at a deadlock).
     """
 
     q: NDArray[np.float64]
@@ -124,6 +131,8 @@ class Equilibrium:
         if self.outcome != "rotating":
             return None
         return np.asarray(field_motion(self.q, self.velocity, self.omega).centre)
+    constraints: tuple[str, ...] = ()
+    multipliers: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
 
     @property
     def growth_rate(self) -> float:

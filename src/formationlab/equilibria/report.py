@@ -225,6 +225,8 @@ class EquilibriaReport:
                 extra += f", |v| = {speed:.4g} m/s"
             elif eq.outcome == "rotating":
                 extra += f", omega = {eq.omega:.4g} rad/s, |v| = {speed:.4g} m/s"
+            if eq.constraints:
+                extra += f", deadlock on {', '.join(eq.constraints)}"
             out.append(
                 f"#{k + 1} {eq.outcome} {eq.stability}{extra}: "
                 f"{count} trials, max Re(lambda) = {eq.growth_rate:.4g}"
@@ -281,7 +283,15 @@ def find_equilibria(
     config = config or parse_equilibria(sc)
     sc = equilibria_scenario(sc, config)
     law, spec = sc.law, config.follow_spec
-    own = simulate(sc.formation, law, sc.q0, duration=sc.duration, integrator=sc.integrator)
+    safety = {"obstacles": sc.obstacles, "safety": sc.safety}
+    own = simulate(
+        sc.formation, law, sc.q0, duration=sc.duration, integrator=sc.integrator, **safety
+    )
+    system = None
+    if sc.obstacles or (sc.safety is not None and sc.safety.enabled):
+        from ..dynamics import System
+
+        system = System(formation=sc.formation, law=law, **safety)
     cands = [own.q[-1][None]]
     outs = [np.array([own.outcome()])]
     source: dict[str, Any] = {"scenario_run": 1}
@@ -294,7 +304,12 @@ def find_equilibria(
         rng = np.random.default_rng(config.seed)
         q0 = random_starts(sc.formation, config.starts, rng, collinear=config.collinear)
         settler = config.settler(law)
-        settled = settle(sc.formation, law, q0, duration=config.duration, integrator=settler)
+        if sc.obstacles:  # starts touching an obstacle are left out
+            keep = system.obstacle_clearances(q0).min(axis=(-2, -1)) > 0  # type: ignore[union-attr]
+            q0 = q0[keep]
+        settled = settle(
+            sc.formation, law, q0, duration=config.duration, integrator=settler, system=system
+        )
         cands.append(settled.q_final)
         outs.append(settled.outcome)
         source["random_starts"] = {
@@ -304,7 +319,9 @@ def find_equilibria(
             "collinear": config.collinear,
             "integrator": settler.name,
         }
-    cat = catalogue(sc.formation, law, np.concatenate(cands), outcomes=np.concatenate(outs))
+    cat = catalogue(
+        sc.formation, law, np.concatenate(cands), outcomes=np.concatenate(outs), system=system
+    )
     report = EquilibriaReport(scenario=sc, catalogue=cat, source=source)
     if spec is None:
         return report

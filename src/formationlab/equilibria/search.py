@@ -85,6 +85,7 @@ def settle(
     integrator: FixedStepIntegrator | None = None,
     speed: float = 1e-6,
     tolerances: Tolerances | None = None,
+    system: System | None = None,
 ) -> BatchResult:
     """Integrate a batch of starts ``q0`` (``(B, n, 2)``) until they stop or ``duration``.
 
@@ -107,6 +108,9 @@ def settle(
     equilibrium and leave it by a spurious drift, the implicit one lands on
     the surface and slides (``formationlab.integrators.implicit``).
 
+    ``system`` (default ``System(formation, law)``) is the closed loop to settle, e.g.
+    with obstacles and a safety filter.
+
     Returns
     -------
     BatchResult
@@ -121,7 +125,7 @@ def settle(
     stepper = Substepped(inner=integrator, reach=0.05 * float(formation.distances.min()))
     tol = tolerances or Tolerances()
     out = drive(
-        System(formation=formation, law=law), stepper, q,
+        system or System(formation=formation, law=law), stepper, q,
         n_steps=int(np.ceil(duration / integrator.dt)), stop=StopRule(speed=speed, check_every=10),
         window=tol.drift_steps(integrator.dt),
     )  # fmt: skip

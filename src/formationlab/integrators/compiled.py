@@ -380,9 +380,9 @@ def compiled_terms(system: System, integrator: object) -> KernelTerms | None:
     from ..models import SingleIntegrator
     from .explicit import Euler
 
-    if type(integrator) is not Euler or type(system.model) is not SingleIntegrator:
+    if type(integrator) is not Euler or system.model != SingleIntegrator():  # no limits
         return None
-    if getattr(system, "marching", None) is not None:
+    if system.marching is not None or system.obstacles or system.filtered:
         return None
     try:
         return system.law.compiled_terms(system.formation)

@@ -20,7 +20,18 @@ variable                  dimensions                    meaning
 ``diameter``              ``(robot,)``                  ``rho_i``
 ``edge_robots``           ``(edge, end)``               1-based robot numbers of each edge
 ``desired_distance``      ``(edge,)``                   ``d_ij``
+``filter_status``         ``(time,)``                   safety filter status (0 unchanged, 1
+                                                        solved, 2 relaxed, 3 fallback, 4 failed)
+``filter_active``         ``(time, robot)``             1 where a robot's constraint is active
+``active_pair``           ``(constraint, column)``      active pair constraints: time index
+                                                        (0-based), robots i < j (1-based)
+``active_obstacle``       ``(obstacle_constraint,       active obstacle constraints: time index,
+                          column)``                     robot, obstacle (1-based)
 ========================  ============================  ======================================
+
+The last four exist only for a run with obstacles or a safety filter; the global
+attribute ``obstacles`` then holds the obstacles (JSON of their scenario form) and
+``safety`` the filter's parameters.
 
 Coordinates: ``time`` in seconds, ``robot`` = 1..n, ``axis`` = ``"x"``, ``"y"``,
 ``edge`` = labels ``"i-j"``, ``surface`` = labels ``"alpha_ijk"``. Global
@@ -99,6 +110,26 @@ def trajectory_dataset(result: Any, *, attrs: dict[str, Any] | None = None) -> A
             result.sigma,
             {"long_name": "switching function sigma = beta c_abc + theta (active >= 0)"},
         )
+    if result.safety is not None:
+        rec = result.safety
+        pairs = np.asarray(rec.active_pairs, np.int64).reshape(-1, 3) + np.array([0, 1, 1])
+        obs = np.asarray(rec.active_obstacles, np.int64).reshape(-1, 3) + np.array([0, 1, 1])
+        data["filter_status"] = (("time",), rec.status, {"long_name": "safety filter status"})
+        data["filter_active"] = (
+            ("time", "robot"),
+            rec.active.astype(np.int8),
+            {"long_name": "1 where a constraint of the robot is active"},
+        )
+        data["active_pair"] = (
+            ("constraint", "column"),
+            pairs,
+            {"long_name": "active pair constraint: time index, robot i, robot j (1-based)"},
+        )
+        data["active_obstacle"] = (
+            ("obstacle_constraint", "column"),
+            obs,
+            {"long_name": "active obstacle constraint: time index, robot, obstacle (1-based)"},
+        )
     glob: dict[str, Any] = {
         "title": "formationlab trajectory",
         "formationlab_version": __version__,
@@ -109,6 +140,10 @@ def trajectory_dataset(result: Any, *, attrs: dict[str, Any] | None = None) -> A
         "message": result.message,
         "Conventions": "CF-1.8",
     }
+    if result.safety is not None:
+        summary = result.safety.summary()
+        glob["obstacles"] = json.dumps(summary["obstacles"])
+        glob["safety"] = json.dumps(to_jsonable(summary["filter"]))
     for key, value in (attrs or {}).items():
         glob[key] = (
             value if isinstance(value, str | int | float) else json.dumps(to_jsonable(value))

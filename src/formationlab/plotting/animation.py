@@ -9,6 +9,7 @@ HTML player stay bounded whatever the run's length. Saving is done by
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -20,6 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .fonts import displayable, font_context
 from .runs import robot_colors
+from .safety import ACTIVE_COLOR, draw_obstacles
 
 __all__ = ["animate_run", "frame_indices"]
 
@@ -53,6 +55,9 @@ def animate_run(
     dpi: int = 90,
     headings: ArrayLike | None = None,
     points: ArrayLike | None = None,
+    obstacles: Sequence[Any] = (),
+    active: ArrayLike | None = None,
+    active_pairs: ArrayLike | None = None,
 ) -> FuncAnimation:
     """An animation of a run.
 
@@ -83,6 +88,12 @@ def animate_run(
     points : array_like, shape (T, n, 2), optional
         Where the law acts when not the centres (near-identity hand points):
         drawn as small crosses; the graph's edges join them.
+    obstacles : sequence
+        Obstacles to draw (:mod:`formationlab.safety` objects or their scenario form).
+    active : array_like of bool, shape (T, n), optional
+        Robots with an active safety constraint at each saved time: drawn with a red ring.
+    active_pairs : array_like of int, shape (k, 3), optional
+        Active pair constraints ``(time index, i, j)``, 0-based: drawn as red lines.
 
     Returns
     -------
@@ -113,6 +124,14 @@ def animate_run(
     ax.set_aspect("equal")
     ax.set_xlabel("x")
     ax.set_ylabel("y")
+    if len(obstacles):
+        draw_obstacles(ax, obstacles)
+    on = np.zeros((len(t), n), bool) if active is None else np.asarray(active, bool)
+    pairs = np.zeros((0, 3), np.int64) if active_pairs is None else np.asarray(active_pairs)
+    pairs = pairs.reshape(-1, 3).astype(np.int64)
+    red = ACTIVE_COLOR
+    constrained = LineCollection([], colors=red, linewidths=2.0, zorder=2.5)
+    ax.add_collection(constrained)
 
     theta = None if headings is None else np.asarray(headings, dtype=float)
     hand = None if points is None else np.asarray(points, dtype=float)
@@ -157,12 +176,16 @@ def animate_run(
         since = -np.inf if trail is None else t[idx] - trail
         sel = path[(path < idx) & (t[path] >= since)]
         sel = np.append(sel, idx)
+        hit = pairs[pairs[:, 0] == idx]
+        constrained.set_segments(list(np.stack([now[hit[:, 1]], now[hit[:, 2]]], axis=1)))
         for i in range(n):
             trails[i].set_data(q[sel, i, 0], q[sel, i, 1])
             discs[i].center = (now[i, 0], now[i, 1])
+            discs[i].set_edgecolor(red if on[idx, i] else colors[i])
+            discs[i].set_linewidth(2.0 if on[idx, i] else 1.0)
             labels[i].xy = (now[i, 0], now[i, 1])
         clock.set_text(f"{title + ': ' if title else ''}t = {t[idx]:.2f} s")
-        return [graph, *trails, *discs, *labels, clock, *extra]
+        return [graph, constrained, *trails, *discs, *labels, clock, *extra]
 
     draw(0)
     return FuncAnimation(fig, draw, frames=len(frames), interval=1000 / fps, blit=False)

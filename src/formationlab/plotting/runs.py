@@ -105,6 +105,10 @@ def plot_trajectories(
         ax.add_patch(disc)
         artists.append(disc)
         artists.append(ax.annotate(str(i + 1), q[0, i], xytext=(5, 5), textcoords="offset points"))
+    if getattr(result, "safety", None) is not None:
+        from .safety import draw_safety
+
+        artists += draw_safety(ax, result)
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x")
     ax.set_ylabel("y")
@@ -173,7 +177,8 @@ def plot_distance_errors(
 
 def run_figures(result: Any, *, prefix: str = "") -> dict[str, Figure]:
     """The standard figures of a run, by name: ``trajectories``, ``controls_x``,
-    ``controls_y``, ``lyapunov``, ``distance_errors``. Figures are not managed by
+    ``controls_y``, ``lyapunov``, ``distance_errors`` (and ``safety`` for a run with
+    obstacles or a safety filter). Figures are not managed by
     pyplot (no GUI); save them with :func:`formationlab.io.save_figure`."""
     out: dict[str, Figure] = {}
     panels: tuple[
@@ -193,4 +198,13 @@ def run_figures(result: Any, *, prefix: str = "") -> dict[str, Figure]:
             if prefix:
                 ax.set_title(f"{displayable(prefix)}: {ax.get_title()}")
         out[name] = fig
+    if getattr(result, "safety", None) is not None:
+        from .safety import plot_filter_activity
+
+        fig = Figure(figsize=(6.0, 5.0), layout="constrained")
+        top, bottom = fig.subplots(2, 1, sharex=True)
+        plot_filter_activity(result, ax=top, ax_distance=bottom)
+        if prefix:
+            top.set_title(f"{prefix}: {top.get_title()}")
+        out["safety"] = fig
     return out

@@ -19,6 +19,7 @@ from .barrier import (
     solve_barrier_qp,
 )
 from .config import FILTERS, SafetyFilter
+from .contact import segment_distances, swept_clearances
 from .decentralized import decentralized_filter, decentralized_reference, project_onto_halfplanes
 from .obstacles import (
     Circle,
@@ -33,6 +34,7 @@ from .obstacles import (
     obstacle_potential,
 )
 from .pairs import neighbour_lists, sensed_pairs
+from .record import SafetyRecord, describe_obstacle
 from .result import FilterResult, FilterStatus
 from .unicycle import (
     point_safety_distance,
@@ -52,12 +54,14 @@ __all__ = [
     "Polygon",
     "QPSolution",
     "SafetyFilter",
+    "SafetyRecord",
     "barrier_constraints",
     "barrier_filter",
     "check_obstacle_starts",
     "clearances",
     "decentralized_filter",
     "decentralized_reference",
+    "describe_obstacle",
     "grad_obstacle_potential",
     "neighbour_lists",
     "obstacle_barrier_rows",
@@ -69,8 +73,10 @@ __all__ = [
     "point_to_unicycle",
     "point_velocity",
     "project_onto_halfplanes",
+    "segment_distances",
     "sensed_pairs",
     "solve_barrier_qp",
+    "swept_clearances",
     "unicycle_points",
     "unicycle_velocity",
 ]

@@ -22,13 +22,17 @@ chunks of trials, for the laws ``distance``, ``angle-restricted``,
 gives their data; and the robot models ``single-integrator``, ``unicycle``
 and ``double-integrator``) and ``"numpy"`` (the stepping driver,
 :func:`formationlab.integrators.drive`, with explicit Euler and a stop rule:
-the readable specification, for any law).
+the readable specification, for any law). The compiled kernel knows no
+obstacles and no safety filter: with either, :func:`batch_backend` chooses the
+numpy path (the decentralized filter is itself batched in numba; the centralized
+QP runs one solve per trial and step), and :func:`run_batch` follows it.
 """
 
 from __future__ import annotations
 
 import threading
-from typing import Literal
+from collections.abc import Sequence
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -47,6 +51,7 @@ from ..validation import positive, whole
 __all__ = [
     "KERNEL_LAWS",
     "BatchResult",
+    "batch_backend",
     "classify_batch",
     "max_distance_errors",
     "run_batch",
@@ -68,6 +73,27 @@ MIN_CHUNK = 64
 _KERNEL_LOCK = threading.Lock()
 
 
+def batch_backend(
+    backend: str, obstacles: Sequence[Any] = (), safety: Any = None
+) -> tuple[Backend, str]:
+    """The backend a batch runs on, and why it differs from ``backend`` ("" if it does not).
+
+    The numba kernel has neither obstacles nor a safety filter, so either moves the
+    batch to the numpy driver path.
+    """
+    filtered = safety is not None and safety.enabled
+    if backend == "numba" and (obstacles or filtered):
+        what = " and ".join(
+            w for w, on in (("obstacles", bool(obstacles)), ("a safety filter", filtered)) if on
+        )
+        return "numpy", (
+            f"the compiled kernel has no {what}: the batch runs on the numpy driver path "
+            "(the decentralized filter is batched in numba, the centralized QP is solved "
+            "per trial)"
+        )
+    return backend, ""  # type: ignore[return-value]
+
+
 def run_batch(
     formation: Formation,
     law: Law,
@@ -79,6 +105,8 @@ def run_batch(
     backend: Backend = "numba",
     check_every: int | None = None,
     model: RobotModel | None = None,
+    obstacles: Sequence[Any] = (),
+    safety: Any = None,
 ) -> BatchResult:
     """Simulate ``B`` trials of ``law`` on ``formation`` with explicit Euler (module docstring).
 
@@ -110,6 +138,11 @@ def run_batch(
     model : RobotModel, optional
         The robots; default the paper's single integrators. The outcome is judged at
         the law's points (``model.points``: near-identity hand points).
+    obstacles : sequence of Circle or Polygon
+        Static obstacles (:mod:`formationlab.safety`); starts must be clear of them.
+    safety : SafetyFilter, optional
+        Safety filter between the law and the robots. With obstacles or a filter the
+        batch runs on the numpy path (:func:`batch_backend`).
 
     Returns
     -------
@@ -123,14 +156,24 @@ def run_batch(
     if check_every is None:
         check_every = max(1, round(tol.window / dt))
     check_every = whole(check_every, "check_every")
+    backend, _ = batch_backend(backend, obstacles, safety)
     if backend == "numba":
         x, v, status, steps, mc, ns, qw, window_step = _run_numba(
             formation, law, model, q0, float(dt), n_steps, int(check_every), tol
         )
     elif backend == "numpy":
+        system = System(formation=formation, law=law, model=model)
+        if obstacles or safety is not None:
+            from ..safety import check_obstacle_starts
+
+            check_obstacle_starts(q0[..., :2], formation.diameters / 2, tuple(obstacles))
+            system = System(
+                formation=formation, law=law, model=model, obstacles=tuple(obstacles),
+                safety=safety,
+            )  # fmt: skip
         out = drive(
-            System(formation=formation, law=law, model=model), Euler(dt=float(dt)), q0,
-            n_steps=n_steps, stop=StopRule(speed=tol.speed, check_every=int(check_every)),
+            system, Euler(dt=float(dt)), q0, n_steps=n_steps,
+            stop=StopRule(speed=tol.speed, check_every=int(check_every)),
             window=tol.drift_steps(float(dt)),
         )  # fmt: skip
         x, v, status, steps, mc, ns = (

@@ -49,6 +49,8 @@ class ChunkTask:
     sweep_keys: tuple[str, ...] = ()
     settle: SettleModel = field(default_factory=SettleModel)
     model: RobotModel = field(default_factory=SingleIntegrator)
+    obstacles: tuple[Any, ...] = ()
+    safety: Any = None
 
     @property
     def id(self) -> str:
@@ -69,8 +71,14 @@ def plan_chunks(
     duration: float,
     center: ArrayLike | None = None,
     model: RobotModel | None = None,
+    obstacles: tuple[Any, ...] = (),
+    safety: Any = None,
 ) -> list[ChunkTask]:
-    """Cut every group's ``config.trials`` trials into chunks of ``config.chunk_size``."""
+    """Cut every group's ``config.trials`` trials into chunks of ``config.chunk_size``.
+
+    ``obstacles`` and ``safety`` (a :class:`~formationlab.safety.SafetyFilter`) go to
+    every chunk.
+    """
     model = model or SingleIntegrator()
     c = None if center is None else np.asarray(center, dtype=float)
     tasks = []
@@ -93,6 +101,8 @@ def plan_chunks(
                     sweep_keys=tuple(config.sweep),
                     settle=config.settle,
                     model=model,
+                    obstacles=obstacles,
+                    safety=safety,
                 )
             )
     return tasks
@@ -107,6 +117,9 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
     trials = np.arange(task.start, task.stop, dtype=np.int64)
     q0 = trial_initial_states(f, task.initial, task.seed, trials, center=task.center)
     x0 = model_initial_states(f, task.model, q0, task.seed, trials)
+    q0 = trial_initial_states(
+        f, task.initial, task.seed, trials, center=task.center, obstacles=task.obstacles
+    )
     res = run_batch(
         f,
         g.law,
@@ -116,10 +129,15 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
         tolerances=task.tolerances,
         backend=task.backend,
         model=task.model,
+        obstacles=task.obstacles,
+        safety=task.safety,
     )
     outcome = np.asarray(res.outcome, dtype=object)
+    # settling steps the law alone: not the closed loop with obstacles or a filter
+    plain = not task.obstacles and (task.safety is None or not task.safety.enabled)
+    settle = task.settle if plain else SettleModel(enabled=False)
     settled, settled_outcome = settle_trials(
-        f, g.law, res.q_final, outcome, settle=task.settle, tolerances=task.tolerances
+        f, g.law, res.q_final, outcome, settle=settle, tolerances=task.tolerances
     )
     cols: dict[str, Any] = {
         "group": np.full(trials.size, g.index, dtype=np.int64),

@@ -118,6 +118,7 @@ def study_identity(
     duration: float,
     center: ArrayLike | None = None,
     model: RobotModel | None = None,
+    safety: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Everything the trials depend on, JSON-ready, with its SHA-256 ``fingerprint``.
 
@@ -148,6 +149,8 @@ def study_identity(
     if model is not None and model != SingleIntegrator():
         # (single-integrator studies keep the identity they had)
         ident["model"] = {"name": model.name, **dataclasses.asdict(model)}
+    if safety is not None:  # obstacles and filter (absent without them: fingerprints kept)
+        ident["safety"] = safety
     text = json.dumps(ident, sort_keys=True, default=float)
     ident["fingerprint"] = hashlib.sha256(text.encode()).hexdigest()[:16]
     return ident
@@ -176,6 +179,11 @@ class StudySetup:
     model : RobotModel
         The robots (``[robots] model``); unicycles start with random headings,
         double integrators at rest (:func:`~formationlab.studies.sampling.model_initial_states`).
+    obstacles : tuple of Circle or Polygon
+        Static obstacles of every trial (starts touching one are drawn again).
+    safety : SafetyFilter, optional
+        Safety filter of every trial. With obstacles or a filter the trials run on the
+        numpy driver path (:func:`~formationlab.studies.batch.batch_backend`).
     """
 
     formation: Formation
@@ -186,6 +194,8 @@ class StudySetup:
     center: NDArray[np.float64] | None = None
     laws: Mapping[str, Law] | None = None
     model: RobotModel = field(default_factory=SingleIntegrator)
+    obstacles: tuple[Any, ...] = ()
+    safety: Any = None
 
     def __post_init__(self) -> None:
         if self.config.settle.enabled and not isinstance(self.model, SingleIntegrator):
@@ -247,6 +257,8 @@ class StudySetup:
             center=center,
             laws=laws,
             model=sc.model,
+            obstacles=sc.obstacles,
+            safety=sc.safety,
         )
         try:
             setup.groups  # noqa: B018 - checks laws and sweep keys now, with the file's lines
@@ -259,6 +271,34 @@ class StudySetup:
         """The groups (:func:`study_groups`)."""
         return study_groups(self.formation, self.law, self.config, laws=self.laws)
 
+    @property
+    def backend(self) -> tuple[str, str]:
+        """The backend the trials run on and why it is not ``config.backend`` ("" if it is)."""
+        from .batch import batch_backend
+
+        return batch_backend(self.config.backend, self.obstacles, self.safety)
+
+    def safety_description(self) -> dict[str, Any] | None:
+        """JSON-ready obstacles and filter (None without either)."""
+        filtered = self.safety is not None and self.safety.enabled
+        if not self.obstacles and not filtered:
+            return None
+        from ..safety import describe_obstacle
+
+        f = self.safety
+        return {
+            "obstacles": [describe_obstacle(ob) for ob in self.obstacles],
+            "filter": None
+            if not filtered
+            else {
+                "filter": f.filter,
+                "distance": f.distance,
+                "gamma": f.gamma,
+                "max_speed": f.max_speed,
+                "obstacle_distance": f.d_obstacle,
+            },
+        }
+
     def identity(self, seed: int) -> dict[str, Any]:
         """:func:`study_identity` of this study with ``seed``."""
         return study_identity(
@@ -269,6 +309,7 @@ class StudySetup:
             duration=self.duration,
             center=self.center,
             model=self.model,
+            safety=self.safety_description(),
         )
 
 
@@ -323,6 +364,9 @@ def run_study(
     tasks = plan_chunks(
         groups, config, seed=int(seed), dt=dt, duration=duration, center=setup.center,
         model=setup.model,
+
+
+        obstacles=setup.obstacles, safety=setup.safety,
     )  # fmt: skip
     total = sum(t.size for t in tasks)
     # compiled (or loaded from numba's cache) here, timed apart from the trials; dask
@@ -368,6 +412,7 @@ def run_study(
         "initial": config.initial.model_dump(mode="json"),
         "tolerances": config.tolerances.model_dump(mode="json"),
         "backend": config.backend,
+        **_backend_used(setup),
         "settle": config.settle.model_dump(mode="json"),
         "laws": list(dict.fromkeys(g.law.name for g in groups)),
         "model": {"name": setup.model.name, **dataclasses.asdict(setup.model)},
@@ -416,3 +461,10 @@ def _kernel_cached(dispatcher: Any) -> bool:
         )
     except AttributeError:  # another numba's internals: assume compiling
         return False
+def _backend_used(setup: StudySetup) -> dict[str, Any]:
+    """``backend_used``, ``backend_note`` and ``safety`` of a study with obstacles or a filter."""
+    used, note = setup.backend
+    safety = setup.safety_description()
+    if safety is None:
+        return {}
+    return {"backend_used": used, "backend_note": note, "safety": safety}

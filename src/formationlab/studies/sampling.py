@@ -16,11 +16,16 @@ block differ.) A trial is rerun from its ``seed`` and ``trial`` columns with
 Drawing per block rather than per trial keeps the cost of seeding below a
 microsecond per trial.
 
-A draw in which two robots overlap (``r_ij <= a_ij``) is rejected and drawn
-again.
+A draw in which two robots overlap (``r_ij <= a_ij``), or, in a study with
+obstacles, a robot touches an obstacle (clearance ``<= 0``), is rejected and
+drawn again. Without obstacles the draws are exactly those of before obstacles
+existed.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -58,6 +63,18 @@ def overlapping(formation: Formation, q: NDArray[np.float64]) -> NDArray[np.bool
     return np.any(r <= formation.contact_matrix[iu, ju], axis=-1)
 
 
+def _rejected(
+    formation: Formation, q: NDArray[np.float64], obstacles: Sequence[Any]
+) -> NDArray[np.bool_]:
+    """Overlapping robots, or (with obstacles) a robot on an obstacle; ``(...)`` bool."""
+    bad = overlapping(formation, q)
+    if obstacles:
+        from ..safety import obstacle_contacts
+
+        bad |= obstacle_contacts(q, formation.diameters / 2, obstacles).any(axis=(-2, -1))
+    return bad
+
+
 def _draw(
     initial: BoxInitial | GaussianInitial,
     rng: np.random.Generator,
@@ -77,6 +94,7 @@ def draw_block(
     size: int = SEED_BLOCK,
     *,
     center: NDArray[np.float64] | None = None,
+    obstacles: Sequence[Any] = (),
 ) -> NDArray[np.float64]:
     """``size`` initial states ``(size, n, 2)`` without overlapping robots, from ``rng``.
 
@@ -90,12 +108,12 @@ def draw_block(
     """
     n = formation.n
     q = _draw(initial, rng, (size, n, 2), center)
-    bad = np.flatnonzero(overlapping(formation, q))
+    bad = np.flatnonzero(_rejected(formation, q, obstacles))
     for _ in range(MAX_DRAWS):
         if bad.size == 0:
             return q
         q[bad] = _draw(initial, rng, (bad.size, n, 2), center)
-        bad = bad[overlapping(formation, q[bad])]
+        bad = bad[_rejected(formation, q[bad], obstacles)]
     what = (
         f"box half_width = {initial.half_width:g}"
         if isinstance(initial, BoxInitial)
@@ -103,7 +121,8 @@ def draw_block(
     )
     raise ParameterError(
         f"{MAX_DRAWS} draws in a row from the {what} put two robots on top of each other "
-        f"(n = {n}, largest diameter {formation.diameters.max():g}); widen study.initial"
+        + ("or a robot on an obstacle " if obstacles else "")
+        + f"(n = {n}, largest diameter {formation.diameters.max():g}); widen study.initial"
     )
 
 
@@ -114,6 +133,7 @@ def trial_initial_states(
     trials: ArrayLike,
     *,
     center: ArrayLike | None = None,
+    obstacles: Sequence[Any] = (),
 ) -> NDArray[np.float64]:
     """Initial states of the given trial numbers of a study with ``seed``; ``(B, n, 2)``.
 
@@ -129,6 +149,8 @@ def trial_initial_states(
         0-based trial numbers, any order.
     center : array_like, shape (n, 2), optional
         Centre of a gaussian distribution (required for it).
+    obstacles : sequence of Circle or Polygon
+        Draws with a robot touching one are rejected too.
 
     Examples
     --------
@@ -153,7 +175,8 @@ def trial_initial_states(
     out = np.empty((idx.size, formation.n, 2))
     blocks = idx // SEED_BLOCK
     for b in np.unique(blocks):
-        states = draw_block(formation, initial, block_generator(int(seed), int(b)), center=c)
+        rng = block_generator(int(seed), int(b))
+        states = draw_block(formation, initial, rng, center=c, obstacles=obstacles)
         sel = blocks == b
         out[sel] = states[idx[sel] % SEED_BLOCK]
     return out

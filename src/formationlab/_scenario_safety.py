@@ -1,0 +1,112 @@
+"""A scenario's ``[[obstacles]]`` and ``[safety]`` tables (private to :mod:`formationlab.scenario`).
+
+The tables' structure is checked by pydantic (:class:`~formationlab._scenario_models.
+SafetyModel`; each obstacle is a table); here the obstacles are built (circle radius,
+simple polygons, through :mod:`formationlab.safety`), checked against the robots'
+starts, and the filter's distances against the contact distances. Every problem is a
+:class:`~formationlab.errors.ScenarioError` naming the key, its line and the fix.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import ScenarioError, UserInputError
+from .spec import Formation
+
+if TYPE_CHECKING:
+    from .safety import Obstacle, SafetyFilter
+
+__all__ = ["build_safety"]
+
+_HEADER = re.compile(r"^\s*\[\[\s*obstacles\s*\]\]")
+
+
+def _obstacle_line(text: str, k: int) -> int | None:
+    """1-based line of the ``k``-th (0-based) ``[[obstacles]]`` header, or of ``obstacles =``."""
+    lines = text.splitlines()
+    headers = [i + 1 for i, line in enumerate(lines) if _HEADER.match(line)]
+    if k < len(headers):
+        return headers[k]
+    inline = [i + 1 for i, line in enumerate(lines) if re.match(r"^\s*obstacles\s*=", line)]
+    return inline[0] if inline else None
+
+
+def build_safety(
+    obstacles: Sequence[dict[str, Any]] | None,
+    safety: Any,
+    formation: Formation,
+    q0: NDArray[np.float64],
+    *,
+    source: str,
+    text: str,
+    warnings: list[str],
+) -> tuple[tuple[Obstacle, ...], SafetyFilter | None]:
+    """The obstacles and the filter of a scenario, validated (module docstring).
+
+    Parameters
+    ----------
+    obstacles : list of dict or None
+        The ``[[obstacles]]`` tables as parsed.
+    safety : SafetyModel or None
+        The validated ``[safety]`` table.
+    formation : Formation
+        Its contact distances bound ``distance`` and ``obstacle_distance``.
+    q0 : ndarray, shape (n, 2)
+        The robots' starts, which must be clear of every obstacle.
+    """
+    if not obstacles and safety is None:
+        return (), None
+    from .safety import SafetyFilter, clearances, obstacle_from_mapping
+
+    def where(key: str, line: int | None) -> str:
+        return f"{source}: {key}" + (f" (line {line})" if line else "")
+
+    built: list[Obstacle] = []
+    radii = formation.diameters / 2
+    for k, spec in enumerate(obstacles or ()):
+        at = where(f"obstacles, item {k + 1}", _obstacle_line(text, k))
+        try:
+            ob = obstacle_from_mapping(spec)
+        except UserInputError as exc:
+            raise ScenarioError(f"{at}: {exc}", key="obstacles") from None
+        s = clearances(q0, radii, [ob])[0][:, 0]
+        if np.any(s <= 0):
+            i = int(np.argmin(s))
+            raise ScenarioError(
+                f"{at}: the {ob.describe()} overlaps robot {i + 1}'s start "
+                f"{q0[i].tolist()} (clearance {s[i]:.4g} <= 0, robot radius {radii[i]:g}); "
+                "move the obstacle or robots.positions",
+                key="obstacles",
+            )
+        built.append(ob)
+    if safety is None:
+        return tuple(built), None
+    values = safety.model_dump()
+    if values["sensing_radius"] is None:
+        values["sensing_radius"] = float("inf")
+    given = safety.model_fields_set
+    try:
+        config = SafetyFilter(**values)
+        config.check_contact(formation.contact_matrix)
+    except UserInputError as exc:
+        msg = str(exc)
+        key = "safety.obstacle_distance" if "D_o" in msg else "safety.distance"
+        for name in ("gamma", "max_speed", "sensing_radius", "speed_sides"):
+            if msg.startswith(f"safety {name} "):
+                key = f"safety.{name}"
+        from .validation import line_of
+
+        raise ScenarioError(f"{where(key, line_of(text, key))}: {msg}", key=key) from None
+    if not config.enabled and given - {"filter"}:
+        unused = ", ".join(sorted(given - {"filter"}))
+        warnings.append(
+            f'[safety] keys {unused}: no effect with filter = "none"; set filter = '
+            '"barrier" or "barrier-decentralized" to use them'
+        )
+    return tuple(built), config
