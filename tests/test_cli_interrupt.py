@@ -88,7 +88,10 @@ def interrupt_after(proc: subprocess.Popen[str], marker: str, delay: float, *, g
 @pytest.mark.parametrize("group", [False, True], ids=["process", "process-group"])
 def test_ctrl_c_during_a_long_run_writes_the_trajectory_so_far(tmp_path: Path, group: bool) -> None:
     scenario = tmp_path / "long.toml"
-    scenario.write_text(SCENARIO.replace("DURATION", "1000.0"))  # 10^6 steps: minutes
+    # 10^6 steps of RK4 on the stepping driver: minutes (explicit Euler's compiled path
+    # would finish them in seconds; its Ctrl-C is tested in tests/test_compiled.py)
+    long = SCENARIO.replace("DURATION", "1000.0").replace('"euler"', '"rk4"')
+    scenario.write_text(long)
     out = tmp_path / "out"
     proc = start(["run", str(scenario), "--out", str(out)], group=group)
     err = interrupt_after(proc, "1,000,000 steps", 2.0, group=group)

@@ -374,8 +374,9 @@ def _run(
 def compiled_terms(system: System, integrator: object) -> KernelTerms | None:
     """The law's kernel data when ``system`` under ``integrator`` can run compiled, else None.
 
-    Explicit Euler (exactly, not a subclass) on single integrators without
-    marching, with a law whose ``kernel_terms`` describe its control.
+    Explicit Euler (exactly, not a subclass) on the paper's single integrators
+    (no speed limit) without marching, with a law whose ``kernel_terms`` describe
+    its control.
     """
     from ..models import SingleIntegrator
     from .explicit import Euler
