@@ -146,7 +146,7 @@ def test_run_writes_obstacles_and_the_filter_status(filtered_run):
     assert sum(counts.values()) == 601 and counts["solved"] > 0  # active from this start
     assert safety["robots_ever_active"] and safety["min_pair_distance"] >= 0.3 - 1e-9
     assert safety["min_obstacle_clearance"] > 0.15 - 0.1 - 1e-9  # D_o - rho/2
-    assert "safety.png" in summary["files"] and (filtered_run / "safety.png").is_file()
+    assert "safety.png" in summary["manifest"] and (filtered_run / "safety.png").is_file()
     ds = xr.open_dataset(filtered_run / "trajectory.nc", engine="h5netcdf")
     try:
         active = ds["filter_active"].values

@@ -115,11 +115,10 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
     g = task.group
     f = g.formation
     trials = np.arange(task.start, task.stop, dtype=np.int64)
-    q0 = trial_initial_states(f, task.initial, task.seed, trials, center=task.center)
-    x0 = model_initial_states(f, task.model, q0, task.seed, trials)
     q0 = trial_initial_states(
         f, task.initial, task.seed, trials, center=task.center, obstacles=task.obstacles
     )
+    x0 = model_initial_states(f, task.model, q0, task.seed, trials)
     res = run_batch(
         f,
         g.law,
