@@ -124,6 +124,7 @@ class Scenario:
     def __post_init__(self) -> None:
         if self.x0 is None:
             object.__setattr__(self, "x0", self.q0)
+
     obstacles: tuple[Any, ...] = ()
     safety: Any = None
 

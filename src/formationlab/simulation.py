@@ -163,6 +163,7 @@ class SimulationResult:
         """Largest angle between a heading and their circular mean, ``(T,)`` (unicycles)."""
         h = self.headings
         return None if h is None else heading_spread(h)
+
     safety: SafetyRecord | None = None
 
     @property

@@ -131,6 +131,7 @@ class Equilibrium:
         if self.outcome != "rotating":
             return None
         return np.asarray(field_motion(self.q, self.velocity, self.omega).centre)
+
     constraints: tuple[str, ...] = ()
     multipliers: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
 

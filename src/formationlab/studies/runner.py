@@ -461,6 +461,8 @@ def _kernel_cached(dispatcher: Any) -> bool:
         )
     except AttributeError:  # another numba's internals: assume compiling
         return False
+
+
 def _backend_used(setup: StudySetup) -> dict[str, Any]:
     """``backend_used``, ``backend_note`` and ``safety`` of a study with obstacles or a filter."""
     used, note = setup.backend
