@@ -19,15 +19,12 @@ Cases:
   as edges (200 edges), the angle-restricted law with the template's
   orientation, stepped live on the server (the step budget per frame keeps
   the display rate; the simulation then runs slower than real time).
-* ``100 robots, distance``: the same with the distance law (eq. 8), whose step
-  is O(n^2) instead of the angular term's O(n^3): the step of the live case
-  above (~25 ms on a shared 2-core machine) is what bounds its frame rate,
-  since every frame shows at least one new step.
+* ``100 robots, distance``: the same with the distance law (eq. 8). Above 64
+  robots both laws sum over lists (edges, restricted triples, close pairs), so
+  neither step bounds the frame rate here.
 * ``10000 robots replay``: a synthetic stored run of 10,000 robots (20,000
-  edges) replayed; positions travel as float32 buffers. The package's laws are
-  dense in the number of robots (``(n, n)`` pair arrays), so 10,000 robots
-  cannot be stepped live here; the case measures what the page and the
-  transport sustain.
+  edges) replayed; positions travel as float32 buffers; the case measures what
+  the page and the transport sustain.
 
 Targets (issue 16): 100 robots >= 30 fps, 10,000 robots >= 10 fps.
 """
