@@ -29,7 +29,8 @@ multipliers the active set does not change, so the motion splits into
   linearisation has a zero there: it is non-hyperbolic by construction of the cubic
   class-K function), and
 * the **tangential** directions of the manifold ``{h_c = 0}``, minus the rigid motions
-  when there are no obstacles: the Jacobian of the filtered field restricted to them
+  when no obstacle acts on the state (none, or every robot beyond Khatib's range and no
+  active obstacle row): the Jacobian of the filtered field restricted to them
   (central differences along an orthonormal basis) gives eigenvalues, and the deadlock
   is ``stable``, a ``saddle`` or ``degenerate`` by their real parts, as for the laws'
   equilibria (:mod:`formationlab.equilibria.classify`).
@@ -254,7 +255,9 @@ def classify_deadlock(
     q = dead.q
     grads, _ = _rows(system, q, dead.active)
     normals = np.stack([g.ravel() for g in grads], axis=1)
-    modes = normals if system.obstacles else np.concatenate([normals, rigid_modes(q)], axis=1)
+    modes = normals
+    if _rigid_invariant(system, q, dead.active):
+        modes = np.concatenate([normals, rigid_modes(q)], axis=1)
     basis = complement(modes)
     step = 1e-6 * max(1.0, float(np.max(np.abs(q))))
     cols = []
@@ -284,6 +287,21 @@ def classify_deadlock(
         ),
         constraints=dead.active.labels(), multipliers=dead.multipliers,
     )  # fmt: skip
+
+
+def _rigid_invariant(system: System, q: NDArray[np.float64], act: ActiveSet) -> bool:
+    """Whether rigid motions are neutral at ``q``: no obstacles, or none within reach.
+
+    The laws are invariant under translations and rotations; obstacles break that only
+    where they act, through Khatib's repulsion (clearance below its ``influence``) or an
+    active obstacle constraint.
+    """
+    if not system.obstacles:
+        return True
+    if act.obstacles:
+        return False
+    reach = system.law.obstacle_repulsion().repulsion.influence
+    return bool(system.obstacle_clearances(q).min() > reach)
 
 
 def _per_pair_positive(system: System, dead: Deadlock) -> bool:
