@@ -75,3 +75,22 @@ def test_check_positions_names_overlapping_pair():
         f.check_positions([[0, 0], [2, 0], [np.nan, 0]])
     with pytest.raises(FormationError, match="shape"):
         f.check_positions([[0, 0], [2, 0]])
+
+
+def test_connectivity_is_decided_in_one_place_for_matrices_and_edge_lists():
+    from formationlab.graph import edges_connected, is_connected
+
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        n = int(rng.integers(2, 9))
+        a = np.triu(rng.random((n, n)) < 0.3, k=1)
+        edges = np.argwhere(a)
+        # a graph is connected when a search from robot 1 reaches every robot
+        seen, todo = {0}, [0]
+        while todo:
+            i = todo.pop()
+            for j in np.flatnonzero(a[i] | a[:, i]):
+                if int(j) not in seen:
+                    seen.add(int(j))
+                    todo.append(int(j))
+        assert is_connected(a | a.T) == edges_connected(edges, n) == (len(seen) == n)

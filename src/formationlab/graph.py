@@ -80,17 +80,9 @@ def as_edges(edges: str | ArrayLike, n: int, *, one_based: bool) -> NDArray[np.i
 
 
 def is_connected(adjacency: NDArray[np.bool_]) -> bool:
-    """Whether the graph with adjacency matrix ``(n, n)`` is connected."""
-    n = adjacency.shape[0]
-    seen = {0}
-    frontier = [0]
-    while frontier:
-        i = frontier.pop()
-        for j in np.flatnonzero(adjacency[i]):
-            if int(j) not in seen:
-                seen.add(int(j))
-                frontier.append(int(j))
-    return len(seen) == n
+    """Whether the graph with adjacency matrix ``(n, n)`` is connected (:func:`edges_connected`)."""
+    a = np.asarray(adjacency, dtype=bool)
+    return edges_connected(np.argwhere(np.triu(a | a.T, k=1)), a.shape[0])
 
 
 def edges_connected(edges: NDArray[np.int64], n: int) -> bool:

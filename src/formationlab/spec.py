@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import FormationError
-from .graph import as_edges, complete_edges, is_connected, is_rigid
+from .graph import as_edges, complete_edges, edges_connected, is_rigid
 from .orientation import alpha_from_shape, neighbour_triples, switching_surfaces
 
 __all__ = [
@@ -536,7 +536,7 @@ class Formation:
     @cached_property
     def is_connected(self) -> bool:
         """Whether the graph is connected."""
-        return is_connected(self.adjacency)
+        return edges_connected(self.edges, self.n)  # sparse: no (n, n) adjacency
 
     @cached_property
     def is_rigid(self) -> bool:
