@@ -16,6 +16,7 @@ import os
 from pathlib import Path
 
 import pytest
+from _scenarios import triangle
 from typer.testing import CliRunner, Result
 
 from formationlab.cli import _load_commands, app
@@ -24,30 +25,16 @@ from formationlab.io import files as io_files
 _load_commands()
 runner = CliRunner()
 
-SCENARIO = """\
-name = "short-triangle"
-[robots]
-positions = [[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]
-diameters = 0.2
-[formation]
-edges = "complete"
-distances = 1.0
-orientation = "table"
-alpha = [[1, 2, 3, 1.0], [3, 1, 2, 1.0], [2, 1, 3, -1.0]]
-[controller]
-law = "angle-restricted"
-k_c = 2.0
-k_a = 3.0
-theta = 0.5
-[simulation]
-integrator = "euler"
-dt = 1e-3
-duration = 0.2
+SCENARIO = triangle(
+    "short-triangle",
+    "0.2",
+    """\
 [study]
 trials = 4
 chunk_size = 4
 initial = { kind = "box", half_width = 3.0 }
-"""
+""",
+)
 
 
 def invoke(*args: object, **kwargs: object) -> Result:

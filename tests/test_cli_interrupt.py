@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
+from _scenarios import triangle
 from typer.testing import CliRunner, Result
 
 import formationlab as fl
@@ -28,26 +29,7 @@ from formationlab.scenario import parse_scenario
 _load_commands()
 runner = CliRunner()
 
-SCENARIO = """\
-name = "long-triangle"
-[robots]
-positions = [[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]
-diameters = 0.2
-[formation]
-edges = "complete"
-distances = 1.0
-orientation = "table"
-alpha = [[1, 2, 3, 1.0], [3, 1, 2, 1.0], [2, 1, 3, -1.0]]
-[controller]
-law = "angle-restricted"
-k_c = 2.0
-k_a = 3.0
-theta = 0.5
-[simulation]
-integrator = "euler"
-dt = 1e-3
-duration = DURATION
-"""
+SCENARIO = triangle("long-triangle", "DURATION")
 
 CLI = [sys.executable, "-c", "from formationlab.cli import main; main()"]
 

@@ -12,6 +12,7 @@ import warnings
 from pathlib import Path
 
 import pytest
+from _scenarios import triangle
 from typer.testing import CliRunner, Result
 
 from formationlab.cli import _load_commands, app
@@ -21,25 +22,10 @@ from formationlab.plotting import fonts
 _load_commands()
 runner = CliRunner()
 
-SCENARIO = """\
-name = "NAME"
-[robots]
-positions = [[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]
-diameters = 0.2
-[formation]
-edges = "complete"
-distances = 1.0
-orientation = "table"
-alpha = [[1, 2, 3, 1.0], [3, 1, 2, 1.0], [2, 1, 3, -1.0]]
-[controller]
-law = "angle-restricted"
-k_c = 2.0
-k_a = 3.0
-theta = 0.5
-[simulation]
-integrator = "euler"
-dt = 1e-3
-duration = 0.3
+SCENARIO = triangle(
+    "NAME",
+    "0.3",
+    """\
 [study]
 trials = 30
 chunk_size = 30
@@ -47,7 +33,8 @@ initial = { kind = "box", half_width = 3.0 }
 laws = ["distance", "angle-restricted", "squared-distance", "signed-area"]
 [study.sweep]
 k_a = [0.5, 3.0]
-"""
+""",
+)
 
 UNICODE = "Fórmation — 三角形 $5"
 
