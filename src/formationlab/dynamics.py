@@ -29,11 +29,12 @@ with no filter every method computes exactly what it did before they existed.
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from itertools import pairwise
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -41,13 +42,26 @@ from numpy.typing import NDArray
 from .controllers import Law
 from .marching import March
 from .models import RobotModel, SingleIntegrator
+from .sensing import Channel, Faults, Seed, Sensing
 from .spec import DENSE_LIMIT, Formation
 from .status import Status
 
 if TYPE_CHECKING:  # the safety package needs the optional "safety" extra at run time
     from .safety import FilterResult, Obstacle, SafetyFilter
 
-__all__ = ["System"]
+__all__ = ["SensedView", "System"]
+
+
+class SensedView(NamedTuple):
+    """A channel bound to the live trials of a step (:meth:`System.bound`).
+
+    ``u_local`` holds the robots' commands in their own frames for the whole step
+    (a channel with noise, delay or drops); None: computed from the state at each stage.
+    """
+
+    channel: Channel
+    live: NDArray[np.intp]
+    u_local: NDArray[np.float64] | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -73,9 +87,20 @@ class System:
     marching: March | None = None
     obstacles: Sequence[Obstacle] = ()
     safety: SafetyFilter | None = None
+    sensing: Sensing | None = None
+    faults: Faults | None = None
+    view: SensedView | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "obstacles", tuple(self.obstacles))
+        if self.faults is not None:
+            self.faults.check(self.formation.n)
+        if self.sensed:
+            from .sensing import SENSING_LIMIT
+
+            if self.formation.n > SENSING_LIMIT:
+                Channel(self.sensing, self.formation, self.law, self.model, [], 1.0)  # says why
+            self.law.compiled_terms(self.formation)  # a law without kernel terms says so now
         if self.marching is not None:
             self.marching.check(self.formation)
         if self.filtered:
@@ -86,8 +111,65 @@ class System:
 
     @property
     def time_dependent(self) -> bool:
-        """Whether the field depends on the time (a marching reference that is a function)."""
-        return self.marching is not None and self.marching.time_dependent
+        """Whether the field depends on the time (a marching reference that is a function,
+        a robot that stops at some ``t > 0``)."""
+        stops = self.faults is not None and any(s.at > 0 for s in self.faults.stop)
+        return stops or (self.marching is not None and self.marching.time_dependent)
+
+    @property
+    def sensed(self) -> bool:
+        """Whether the robots sense other than the paper says (:attr:`Sensing.ideal`)."""
+        return self.sensing is not None and not self.sensing.ideal
+
+    def channel(self, seeds: Sequence[Seed] | None, dt: float, trials: int = 1) -> Channel:
+        """The measurement channel of ``trials`` trials (``seeds``: default the sensing's seed)."""
+        assert self.sensing is not None
+        if seeds is None:
+            seeds = [self.sensing.seed] * trials
+        return Channel(self.sensing, self.formation, self.law, self.model, seeds, dt)
+
+    def bound(self, view: SensedView) -> System:
+        """This system reading its robots' measurements from ``view`` (the driver, per step)."""
+        out = copy.copy(self)
+        object.__setattr__(out, "view", view)
+        return out
+
+    def _law_control(self, x: NDArray[np.float64], p: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The law's part of the command: the law, or every robot's own sensed command."""
+        if not self.sensed:
+            return self.law.control(self.formation, p)
+        view = self.view
+        if view is None:
+            assert self.sensing is not None
+            if self.sensing.sampled:
+                raise RuntimeError(
+                    "a system whose sensing has noise, delay or drops is stepped through the "
+                    "stepping driver, which owns its measurement channel"
+                )
+            batch = int(np.prod(x.shape[:-2], dtype=np.int64))
+            flat = x.reshape(batch, *x.shape[-2:])
+            view = SensedView(self.channel(None, 1.0, batch), np.arange(batch))
+            return view.channel.world(self._sensed_local(view, flat), flat, view.live).reshape(
+                p.shape
+            )
+        return view.channel.world(self._sensed_local(view, x), x, view.live)
+
+    @staticmethod
+    def _sensed_local(view: SensedView, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        if view.u_local is not None:
+            return view.u_local
+        z, seen = view.channel.field(x, view.live)
+        return view.channel.local(z, seen, view.live)
+
+    def _faulty(self, xdot: NDArray[np.float64], t: float) -> NDArray[np.float64]:
+        """``xdot`` with the rows of the robots that have stopped by ``t`` set to zero."""
+        if self.faults is None or not self.faults.any:
+            return xdot
+        stopped = self.faults.stopped(self.formation.n, t)
+        if stopped.any():
+            xdot = np.array(xdot, copy=True)
+            xdot[..., stopped, :] = 0.0
+        return xdot
 
     @property
     def filtered(self) -> bool:
@@ -110,15 +192,15 @@ class System:
 
     def rhs(self, x: NDArray[np.float64], t: float = 0.0) -> NDArray[np.float64]:
         p = self.model.points(x)
-        u = self.command(p, self.law.control(self.formation, p), t)
-        return self.model.derivative(x, u)
+        u = self.command(p, self._law_control(x, p), t)
+        return self._faulty(self.model.derivative(x, u), t)
 
     def rhs_with(
         self, x: NDArray[np.float64], weights: NDArray[np.float64], t: float = 0.0
     ) -> NDArray[np.float64]:
         p = self.model.points(x)
         u = self.command(p, self.law.control_with(self.formation, p, weights), t)
-        return self.model.derivative(x, u)
+        return self._faulty(self.model.derivative(x, u), t)
 
     def speed(self, x: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
         """Largest robot speed (:meth:`RobotModel.speed`) of states and rates ``(..., n, k)``."""

@@ -39,6 +39,7 @@ from .marching import March, centroid_velocity, heading_spread
 from .models import MODELS, RobotModel, SingleIntegrator
 from .registry import resolve
 from .rigid_motion import RigidMotion
+from .sensing import Faults, Sensing
 from .spec import Formation
 from .status import Status
 from .validation import whole
@@ -355,6 +356,8 @@ def simulate(
     obstacles: Sequence[Obstacle] = (),
     safety: SafetyFilter | str | None = None,
     backend: Literal["auto", "numpy", "numba"] = "auto",
+    sensing: Sensing | None = None,
+    faults: Faults | None = None,
     **initial: Any,
 ) -> SimulationResult:
     """Simulate ``law`` on ``formation`` from ``q0`` (``q_dot_i = u_i``, eq. 1, by default).
@@ -401,6 +404,12 @@ def simulate(
         A safety filter between the law and the robots (``"barrier"``,
         ``"barrier-decentralized"`` with their defaults, or a configured
         :class:`~formationlab.safety.SafetyFilter`); default none.
+    sensing : Sensing, optional
+        How the robots measure each other (:mod:`formationlab.sensing`: local frames,
+        noise, range, delay, drops, mismatch; seeded by ``sensing.seed``); default the
+        paper's exact, common-frame sensing. Needs ``euler`` or ``rk4``.
+    faults : Faults, optional
+        Robots that stop moving (:class:`~formationlab.sensing.Faults`).
 
     Returns
     -------
@@ -424,6 +433,8 @@ def simulate(
     robot = resolve(MODELS, model or SingleIntegrator())
     x0 = initial_state(formation, robot, q0, **initial)
     system = _system(formation, law, robot, x0, marching, obstacles, safety)
+    if sensing is not None or faults is not None:
+        system = dataclasses.replace(system, sensing=sensing, faults=faults)
     terms = compiled_terms(system, integrator) if backend != "numpy" else None
     if backend == "numba" and terms is None:
         raise ParameterError(

@@ -85,6 +85,8 @@ class Integrator:
     """Base class of integrators."""
 
     name: ClassVar[str] = ""
+    #: an explicit scheme: may step a sensed system (commands held over a step)
+    explicit: ClassVar[bool] = False
 
     def run(
         self,

@@ -385,6 +385,8 @@ def compiled_terms(system: System, integrator: object) -> KernelTerms | None:
         return None
     if system.marching is not None or system.obstacles or system.filtered:
         return None
+    if system.sensed or (system.faults is not None and system.faults.any):
+        return None
     try:
         return system.law.compiled_terms(system.formation)
     except ParameterError:

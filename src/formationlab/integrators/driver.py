@@ -26,6 +26,13 @@ it is not negative) are kept (``Stepped.q_window``): the start of the drift wind
 rigid motion of a formation that never stops is fitted
 (:mod:`formationlab.rigid_motion`).
 
+With sensing (:attr:`System.sensed`) the driver makes the measurement channel of its
+trials (:meth:`System.channel`, one seed per trial) and binds it to the system at each
+step: with noise, delay or drops the robots measure once, at the start of the step, and
+hold their commands over it (a digital controller); otherwise their sensed commands are
+evaluated at every stage of the scheme. Only explicit schemes (``explicit = True``) step
+a sensed system.
+
 Saving every ``save_every`` steps keeps ``(t, x, v)`` of every live trial, and
 always a trial's last state. Counts in ``stats`` are integers.
 """
@@ -40,7 +47,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..dynamics import System
+from ..dynamics import SensedView, System
+from ..errors import ParameterError
 from ..status import Status
 from .diagnostics import SwitchMonitor
 
@@ -146,6 +154,7 @@ def drive(
     diagnostics: bool = False,
     progress: Progress | None = None,
     interruptible: bool = False,
+    seeds: Any = None,
 ) -> Stepped:
     """Step the trials ``x0`` ``(B, n, k)`` for up to ``n_steps`` steps of ``stepper.dt``.
 
@@ -173,10 +182,24 @@ def drive(
     interruptible : bool
         On Ctrl-C, stop every live trial with :attr:`Status.INTERRUPTED` and return
         what was stepped so far (instead of raising ``KeyboardInterrupt``).
+    seeds : sequence of int or tuple of int, optional
+        With sensing, the seed of each trial's channel (default: the sensing's ``seed``).
     """
     dt = float(stepper.dt)
     x = np.array(x0, dtype=float)
     B = x.shape[0]
+    channel = None
+    if system.sensed:
+        if not getattr(stepper, "explicit", False):
+            raise ParameterError(
+                f"[sensing] needs an explicit fixed-step integrator (euler or rk4): a robot "
+                f"measures once per step and holds its command; {stepper.name!r} is not one",
+                key="simulation.integrator",
+            )
+        channel = system.channel(seeds, dt, B)
+        if channel.B != B:
+            raise ParameterError(f"drive: {channel.B} seeds for {B} trials")
+    sampled = channel is not None and channel.sensing.sampled
     x_out, v_out = np.empty_like(x), np.full_like(x, np.nan)
     steps = np.zeros(B, dtype=np.int64)
     status = np.full(B, Status.SUCCESS.code, dtype=np.int8)
@@ -201,10 +224,12 @@ def drive(
     now = 0  # the step of the states x of the live trials
     try:
         for k in range(n_steps + 1):
+            here = system
+            if channel is not None:
+                u_local = channel.local(*channel.observe(x, live, k), live) if sampled else None
+                here = system.bound(SensedView(channel, live, u_local))
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-                x_new, v = stepper.advance(
-                    system, x, dt, counters, k * dt
-                )  # judged by step_verdict
+                x_new, v = stepper.advance(here, x, dt, counters, k * dt)  # judged by step_verdict
             evaluations += live.size
             if k == window_step:
                 q_window[live] = x[..., :2]
@@ -255,7 +280,10 @@ def drive(
             raise
         ids = live
         if ids.size:
-            v_now = system.rhs(x, now * dt)
+            if channel is None:
+                v_now = system.rhs(x, now * dt)
+            else:  # what the robots would do with exact measurements: the step was not taken
+                v_now = system.bound(SensedView(channel, ids)).rhs(x, now * dt)
             x_out[ids], v_out[ids], status[ids] = x, v_now, Status.INTERRUPTED.code
             steps[ids] = now
             if save_every is not None and (not saved or saved[-1][0] != now):

@@ -24,6 +24,7 @@ class Euler(FixedStepIntegrator):
     """Forward Euler, ``q_{k+1} = q_k + dt f(q_k)``: first order away from switching surfaces."""
 
     name = "euler"
+    explicit = True
 
     def advance(
         self,
@@ -43,6 +44,7 @@ class RK4(FixedStepIntegrator):
     """Classic fourth-order Runge-Kutta; fourth order only where the field is smooth."""
 
     name = "rk4"
+    explicit = True
     evaluations_per_step = 4
 
     def advance(

@@ -228,6 +228,12 @@ class Filippov(Integrator):
         interruptible: bool = False,
     ) -> RawSolution:
         steps_for(duration, self.save_dt)  # validates duration
+        if system.sensed:
+            raise ParameterError(
+                "[sensing] needs an explicit fixed-step integrator (euler or rk4): a robot "
+                "measures once per step and holds its command; filippov is event-driven",
+                key="simulation.integrator",
+            )
         if system.time_dependent:
             raise ParameterError(
                 "filippov steps a field that does not depend on time: give the marching "

@@ -60,6 +60,17 @@ class RobotModel:
         """
         return 1.0
 
+    @property
+    def has_heading(self) -> bool:
+        """Whether the state holds a heading (:meth:`heading`): a robot's own frame."""
+        return "theta" in self.state_names
+
+    def heading(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Each robot's heading ``(..., n)`` (radians), for a model with one."""
+        if not self.has_heading:
+            raise NotImplementedError(f"the robot model {self.name!r} has no heading")
+        return x[..., self.state_names.index("theta")]
+
     def positions(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Robot centres ``(..., n, 2)`` of states ``(..., n, k)`` (contact is tested on them)."""
         return x[..., :2]

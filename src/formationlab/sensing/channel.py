@@ -1,0 +1,207 @@
+"""The measurement channel of a batch of trials: frames, mismatch, noise, delay, drops, range.
+
+A :class:`Channel` belongs to one run of ``B`` trials (the stepping driver makes one;
+so do the PettingZoo environment and the asynchronous runner). Everything random is
+drawn from each trial's own seed, in an order that does not depend on the other
+trials, so a trial's run is the same alone, in any batch, on any worker:
+
+* at creation, each robot's frame (a uniform rotation, for robots without a heading)
+  and each robot's error in each of its desired distances (``mismatch``);
+* per step ``k``, the noise of the measurements taken at ``k`` and the losses of the
+  measurements delivered at ``k`` (drawn in blocks of :data:`BLOCK` steps).
+
+At step ``k`` robot ``i`` measures ``z_ij(k) = R(-a_i(k)) (p_j(k) - p_i(k)) + noise``
+of every robot within ``range`` (centre to centre); the measurement it uses is the one
+taken at ``k - m`` (``m = delay / dt``), unless that one is lost (probability
+``drop``), in which case it keeps the last one it received. A robot out of range when
+the measurement was taken is not seen: its terms are left out, nothing is held.
+
+With no noise, delay or drops the channel is a function of the state (:meth:`field`),
+evaluated at every stage of a scheme; otherwise measurements change once per step
+(:meth:`observe`) and a robot holds its command over the step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..controllers import Law
+from ..controllers.terms import PAIR_LIMIT, KernelTerms
+from ..errors import ParameterError
+from ..models import RobotModel
+from ..spec import Formation
+from .config import Sensing, delay_steps
+from .local import local_controls, measured, rotate
+
+__all__ = ["BLOCK", "SENSING_LIMIT", "Channel", "Seed"]
+
+#: steps of noise and losses drawn at once per trial
+BLOCK = 256
+#: most robots a sensed run takes: the measurements of a trial are an n x n array
+SENSING_LIMIT = 256
+#: what a trial's randomness is drawn from: an int, or a tuple of ints (study seed, trial)
+Seed = int | tuple[int, ...]
+
+
+def _entropy(seed: Seed) -> list[int]:
+    return [int(s) for s in (seed if isinstance(seed, tuple) else (seed,))]
+
+
+class Channel:
+    """What the robots of ``B`` trials measure, step by step (module docstring).
+
+    Parameters
+    ----------
+    sensing : Sensing
+        The sensing model.
+    formation, law, model
+        The closed loop's formation, law (its :meth:`~Law.compiled_terms` give the
+        per-robot controls) and robot model (its heading, if any, is the local frame).
+    seeds : sequence of int or tuple of int
+        One per trial.
+    dt : float
+        The step (the delay is a whole number of steps).
+    """
+
+    def __init__(
+        self,
+        sensing: Sensing,
+        formation: Formation,
+        law: Law,
+        model: RobotModel,
+        seeds: Sequence[Seed],
+        dt: float,
+    ) -> None:
+        n = formation.n
+        if n > SENSING_LIMIT:
+            raise ParameterError(
+                f"[sensing] models formations of at most {SENSING_LIMIT} robots (each "
+                f"trial keeps an n x n array of measurements); this one has {n}: remove "
+                "[sensing] for larger swarms",
+                key="sensing",
+            )
+        assert n <= PAIR_LIMIT
+        self.sensing, self.formation, self.model, self.n = sensing, formation, model, n
+        self.terms: KernelTerms = law.compiled_terms(formation)
+        self.B = len(seeds)
+        self.m = delay_steps(sensing.delay, dt) if sensing.delay > 0 else 0
+        self.k = -1  # the last step observed
+        roots = [np.random.SeedSequence(_entropy(s)) for s in seeds]
+        kids = [r.spawn(4) for r in roots]  # frames, mismatch, noise, drops
+        self._noise = [np.random.Generator(np.random.PCG64(c[2])) for c in kids]
+        self._drop = [np.random.Generator(np.random.PCG64(c[3])) for c in kids]
+        self.fixed_angles: NDArray[np.float64] | None = None
+        if sensing.frames == "local" and not model.has_heading:
+            self.fixed_angles = np.stack(
+                [np.random.Generator(np.random.PCG64(c[0])).uniform(0, 2 * np.pi, n) for c in kids]
+            )
+        self.own_distance: NDArray[np.float64] | None = None
+        if sensing.mismatch > 0:
+            d, a = self.terms.edge_distance, self.terms.edge_contact
+            e = np.stack(
+                [np.random.Generator(np.random.PCG64(c[1])).standard_normal((d.size, 2))
+                 for c in kids]
+            ) * sensing.mismatch  # fmt: skip
+            cap = (0.5 * (d - a))[None, :, None]
+            self.own_distance = d[None, :, None] + np.clip(e, -cap, cap)
+        shape = (self.B, n, n)
+        self._ring_z = np.zeros((self.m + 1, *shape, 2))
+        self._ring_in = np.zeros((self.m + 1, *shape), dtype=bool)
+        self._held = np.zeros((*shape, 2))
+        self._has = np.zeros(shape, dtype=bool)
+        self._blocks: dict[str, NDArray[np.float64]] = {}
+        self._eye = np.eye(n, dtype=bool)
+        self._block_of: dict[str, int] = {}
+
+    # ------------------------------------------------------------------ frames and views
+
+    def angles(self, x: NDArray[np.float64], live: NDArray[np.intp]) -> NDArray[np.float64] | None:
+        """Each robot's frame ``(L, n)`` at states ``x`` of trials ``live`` (None: common frame)."""
+        if self.sensing.frames != "local":
+            return None
+        if self.fixed_angles is not None:
+            return self.fixed_angles[live]
+        return self.model.heading(x)
+
+    def in_range(self, x: NDArray[np.float64]) -> NDArray[np.bool_] | None:
+        """Who sees whom by range, ``(L, n, n)`` (centre to centre); None without a range."""
+        if np.isinf(self.sensing.range):
+            return None
+        q = self.model.positions(x)
+        r = q[..., None, :, :] - q[..., :, None, :]
+        return np.sum(r * r, axis=-1) <= self.sensing.range**2
+
+    def field(self, x: NDArray[np.float64], live: NDArray[np.intp]):
+        """``(z, seen)`` of states ``x`` now (a channel without noise, delay or drops)."""
+        return measured(self.model.points(x), self.angles(x, live)), self.in_range(x)
+
+    def _draw(self, which: str, live: NDArray[np.intp], k: int, shape: tuple[int, ...]) -> NDArray:
+        gens = self._noise if which == "noise" else self._drop
+        block, row = divmod(k, BLOCK)
+        buf = self._blocks.get(which)
+        if buf is None:
+            buf = self._blocks[which] = np.zeros((self.B, BLOCK, *shape))
+        if self._block_of.get(which, -1) != block:  # a new block for the live trials
+            for b in live:
+                g = gens[b]
+                buf[b] = (
+                    g.standard_normal((BLOCK, *shape))
+                    if which == "noise"
+                    else g.random((BLOCK, *shape))
+                )
+            self._block_of[which] = block
+        return buf[live, row]
+
+    def observe(
+        self, x: NDArray[np.float64], live: NDArray[np.intp], k: int
+    ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """The measurements ``(z, seen)`` the robots of trials ``live`` use at step ``k``.
+
+        Steps are observed in order, once each (``k`` = the previous ``k`` + 1).
+        """
+        if k != self.k + 1:
+            raise RuntimeError(f"the channel observes steps in order: step {k} after {self.k}")
+        self.k = k
+        n, s = self.n, self.sensing
+        z = measured(self.model.points(x), self.angles(x, live))
+        if s.noise > 0:
+            z = z + s.noise * np.where(
+                self._eye[..., None], 0.0, self._draw("noise", live, k, (n, n, 2))
+            )
+        rng = self.in_range(x)
+        inside = np.ones((live.size, n, n), dtype=bool) if rng is None else rng
+        slot = k % (self.m + 1)
+        self._ring_z[slot, live], self._ring_in[slot, live] = z, inside
+        if k < self.m:  # nothing has arrived yet
+            arrived = np.zeros_like(inside)
+            z_in = z
+        else:
+            back = (k - self.m) % (self.m + 1)
+            z_in, arrived = self._ring_z[back, live], self._ring_in[back, live]
+        if s.drop > 0:
+            lost = (self._draw("drop", live, k, (n, n)) < s.drop) & ~self._eye
+            fresh = arrived & ~lost
+            keep = arrived & lost & self._has[live]
+        else:
+            fresh, keep = arrived, np.zeros_like(arrived)
+        held = np.where(fresh[..., None], z_in, self._held[live])
+        has = fresh | keep
+        self._held[live], self._has[live] = held, has
+        return held, has
+
+    # ------------------------------------------------------------------ commands
+
+    def local(
+        self, z: NDArray, seen: NDArray | None, live: NDArray[np.intp]
+    ) -> NDArray[np.float64]:
+        """Every robot's command in its own frame from its measurements; ``(L, n, 2)``."""
+        own = None if self.own_distance is None else self.own_distance[live]
+        return local_controls(self.terms, z, seen=seen, own_distance=own)
+
+    def world(self, u_local: NDArray, x: NDArray, live: NDArray[np.intp]) -> NDArray[np.float64]:
+        """Commands ``(L, n, 2)`` in the common frame: ``R(a_i) u_i``."""
+        a = self.angles(x, live)
+        return u_local if a is None else rotate(u_local, a)

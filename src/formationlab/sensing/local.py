@@ -1,0 +1,162 @@
+"""Every robot's command from its own measurements: the laws as per-robot controllers.
+
+The paper's laws "depend on local information and are suitable for application in
+decentralized algorithms": robot ``i``'s control ``u_i`` involves only the relative
+positions ``z_ij = p_j - p_i`` of the robots it is coupled to, its neighbours (the
+edge terms of eq. 8 and the triples of eq. 13) and the robots within Khatib's
+clearance ``s0`` (eq. 12). :func:`local_controls` evaluates each robot's control from
+*its own* measurements ``z[..., i, j]``, so that robots may measure in their own
+frames, with their own errors, and hold different ideas of a desired distance:
+
+* an edge ``(i, j)`` gives robot ``i`` ``g(|z_ij|) z_ij`` with its own ``d_ij`` and
+  robot ``j`` ``g(|z_ji|) z_ji`` with its own ``d_ji`` (``g = k_c phi'(r) / r``, eq. 8;
+  ``g = k (r^2 - d^2)`` for Krick et al.'s squared distances);
+* a non-neighbour pair gives each robot Khatib's repulsion from its own measurement;
+* a restricted triple ``(i, j, k)`` of eqs. (13), (14), (23) gives robot ``i``
+  ``-w Upsilon(sigma) k x (z_ik - z_ij)``, with the switching function ``sigma`` of
+  its surface computed from robot ``i``'s own measurements of the triangle (robot
+  ``i`` is a vertex, so it knows the triangle up to translation);
+* a signed-area triangle gives each vertex the penalty's gradient from that vertex's
+  measurements.
+
+The law enters as its :class:`~formationlab.controllers.terms.KernelTerms` (the data
+each law already gives the compiled kernels), so a law gets its local form with no
+second implementation of its own. All of ``u`` is in each robot's frame: rotations
+commute with ``k x`` and leave lengths and triple products unchanged, so with exact
+measurements the result rotated back equals the centralized law (to rounding: tested
+to ``1e-12`` for every law). A reflection does not commute with ``k x``: the
+angle-restricted law needs a common sense of rotation, not a common frame.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..controllers.terms import LOG_BARRIER, KernelTerms
+from ..potentials import scatter_rows
+
+__all__ = ["local_controls", "rotate"]
+
+
+def rotate(v: NDArray[np.float64], angle: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``R(angle) v`` for vectors ``(..., 2)`` and angles broadcasting against ``(...)``."""
+    c, s = np.cos(angle), np.sin(angle)
+    x, y = v[..., 0], v[..., 1]
+    return np.stack([c * x - s * y, s * x + c * y], axis=-1)
+
+
+def measured(p: NDArray[np.float64], angle: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    """``z[..., i, j] = R(-angle_i) (p_j - p_i)``, each robot's view; ``(..., n, n, 2)``.
+
+    ``angle`` ``(..., n)`` is each robot's frame (None: the common frame).
+    """
+    z = p[..., None, :, :] - p[..., :, None, :]
+    return z if angle is None else rotate(z, -np.asarray(angle)[..., :, None])
+
+
+def _gather(z: NDArray, obs: NDArray, tgt: NDArray) -> NDArray:
+    return z[..., obs, tgt, :]
+
+
+def _seen(seen: NDArray | None, obs: NDArray, tgt: NDArray) -> NDArray | bool:
+    return True if seen is None else seen[..., obs, tgt]
+
+
+def _pair_gain(terms: KernelTerms, r2: NDArray, d: NDArray, a: NDArray) -> NDArray:
+    """``g`` of an edge seen at squared distance ``r2`` with desired ``d`` (module docstring)."""
+    if terms.kind == LOG_BARRIER:
+        r = np.sqrt(r2)
+        clr = r - a
+        return terms.edge_gain * (clr / (d - a) - 1.0) / (clr * r)  # k_c phi'(r) / r, eqs. (7), (8)
+    return terms.edge_gain * (r2 - d * d)  # Krick et al. 2009
+
+
+def _repulsion_gain(terms: KernelTerms, r2: NDArray, a: NDArray) -> NDArray:
+    """``k_r gamma'(r - a) / r``, ``gamma'(s) = -eta (1/s - 1/s0) / s^2`` (Khatib); 0 beyond s0."""
+    s0 = terms.repulsion_influence
+    r = np.sqrt(r2)
+    clr = r - a
+    g = -terms.repulsion_gain * terms.repulsion_eta / s0 * (s0 - clr) / (clr * clr * clr * r)
+    return np.where(clr < s0, g, 0.0)
+
+
+def local_controls(
+    terms: KernelTerms,
+    z: NDArray[np.float64],
+    *,
+    seen: NDArray[np.bool_] | None = None,
+    own_distance: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]:
+    """Every robot's control from its own measurements, in its own frame (module docstring).
+
+    Parameters
+    ----------
+    terms : KernelTerms
+        The law's terms (``law.compiled_terms(formation)``), with pair arrays (at most
+        ``PAIR_LIMIT`` robots).
+    z : ndarray, shape (..., n, n, 2)
+        ``z[..., i, j]``: robot ``i``'s measurement of ``p_j - p_i`` in its frame.
+    seen : ndarray of bool, shape (..., n, n), optional
+        Whether robot ``i`` has a measurement of ``j``; terms that need an unseen robot
+        are left out of the robot's control. Default: everyone sees everyone.
+    own_distance : ndarray, shape (..., E, 2), optional
+        The desired distance of edge ``e`` as its robots ``edge_i[e]`` and ``edge_j[e]``
+        hold it; default ``terms.edge_distance`` for both.
+
+    Returns
+    -------
+    ndarray, shape (..., n, 2)
+        ``u_i`` in robot ``i``'s frame.
+    """
+    z = np.asarray(z, dtype=float)
+    n = z.shape[-2]
+    t = terms
+    rows: list[NDArray] = []
+    vals: list[NDArray] = []
+
+    def add(row: NDArray, value: NDArray, mask: NDArray | bool) -> None:
+        rows.append(row)
+        vals.append(np.where(np.asarray(mask)[..., None], value, 0.0))
+
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        ei, ej, a = t.edge_i, t.edge_j, t.edge_contact
+        d = (
+            np.broadcast_to(t.edge_distance[:, None], (len(ei), 2))
+            if own_distance is None
+            else own_distance
+        )
+        for side, (obs, tgt) in enumerate(((ei, ej), (ej, ei))):
+            v = _gather(z, obs, tgt)
+            g = _pair_gain(t, np.sum(v * v, axis=-1), d[..., side], a)
+            add(obs, g[..., None] * v, _seen(seen, obs, tgt))
+        other = ~t.pair_is_edge
+        if t.repulsion_gain != 0 and other.any():
+            pi, pj, pa = t.pair_i[other], t.pair_j[other], t.pair_contact[other]
+            for obs, tgt in ((pi, pj), (pj, pi)):
+                v = _gather(z, obs, tgt)
+                g = _repulsion_gain(t, np.sum(v * v, axis=-1), pa)
+                add(obs, g[..., None] * v, _seen(seen, obs, tgt))
+        if t.term_i.size:  # eqs. (11), (13), (14), (23), from robot i's own view
+            ti, tj, tk = t.term_i, t.term_j, t.term_k
+            sa, sb, sc = (x[t.term_surface] for x in (t.surface_a, t.surface_b, t.surface_c))
+            pa_, pb, pc = (_gather(z, ti, s) for s in (sa, sb, sc))
+            e1, e2 = pb - pa_, pc - pa_
+            cab = e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]  # as triangle_products
+            sigma = t.surface_beta[t.term_surface] * cab + t.theta
+            w = np.where(sigma >= 0.0, t.term_weight, 0.0)  # Upsilon(0) = 1
+            r_jk = _gather(z, ti, tk) - _gather(z, ti, tj)
+            term = w[..., None] * np.stack([r_jk[..., 1], -r_jk[..., 0]], axis=-1)
+            add(ti, term, _seen(seen, ti, tj) & _seen(seen, ti, tk))
+        if t.area_a.size:  # signed-area penalty, grad_a A_abc = 1/2 k x r_bc, per vertex
+            for v_, o1, o2 in ((t.area_a, t.area_b, t.area_c), (t.area_b, t.area_c, t.area_a),
+                               (t.area_c, t.area_a, t.area_b)):  # fmt: skip
+                p1, p2 = _gather(z, v_, o1), _gather(z, v_, o2)  # the vertex at 0
+                area = 0.5 * (p1[..., 0] * p2[..., 1] - p1[..., 1] * p2[..., 0])
+                g = t.area_gain * 0.5 * (area - t.area_target)
+                r12 = p2 - p1
+                term = g[..., None] * np.stack([r12[..., 1], -r12[..., 0]], axis=-1)
+                add(v_, term, _seen(seen, v_, o1) & _seen(seen, v_, o2))
+    if not rows:
+        return np.zeros((*z.shape[:-3], n, 2))
+    return scatter_rows(np.concatenate(vals, axis=-2), np.concatenate(rows), n)
