@@ -347,6 +347,38 @@ class SafetyModel(BaseModel):
         return v
 
 
+class SensingModel(BaseModel):
+    """``[sensing]``: how the robots measure each other (:class:`formationlab.sensing.Sensing`).
+
+    Types here; ranges by :class:`~formationlab.sensing.Sensing` itself, the delay against
+    the step by :mod:`formationlab.scenario`.
+    """
+
+    model_config = _STRICT
+    frames: Literal["global", "local"] = "global"
+    noise: float = 0.0
+    range: float | None = None
+    delay: float = 0.0
+    drop: float = 0.0
+    mismatch: float = 0.0
+    seed: int = 0
+
+
+class StopModel(BaseModel):
+    """One robot that stops: ``{ robot = 2, at = 3.0 }`` (robot numbers from 1)."""
+
+    model_config = _STRICT
+    robot: int
+    at: float = 0.0
+
+
+class FaultsModel(BaseModel):
+    """``[faults]``: robots that stop moving (:class:`formationlab.sensing.Faults`)."""
+
+    model_config = _STRICT
+    stop: list[StopModel] = []
+
+
 class ScenarioModel(BaseModel):
     """The whole file. ``[study]`` and ``[equilibria]`` are passed through unvalidated."""
 
@@ -362,6 +394,8 @@ class ScenarioModel(BaseModel):
     equilibria: dict[str, Any] | None = None
     obstacles: list[dict[str, Any]] | None = None
     safety: SafetyModel | None = None
+    sensing: SensingModel | None = None
+    faults: FaultsModel | None = None
 
 
 #: The keys each table accepts (the fixed ones; laws and integrators add theirs).
@@ -373,4 +407,6 @@ SECTIONS: dict[str, tuple[str, ...]] = {
     "simulation": tuple(SimulationModel.model_fields),
     "marching": tuple(MarchingModel.model_fields),
     "safety": tuple(SafetyModel.model_fields),
+    "sensing": tuple(SensingModel.model_fields),
+    "faults": tuple(FaultsModel.model_fields),
 }

@@ -24,6 +24,7 @@ This module reads no files: :func:`formationlab.io.scenario.load_scenario` does.
 from __future__ import annotations
 
 import dataclasses
+import math
 import tomllib
 import warnings as _warnings
 from collections.abc import Mapping
@@ -51,6 +52,7 @@ from .errors import IgnoredKeyWarning, ScenarioError, UserInputError
 from .integrators import INTEGRATORS, Integrator
 from .marching import March
 from .models import MODELS, RobotModel, SingleIntegrator
+from .sensing import SENSING_LIMIT, Faults, Sensing, Stop, delay_steps
 from .spec import Formation
 from .validation import line_of, validation_error
 
@@ -101,6 +103,11 @@ class Scenario:
         The ``[[obstacles]]`` tables (:mod:`formationlab.safety`), clear of the starts.
     safety : SafetyFilter or None
         The ``[safety]`` table (None when absent), checked against the contact distances.
+    sensing : Sensing or None
+        The ``[sensing]`` table (:mod:`formationlab.sensing`), None when absent; its delay
+        is a whole number of steps of the integrator.
+    faults : Faults or None
+        The ``[faults]`` table, None when absent; its robots exist.
     """
 
     name: str
@@ -127,6 +134,8 @@ class Scenario:
 
     obstacles: tuple[Any, ...] = ()
     safety: Any = None
+    sensing: Sensing | None = None
+    faults: Faults | None = None
 
     @property
     def n(self) -> int:
@@ -330,6 +339,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
             message = f"{source}: [{table}]{at}: {registry.ignored_message(name, ignored)}"
             warnings.append(message)
             _warnings.warn(message, IgnoredKeyWarning, stacklevel=3)
+    sensing, faults = _sensing(model, formation, integrator, fail)
     return Scenario(
         name=model.name or stem(source),
         text=text,
@@ -350,4 +360,47 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         marching=marching,
         obstacles=obstacles,
         safety=safety,
+        sensing=sensing,
+        faults=faults,
     )
+
+
+def _sensing(
+    model: ScenarioModel, formation: Formation, integrator: Integrator, fail: Any
+) -> tuple[Sensing | None, Faults | None]:
+    """The ``[sensing]`` and ``[faults]`` tables, checked against the formation and the step."""
+    sensing = faults = None
+    if model.sensing is not None:
+        given = model.sensing.model_dump()
+        if given["range"] is None:
+            given["range"] = math.inf
+        try:
+            sensing = Sensing(**given)
+        except UserInputError as exc:
+            raise fail(exc.key or "sensing", str(exc).removeprefix(f"{exc.key} ")) from None
+        if not sensing.ideal:
+            if not getattr(integrator, "explicit", False):
+                raise fail(
+                    "simulation.integrator",
+                    f"[sensing] needs an explicit fixed-step integrator (euler or rk4): a robot "
+                    f"measures once per step and holds its command; {integrator.name!r} is "
+                    "not one",
+                )
+            if formation.n > SENSING_LIMIT:
+                raise fail(
+                    "sensing",
+                    f"[sensing] models formations of at most {SENSING_LIMIT} robots; this one "
+                    f"has {formation.n}: remove [sensing] for larger swarms",
+                )
+            if sensing.delay > 0:
+                try:
+                    delay_steps(sensing.delay, float(integrator.dt))  # type: ignore[attr-defined]
+                except UserInputError as exc:
+                    raise fail("sensing.delay", str(exc)) from None
+    if model.faults is not None:
+        try:
+            faults = Faults(stop=[Stop(robot=s.robot, at=s.at) for s in model.faults.stop])
+            faults.check(formation.n)
+        except UserInputError as exc:
+            raise fail(exc.key or "faults", str(exc)) from None
+    return sensing, faults

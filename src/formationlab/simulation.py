@@ -93,6 +93,13 @@ class SimulationResult:
         With obstacles or a safety filter: the obstacles, and which robots, pairs and
         obstacle constraints the filter held active at each saved state
         (:class:`formationlab.safety.SafetyRecord`); None otherwise.
+    sensing : Sensing or None
+        How the robots sensed each other (:mod:`formationlab.sensing`), if not as the paper.
+    faults : Faults or None
+        The robots that stopped, if any.
+    own_distances : ndarray, shape (E, 2), or None
+        Under ``sensing.mismatch``: the desired distance of each edge as its first and
+        its second robot held it.
     """
 
     formation: Formation
@@ -110,6 +117,9 @@ class SimulationResult:
     xdot: NDArray[np.float64] = field(default=None)  # type: ignore[arg-type]
     model: RobotModel = field(default_factory=SingleIntegrator)
     marching: March | None = None
+    sensing: Sensing | None = None
+    faults: Faults | None = None
+    own_distances: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         if self.x is None:
@@ -280,6 +290,14 @@ class SimulationResult:
             extra["marching"] = self._marching_summary()
         if self.safety is not None:
             extra["safety"] = self.safety.summary()
+        if self.sensing is not None:
+            extra["sensing"] = self.sensing.describe()
+            if self.own_distances is not None:
+                extra["sensing"]["own_distances"] = dict(
+                    zip(self.edge_labels, self.own_distances.tolist(), strict=True)
+                )
+        if self.faults is not None:
+            extra["faults"] = self.faults.describe()
         return {
             "model": {"name": self.model.name, **dataclasses.asdict(self.model)},
             "state_names": list(type(self.model).state_names),
@@ -493,7 +511,18 @@ def simulate(
         model=robot,
         marching=marching,
         safety=record,
+        sensing=sensing,
+        faults=faults,
+        own_distances=_own_distances(system, integrator),
     )
+
+
+def _own_distances(system: System, integrator: Integrator) -> NDArray[np.float64] | None:
+    """The desired distances each robot of a mismatched run held (its channel's, trial 0)."""
+    if not system.sensed or system.sensing is None or system.sensing.mismatch == 0:
+        return None
+    own = system.channel(None, float(getattr(integrator, "dt", 1.0))).own_distance
+    return None if own is None else own[0]
 
 
 def initial_state(

@@ -244,6 +244,22 @@ def _verdict(s: dict[str, Any]) -> str:
     return line + f", still moving at the end ({speed:.2g} m/s > {tol['speed']:g})"
 
 
+def _sensing_words(sc: Any) -> str:
+    """``, sensing (...)`` and ``, faults (...)`` for the validate line ("" with neither)."""
+    out = ""
+    if sc.sensing is not None and not sc.sensing.ideal:
+        d = sc.sensing.describe()
+        parts = [f"frames {d['frames']}"] + [
+            f"{k} {d[k]:g}" for k in ("noise", "range", "delay", "drop", "mismatch")
+            if d[k] not in (0, 0.0, None)
+        ]  # fmt: skip
+        out += f", sensing ({', '.join(parts)}, seed {d['seed']})"
+    if sc.faults is not None and sc.faults.any:
+        stops = ", ".join(f"robot {s.robot} stops at {s.at:g} s" for s in sc.faults.stop)
+        out += f", faults ({stops})"
+    return out
+
+
 def _simulate(simulate: Any, sc: Any, save_every: int, quiet: bool) -> Any:
     """Run ``sc`` with a progress bar on a terminal (long runs only)."""
     steps = sc.duration / getattr(sc.integrator, "dt", 1e-3)
@@ -257,6 +273,8 @@ def _simulate(simulate: Any, sc: Any, save_every: int, quiet: bool) -> Any:
         "marching": sc.marching,
         "obstacles": sc.obstacles,
         "safety": sc.safety,
+        "sensing": sc.sensing,
+        "faults": sc.faults,
     }
     if not show:
         return simulate(sc.formation, sc.law, sc.x0, **kwargs)
@@ -322,6 +340,7 @@ def validate(
             safety += f", {len(sc.obstacles)} obstacles"
         if sc.safety is not None and sc.safety.enabled:
             safety += f", safety filter {sc.safety.filter} (D_s = {sc.safety.distance:g})"
+        safety += _sensing_words(sc)
         typer.echo(
             f"ok: {path}: {sc.name!r}, {_count(f.n, 'robot')}, {_count(len(f.edges), 'edge')} "
             f"({rigid}), "

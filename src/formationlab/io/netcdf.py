@@ -37,7 +37,8 @@ Coordinates: ``time`` in seconds, ``robot`` = 1..n, ``axis`` = ``"x"``, ``"y"``,
 ``edge`` = labels ``"i-j"``, ``surface`` = labels ``"alpha_ijk"``. Global
 attributes: ``scenario`` (the scenario's TOML text), ``formationlab_version``,
 ``law``, ``integrator`` and ``model`` (JSON of their parameters), ``status``,
-``message``. ``state`` = the model's ``state_names`` (``"x", "y", "theta"``).
+``message``; with ``[sensing]`` or ``[faults]`` also ``sensing`` and ``faults`` (JSON of
+their tables). ``state`` = the model's ``state_names`` (``"x", "y", "theta"``).
 """
 
 from __future__ import annotations
@@ -144,6 +145,10 @@ def trajectory_dataset(result: Any, *, attrs: dict[str, Any] | None = None) -> A
         summary = result.safety.summary()
         glob["obstacles"] = json.dumps(summary["obstacles"])
         glob["safety"] = json.dumps(to_jsonable(summary["filter"]))
+    if getattr(result, "sensing", None) is not None:
+        glob["sensing"] = json.dumps(to_jsonable(result.sensing.describe()))
+    if getattr(result, "faults", None) is not None:
+        glob["faults"] = json.dumps(to_jsonable(result.faults.describe()))
     for key, value in (attrs or {}).items():
         glob[key] = (
             value if isinstance(value, str | int | float) else json.dumps(to_jsonable(value))

@@ -45,6 +45,7 @@ from ..errors import FormationError, ParameterError
 from ..integrators import Euler, StopRule, drive
 from ..integrators.base import steps_for
 from ..models import RobotModel, SingleIntegrator
+from ..sensing import Faults, Seed, Sensing
 from ..spec import Formation
 from ..validation import positive, whole
 
@@ -74,13 +75,18 @@ _KERNEL_LOCK = threading.Lock()
 
 
 def batch_backend(
-    backend: str, obstacles: Sequence[Any] = (), safety: Any = None
+    backend: str, obstacles: Sequence[Any] = (), safety: Any = None, sensed: bool = False
 ) -> tuple[Backend, str]:
     """The backend a batch runs on, and why it differs from ``backend`` ("" if it does not).
 
-    The numba kernel has neither obstacles nor a safety filter, so either moves the
-    batch to the numpy driver path.
+    The numba kernel has neither obstacles nor a safety filter nor sensing and faults,
+    so any of them moves the batch to the numpy driver path.
     """
+    if backend == "numba" and sensed:
+        return "numpy", (
+            "the compiled kernel has no sensing models or faults: the batch runs on the "
+            "numpy driver path (every trial with its own seeded measurement channel)"
+        )
     filtered = safety is not None and safety.enabled
     if backend == "numba" and (obstacles or filtered):
         what = " and ".join(
@@ -107,6 +113,9 @@ def run_batch(
     model: RobotModel | None = None,
     obstacles: Sequence[Any] = (),
     safety: Any = None,
+    sensing: Sensing | None = None,
+    faults: Faults | None = None,
+    seeds: Sequence[Seed] | None = None,
 ) -> BatchResult:
     """Simulate ``B`` trials of ``law`` on ``formation`` with explicit Euler (module docstring).
 
@@ -143,6 +152,15 @@ def run_batch(
     safety : SafetyFilter, optional
         Safety filter between the law and the robots. With obstacles or a filter the
         batch runs on the numpy path (:func:`batch_backend`).
+    sensing : Sensing, optional
+        How the robots sense each other (:mod:`formationlab.sensing`); with a sensing
+        model other than the paper's, or with ``faults``, the batch runs on the numpy
+        driver path.
+    faults : Faults, optional
+        Robots that stop.
+    seeds : sequence of int or tuple of int, optional
+        Each trial's sensing seed (default: ``sensing.seed`` for every trial); a trial's
+        noise, losses, frames and mismatch depend on its seed only.
 
     Returns
     -------
@@ -156,25 +174,26 @@ def run_batch(
     if check_every is None:
         check_every = max(1, round(tol.window / dt))
     check_every = whole(check_every, "check_every")
-    backend, _ = batch_backend(backend, obstacles, safety)
+    sensed = (sensing is not None and not sensing.ideal) or (faults is not None and faults.any)
+    backend, _ = batch_backend(backend, obstacles, safety, sensed)
     if backend == "numba":
         x, v, status, steps, mc, ns, qw, window_step = _run_numba(
             formation, law, model, q0, float(dt), n_steps, int(check_every), tol
         )
     elif backend == "numpy":
-        system = System(formation=formation, law=law, model=model)
+        system = System(formation=formation, law=law, model=model, sensing=sensing, faults=faults)
         if obstacles or safety is not None:
             from ..safety import check_obstacle_starts
 
             check_obstacle_starts(q0[..., :2], formation.diameters / 2, tuple(obstacles))
             system = System(
                 formation=formation, law=law, model=model, obstacles=tuple(obstacles),
-                safety=safety,
+                safety=safety, sensing=sensing, faults=faults,
             )  # fmt: skip
         out = drive(
             system, Euler(dt=float(dt)), q0, n_steps=n_steps,
             stop=StopRule(speed=tol.speed, check_every=int(check_every)),
-            window=tol.drift_steps(float(dt)),
+            window=tol.drift_steps(float(dt)), seeds=None if seeds is None else list(seeds),
         )  # fmt: skip
         x, v, status, steps, mc, ns = (
             out.x, out.v, out.status, out.steps, out.min_clearance, out.net_speed,

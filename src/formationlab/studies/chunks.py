@@ -130,10 +130,14 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
         model=task.model,
         obstacles=task.obstacles,
         safety=task.safety,
+        sensing=g.sensing,
+        faults=g.faults,
+        seeds=[(task.seed, int(t)) for t in trials] if g.sensed else None,
     )
     outcome = np.asarray(res.outcome, dtype=object)
     # settling steps the law alone: not the closed loop with obstacles or a filter
     plain = not task.obstacles and (task.safety is None or not task.safety.enabled)
+    plain = plain and not g.sensed  # nor a sensed one
     settle = task.settle if plain else SettleModel(enabled=False)
     settled, settled_outcome = settle_trials(
         f, g.law, res.q_final, outcome, settle=settle, tolerances=task.tolerances

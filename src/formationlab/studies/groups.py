@@ -4,7 +4,10 @@ A group is one law with one set of parameters on one formation; the trials of a
 study are run once per group. A law runs only the sweep points of the keys it
 has (its dataclass fields, ``eta``/``influence`` of its repulsion, and the robot
 parameter ``diameter``), and takes the scenario law's parameters that it shares
-by name.
+by name. The sensing keys (``noise``, ``range``, ``delay``, ``drop``, ``mismatch``:
+the scenario's ``[sensing]`` with that key changed) and the fault key ``stop_at``
+(the time at which the robots of the scenario's ``[faults] stop`` stop) apply to
+every law.
 """
 
 from __future__ import annotations
@@ -17,15 +20,22 @@ from typing import Any
 
 from ..controllers import LAWS, Law
 from ..errors import ParameterError, UserInputError
+from ..sensing import Faults, Sensing, Stop
 from ..spec import Formation
 from ..validation import choices, nearest
 from .config import StudyConfig
 
-__all__ = ["REPULSION_KEYS", "ROBOT_KEYS", "Group", "study_groups"]
+__all__ = ["FAULT_KEYS", "REPULSION_KEYS", "ROBOT_KEYS", "SENSING_KEYS", "Group", "study_groups"]
 
 REPULSION_KEYS = ("eta", "influence")
 #: Sweep keys that set a property of the robots.
 ROBOT_KEYS = ("diameter",)
+#: Sweep keys of the sensing model (fields of :class:`~formationlab.sensing.Sensing`).
+SENSING_KEYS = ("noise", "range", "delay", "drop", "mismatch")
+#: Sweep keys of the faults: when the robots of ``[faults] stop`` stop.
+FAULT_KEYS = ("stop_at",)
+#: Sweep keys that apply to every law.
+EVERY_LAW = (*ROBOT_KEYS, *SENSING_KEYS, *FAULT_KEYS)
 
 
 # ----------------------------------------------------------------------------- groups
@@ -45,12 +55,25 @@ class Group:
         The formation with the point's robot parameters (``diameter``).
     parameters : dict
         The swept parameters that apply to this law, ``{key: value}``.
+    sensing : Sensing or None
+        How the robots sense (the scenario's, with the point's sensing keys).
+    faults : Faults or None
+        The robots that stop (the scenario's, with the point's ``stop_at``).
     """
 
     index: int
     law: Law
     formation: Formation
     parameters: dict[str, float]
+    sensing: Sensing | None = None
+    faults: Faults | None = None
+
+    @property
+    def sensed(self) -> bool:
+        """Whether the trials need the sensed (numpy driver) path."""
+        return (self.sensing is not None and not self.sensing.ideal) or (
+            self.faults is not None and self.faults.any
+        )
 
     def describe(self) -> dict[str, Any]:
         """JSON-ready: ``law``, ``parameters`` and the law's full ``law_parameters``."""
@@ -60,6 +83,9 @@ class Group:
             "parameters": dict(self.parameters),
             "law_parameters": dataclasses.asdict(self.law),
             "diameters": self.formation.diameters.tolist(),
+            # (absent without sensing or faults: earlier fingerprints are kept)
+            **({"sensing": self.sensing.describe()} if self.sensing is not None else {}),
+            **({"faults": self.faults.describe()} if self.faults is not None else {}),
         }
 
 
@@ -78,7 +104,20 @@ def _base_law(name: str, law: Law) -> Law:
 
 def _applies(key: str, cls: type) -> bool:
     names = _fields(cls)
-    return key in ROBOT_KEYS or key in names or (key in REPULSION_KEYS and "repulsion" in names)
+    return key in EVERY_LAW or key in names or (key in REPULSION_KEYS and "repulsion" in names)
+
+
+def _sensed(
+    point: dict[str, float], sensing: Sensing | None, faults: Faults | None
+) -> tuple[Sensing | None, Faults | None]:
+    """The point's sensing and faults: the scenario's with the swept keys changed."""
+    given = {k: v for k, v in point.items() if k in SENSING_KEYS}
+    if given:
+        sensing = dataclasses.replace(sensing or Sensing(), **given)
+    if "stop_at" in point:
+        assert faults is not None  # checked by study_groups
+        faults = Faults(stop=[Stop(robot=s.robot, at=point["stop_at"]) for s in faults.stop])
+    return sensing, faults
 
 
 def _apply(law: Law, formation: Formation, point: dict[str, float]) -> tuple[Law, Formation]:
@@ -98,6 +137,8 @@ def study_groups(
     config: StudyConfig,
     *,
     laws: Mapping[str, Law] | None = None,
+    sensing: Sensing | None = None,
+    faults: Faults | None = None,
 ) -> list[Group]:
     """The groups of a study: every law of ``config.laws`` at every point of its sweep.
 
@@ -105,7 +146,8 @@ def study_groups(
     (its dataclass fields, ``eta``/``influence`` of its repulsion, ``diameter``).
     ``laws`` gives the base law of each name (a scenario's
     :meth:`~formationlab.scenario.Scenario.law_named`: the file's keys that it takes);
-    without it, a law takes the parameters it shares with ``law``.
+    without it, a law takes the parameters it shares with ``law``. ``sensing`` and
+    ``faults`` are the scenario's; the sensing and fault keys of a point change them.
 
     Raises
     ------
@@ -121,7 +163,7 @@ def study_groups(
     for key in keys:
         if not any(_applies(key, LAWS[name]) for name in names):
             takes = sorted(set().union(*(_fields(LAWS[n]) for n in names)) - {"repulsion"})
-            known = [*takes, *REPULSION_KEYS, *ROBOT_KEYS]
+            known = [*takes, *REPULSION_KEYS, *EVERY_LAW]
             hint = choices(key, known, "Sweepable")
             if hint.startswith("."):  # a parameter of a law the study does not run?
                 others = {k: n for n in LAWS for k in _fields(LAWS[n]) if n not in names}
@@ -136,6 +178,12 @@ def study_groups(
                 f"{key!r}{hint}",
                 key=f"study.sweep.{key}",
             )
+    if "stop_at" in keys and (faults is None or not faults.any):
+        raise ParameterError(
+            "study.sweep.stop_at sets when the robots of [faults] stop stop, but the scenario "
+            "names none: add [faults] stop = [{ robot = 2 }] (the robot that fails)",
+            key="study.sweep.stop_at",
+        )
     groups: list[Group] = []
     for name in names:
         base = laws[name] if laws is not None and name in laws else _base_law(name, law)
@@ -144,12 +192,20 @@ def study_groups(
             point = {k: float(v) for k, v in zip(mine, values, strict=True)}
             try:
                 g_law, g_formation = _apply(base, formation, point)
+                g_sensing, g_faults = _sensed(point, sensing, faults)
             except UserInputError as exc:
                 where = ", ".join(f"{k} = {v:g}" for k, v in point.items())
                 raise ParameterError(
                     f"study.sweep ({name}, {where}): {exc}", key="study.sweep"
                 ) from None
             groups.append(
-                Group(index=len(groups), law=g_law, formation=g_formation, parameters=point)
+                Group(
+                    index=len(groups),
+                    law=g_law,
+                    formation=g_formation,
+                    parameters=point,
+                    sensing=g_sensing,
+                    faults=g_faults,
+                )
             )
     return groups

@@ -49,6 +49,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..controllers import LAWS, Law
 from ..errors import ParameterError
 from ..models import RobotModel, SingleIntegrator
+from ..sensing import Faults, Sensing, delay_steps
 from ..spec import Formation
 from ..validation import positive, whole
 from .chunks import ChunkTask, plan_chunks, run_chunk
@@ -196,6 +197,8 @@ class StudySetup:
     model: RobotModel = field(default_factory=SingleIntegrator)
     obstacles: tuple[Any, ...] = ()
     safety: Any = None
+    sensing: Sensing | None = None
+    faults: Faults | None = None
 
     def __post_init__(self) -> None:
         if self.config.settle.enabled and not isinstance(self.model, SingleIntegrator):
@@ -259,6 +262,8 @@ class StudySetup:
             model=sc.model,
             obstacles=sc.obstacles,
             safety=sc.safety,
+            sensing=sc.sensing,
+            faults=sc.faults,
         )
         try:
             setup.groups  # noqa: B018 - checks laws and sweep keys now, with the file's lines
@@ -269,14 +274,26 @@ class StudySetup:
     @cached_property
     def groups(self) -> list[Group]:
         """The groups (:func:`study_groups`)."""
-        return study_groups(self.formation, self.law, self.config, laws=self.laws)
+        groups = study_groups(
+            self.formation, self.law, self.config, laws=self.laws, sensing=self.sensing,
+            faults=self.faults,
+        )  # fmt: skip
+        for g in groups:  # a swept delay must be whole steps of the study's dt
+            if g.sensing is not None and g.sensing.delay > 0:
+                try:
+                    delay_steps(g.sensing.delay, self.dt)
+                except ParameterError as exc:
+                    key = "study.sweep.delay" if "delay" in g.parameters else "sensing.delay"
+                    raise ParameterError(f"{exc} (study dt = {self.dt:g} s)", key=key) from None
+        return groups
 
     @property
     def backend(self) -> tuple[str, str]:
         """The backend the trials run on and why it is not ``config.backend`` ("" if it is)."""
         from .batch import batch_backend
 
-        return batch_backend(self.config.backend, self.obstacles, self.safety)
+        sensed = any(g.sensed for g in self.groups)
+        return batch_backend(self.config.backend, self.obstacles, self.safety, sensed)
 
     def safety_description(self) -> dict[str, Any] | None:
         """JSON-ready obstacles and filter (None without either)."""
@@ -433,7 +450,7 @@ def run_study(
 def _warm_kernels(tasks: list[ChunkTask], notify: Callable[[str], None] | None) -> float:
     """Compile (or load from numba's cache) the kernel for each law, on one trial of two
     steps, so that the study's throughput does not count it; returns the time taken."""
-    first = {t.group.law.name: t for t in tasks if t.backend == "numba"}
+    first = {t.group.law.name: t for t in tasks if t.backend == "numba" and not t.group.sensed}
     if not first:
         return 0.0
     from .batch import run_batch
