@@ -34,16 +34,29 @@ second order):
 ``omega_1 = sum_E kappa_ij (dhat_ji - dhat_ij) (p_i - p_bar) x (p_j - p_bar) / I(p)``,  (M2)
 
 ``kappa = -dg/d(dhat)`` at ``r = dhat = d``: ``2 k d`` for Krick et al.,
-``k_c / ((d - a)^2 d)`` for the log barrier of eq. (7). For the equilateral
-triangle of side ``d`` (robots counter-clockwise) and Krick et al.'s law this is
+``k_c / ((d - a)^2 d)`` for the log barrier of eq. (7).
 
-``omega_1 = k / (2 sqrt 3) sum_ccw (dhat_ji^2 - dhat_ij^2)``,   (M3)
+**The triangle.** For Krick et al.'s law ``g_ij - g_ji = k (dhat_ji^2 - dhat_ij^2)``
+whatever the shape, the centroid cuts a triangle into three of equal area, so
+``(q_i - q_bar) x (q_j - q_bar) = 2 A / 3`` for each counter-clockwise pair ``(i, j)``
+(``A`` the signed area, robots 1, 2, 3 counter-clockwise), and
+``I = (a^2 + b^2 + c^2) / 3`` for sides ``a, b, c``. (M1) is then, exactly,
 
-the sum over the three edges oriented counter-clockwise, ``i -> j``. It is linear in
-the errors: with independent ``e ~ N(0, sigma^2)``, ``omega_1 ~ N(0, 2 k^2 d^2 sigma^2)``
-and ``E |omega_1| = 2 k d sigma / sqrt(pi)``. :func:`first_order_motion` evaluates
-(M2) (and the centroid velocity, the mean of ``u`` at ``p``) from the package's own
-controls.
+``omega = 2 k A / (a^2 + b^2 + c^2) sum_ccw (dhat_ji^2 - dhat_ij^2)``,   (M3)
+
+the sum over the three edges oriented counter-clockwise, ``i -> j``, and ``A``,
+``a, b, c`` those of the distorted steady shape. The factor ``2 A / (a^2 + b^2 + c^2)``
+is largest, ``sqrt(3) / 6``, for the equilateral triangle (Weitzenboeck's
+inequality), so on the equilateral triangle of side ``d`` the first-order
+
+``omega_1 = k / (2 sqrt 3) sum_ccw (dhat_ji^2 - dhat_ij^2)``   (M4)
+
+is off only at third order in the errors (a first-order distortion leaves a
+stationary factor unchanged). It is linear in the errors: with independent
+``e ~ N(0, sigma^2)``, ``omega_1 ~ N(0, 2 k^2 d^2 sigma^2)`` and
+``E |omega_1| = 2 k d sigma / sqrt(pi)``: the drift grows in proportion to the
+mismatch. :func:`first_order_motion` evaluates (M2) (and the centroid velocity, the
+mean of ``u`` at ``p``) from the package's own controls.
 
 **The solver.** :func:`steady_motion` solves for the shape directly: unknowns the
 positions ``q`` ``(n, 2)``, ``omega`` and the centroid velocity ``v`` (``2n + 3``);
@@ -100,9 +113,7 @@ def _own(formation: Formation, own_distance: ArrayLike | None) -> NDArray[np.flo
             key="own_distance",
         )
     if not np.all(np.isfinite(own)) or np.any(own <= 0):
-        raise ParameterError(
-            "own_distance must hold finite positive distances", key="own_distance"
-        )
+        raise ParameterError("own_distance must hold finite positive distances", key="own_distance")
     return own
 
 
@@ -178,7 +189,8 @@ class SteadyMotion:
     velocity : ndarray, shape (2,)
         Velocity of the centroid, m/s.
     centre : ndarray, shape (2,)
-        Centre of the rotation, ``q_bar + (k x v) / omega``; NaN when ``omega = 0``.
+        Centre of the rotation, ``q_bar + (k x v) / omega``; NaN when the rotation moves
+        no robot faster than ``tol`` about the centroid (``kind`` is not ``"rotation"``).
     distance_error : ndarray, shape (E,)
         ``r_ij - d_ij`` of the shape, in the order of ``formation.edges``.
     residual : float
@@ -189,6 +201,10 @@ class SteadyMotion:
         The solver's message.
     own_distance : ndarray, shape (E, 2)
         The distances the robots steered to.
+    kind : {"rotation", "translation", "rest"}
+        ``"rotation"`` when the rotation moves some robot about the centroid faster than
+        ``tol``; otherwise ``"translation"`` when the centroid moves faster than ``tol``,
+        else ``"rest"`` (an equilibrium: no mismatch, or one that cancels).
     """
 
     q: NDArray[np.float64]
@@ -200,6 +216,7 @@ class SteadyMotion:
     converged: bool
     message: str
     own_distance: NDArray[np.float64]
+    kind: str
 
     @property
     def speed(self) -> float:
@@ -276,12 +293,14 @@ def steady_motion(
     sol = least_squares(equations, x0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
     q, omega, v = unpack(sol.x)
     residual = float(np.max(np.linalg.norm(rigid_part(q, omega, v), axis=-1)))
-    centre = q.mean(axis=0) + perp(v) / omega if omega != 0 else np.full(2, np.nan)
+    spin = abs(omega) * float(np.max(np.linalg.norm(q - q.mean(axis=0), axis=-1)))
+    kind = "rotation" if spin > tol else "translation" if np.linalg.norm(v) > tol else "rest"
+    centre = q.mean(axis=0) + perp(v) / omega if kind == "rotation" else np.full(2, np.nan)
     return SteadyMotion(
         q=q, omega=omega, velocity=np.array(v), centre=centre,
         distance_error=distance_errors(formation, q), residual=residual,
         converged=bool(sol.status > 0 and residual <= tol), message=str(sol.message),
-        own_distance=own,
+        own_distance=own, kind=kind,
     )  # fmt: skip
 
 
