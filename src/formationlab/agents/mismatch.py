@@ -8,7 +8,9 @@ comes to rest: the formation converges exponentially to a distorted but rigid sh
 that travels a circle at a constant angular speed. With ``sensing.mismatch`` the
 package realises such disagreements (:class:`formationlab.sensing.Channel`:
 ``own_distance[e] = (d_ij + e_ij, d_ij + e_ji)``); this module finds the motion they
-end in without simulating.
+end in without simulating. Equations (M1) to (M4) below are derived here (they agree
+with the paper's statement above; the tests hold them against simulated runs), not
+copied from the paper.
 
 **Why a rotation.** Every edge law of the package gives robot ``i`` the term
 ``g_ij(r) z_ij`` (``z_ij = q_j - q_i``, ``g_ij = k (r^2 - d_ij^2)`` for Krick et al.,
