@@ -351,3 +351,35 @@ def test_a_delay_that_is_not_whole_steps_says_what_to_use() -> None:
         ScenarioError, match=r"not a multiple of the step dt = 0.001 s.*use 0.001 s|use 0.002 s"
     ):
         parse_scenario(triangle("d", "1.0", "[sensing]\ndelay = 0.0015\n"))
+
+
+def _noisy_study(tmp_path: Path, chunk_size: int, workers: int | None) -> object:
+    from formationlab.io.scenario import load_scenario
+    from formationlab.studies import parse_study
+    from formationlab.studies.runner import StudySetup, run_study
+
+    path = tmp_path / f"s{chunk_size}.toml"
+    path.write_text(
+        triangle(
+            "noisy-study",
+            "3.0",
+            '[sensing]\nframes = "local"\ndrop = 0.2\n[faults]\nstop = [{ robot = 2, at = inf }]\n'
+            f'[study]\ntrials = 6\nchunk_size = {chunk_size}\nlaws = ["distance"]\n',
+        )
+    )
+    sc = load_scenario(path)
+    config = parse_study(sc.study, dt=1e-2, sweep={"noise": [0.0, 0.03], "stop_at": [1.0]})
+    setup = StudySetup.from_scenario(sc, config)
+    assert setup.backend[0] == "numpy"
+    return run_study(setup, seed=3, workers=workers).trials
+
+
+def test_a_noisy_study_is_the_same_whatever_chunks_and_workers(tmp_path: Path) -> None:
+    one = _noisy_study(tmp_path, 6, None)
+    other = _noisy_study(tmp_path, 2, 2)
+    import pandas as pd
+
+    pd.testing.assert_frame_equal(one, other, check_exact=True)
+    assert set(one["noise"]) == {0.0, 0.03} and set(one["stop_at"]) == {1.0}
+    quiet, noisy = (one[one["noise"] == v] for v in (0.0, 0.03))
+    assert not np.array_equal(quiet["x1"].to_numpy(), noisy["x1"].to_numpy())

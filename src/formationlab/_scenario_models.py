@@ -365,9 +365,10 @@ class SensingModel(BaseModel):
 
 
 class StopModel(BaseModel):
-    """One robot that stops: ``{ robot = 2, at = 3.0 }`` (robot numbers from 1)."""
+    """One robot that stops: ``{ robot = 2, at = 3.0 }`` (robot numbers from 1; ``at = inf``:
+    never, unless a study's ``stop_at`` sweep says when)."""
 
-    model_config = _STRICT
+    model_config = ConfigDict(strict=True, extra="forbid", allow_inf_nan=True, frozen=True)
     robot: int
     at: float = 0.0
 

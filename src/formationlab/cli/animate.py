@@ -49,8 +49,10 @@ def write_animation(
     from ..plotting.animation import animate_run
 
     safety: dict[str, Any] = {}
+    faults: dict[str, Any] | None = None
     if hasattr(result_or_ds, "formation"):
         r = result_or_ds
+        faults = None if r.faults is None else r.faults.describe()
         t, q, edges, diam = r.t, r.q, r.formation.edges, r.formation.diameters
         headings, points = r.headings, (None if r.points is r.q else r.points)
         if r.safety is not None:
@@ -64,6 +66,7 @@ def write_animation(
         edges, diam = ds["edge_robots"].values - 1, ds["diameter"].values
         headings = ds["theta"].values if "theta" in ds else None
         points = ds["point"].values if "point" in ds else None
+        faults = json.loads(str(ds.attrs["faults"])) if "faults" in ds.attrs else None
         if "filter_active" in ds:
             safety = {
                 "obstacles": json.loads(str(ds.attrs.get("obstacles", "[]"))),
@@ -73,6 +76,7 @@ def write_animation(
     anim = animate_run(
         t, q, edges=edges, diameters=diam, max_frames=frames, title=title,
         headings=headings, points=points, **safety,
+        stops=[(s["robot"] - 1, s["at"]) for s in (faults or {}).get("stop", [])],
     )  # fmt: skip
     return save_animation(anim, folder / ANIMATION_STEM, formats=formats, written=done)
 

@@ -255,7 +255,10 @@ def _sensing_words(sc: Any) -> str:
         ]  # fmt: skip
         out += f", sensing ({', '.join(parts)}, seed {d['seed']})"
     if sc.faults is not None and sc.faults.any:
-        stops = ", ".join(f"robot {s.robot} stops at {s.at:g} s" for s in sc.faults.stop)
+        stops = ", ".join(
+            f"robot {s.robot} stops at {s.at:g} s" if s.at < float("inf") else
+            f"robot {s.robot} may stop (study.sweep.stop_at)" for s in sc.faults.stop
+        )  # fmt: skip
         out += f", faults ({stops})"
     return out
 

@@ -69,6 +69,14 @@ def study(
             "(overrides safety.filter; the other [safety] keys apply).",
         ),
     ] = None,
+    sweep: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--sweep",
+            help="KEY=V1,V2,... : sweep KEY over these values instead of the file's "
+            "[study.sweep] (repeat for a product, e.g. --sweep noise=0,0.01,0.02).",
+        ),
+    ] = None,
     resume: Annotated[
         bool, typer.Option("--resume", help="Finish an interrupted study in OUT.")
     ] = False,
@@ -104,6 +112,7 @@ def study(
         dt=dt,
         duration=duration,
         settle=settle,
+        sweep=_sweep_option(sweep) if sweep else None,
         source=sc.source,
         text=sc.text,
     )
@@ -149,6 +158,26 @@ def study(
         notify=lambda msg: err_console.print(msg, highlight=False),
     )
     _write_outputs(out, sc, result, identity)
+
+
+def _sweep_option(given: list[str]) -> dict[str, list[float]]:
+    """``--sweep KEY=V1,V2`` options as a sweep table; a clear error for a bad one."""
+    out: dict[str, list[float]] = {}
+    for item in given:
+        key, eq, values = item.partition("=")
+        key = key.strip()
+        try:
+            numbers = [float(v) for v in values.split(",") if v.strip()]
+        except ValueError:
+            numbers = []
+        if not eq or not key or not numbers:
+            fail(
+                f"--sweep {item!r}: give KEY=V1,V2,... with numbers, e.g. --sweep noise=0,0.01,0.02"
+            )
+        if key in out:
+            fail(f"--sweep names {key!r} twice; give all its values in one option")
+        out[key] = numbers
+    return out
 
 
 def _clear_earlier_study(out: Path, store: Any) -> None:

@@ -228,7 +228,7 @@ class Filippov(Integrator):
         interruptible: bool = False,
     ) -> RawSolution:
         steps_for(duration, self.save_dt)  # validates duration
-        if system.sensed:
+        if getattr(system, "sensed", False):
             raise ParameterError(
                 "[sensing] needs an explicit fixed-step integrator (euler or rk4): a robot "
                 "measures once per step and holds its command; filippov is event-driven",

@@ -58,6 +58,7 @@ def animate_run(
     obstacles: Sequence[Any] = (),
     active: ArrayLike | None = None,
     active_pairs: ArrayLike | None = None,
+    stops: Sequence[tuple[int, float]] = (),
 ) -> FuncAnimation:
     """An animation of a run.
 
@@ -94,6 +95,9 @@ def animate_run(
         Robots with an active safety constraint at each saved time: drawn with a red ring.
     active_pairs : array_like of int, shape (k, 3), optional
         Active pair constraints ``(time index, i, j)``, 0-based: drawn as red lines.
+    stops : sequence of (int, float)
+        Robots that stop (``[faults] stop``): 0-based robot and stop time; from then on
+        the robot is drawn grey with a black rim.
 
     Returns
     -------
@@ -157,6 +161,9 @@ def animate_run(
         for i in range(n)
     ]
     clock = ax.set_title("")
+    stop_at = np.full(n, np.inf)
+    for robot, at in stops:
+        stop_at[int(robot)] = float(at)
 
     def draw(k: int) -> list[Any]:
         idx = frames[k]
@@ -181,8 +188,10 @@ def animate_run(
         for i in range(n):
             trails[i].set_data(q[sel, i, 0], q[sel, i, 1])
             discs[i].center = (now[i, 0], now[i, 1])
-            discs[i].set_edgecolor(red if on[idx, i] else colors[i])
-            discs[i].set_linewidth(2.0 if on[idx, i] else 1.0)
+            dead = t[idx] >= stop_at[i]
+            discs[i].set_facecolor("0.55" if dead else colors[i])
+            discs[i].set_edgecolor(red if on[idx, i] else "k" if dead else colors[i])
+            discs[i].set_linewidth(2.0 if on[idx, i] or dead else 1.0)
             labels[i].xy = (now[i, 0], now[i, 1])
         clock.set_text(f"{title + ': ' if title else ''}t = {t[idx]:.2f} s")
         return [graph, constrained, *trails, *discs, *labels, clock, *extra]

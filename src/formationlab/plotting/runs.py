@@ -109,6 +109,16 @@ def plot_trajectories(
         from .safety import draw_safety
 
         artists += draw_safety(ax, result)
+    faults = getattr(result, "faults", None)
+    for stop in () if faults is None else faults.stop:
+        k = int(np.searchsorted(result.t, stop.at))
+        if k < len(result.t):  # the robot stopped during the run: an x where it did
+            i = stop.robot - 1
+            artists.append(ax.plot(*q[k, i], "kx", ms=9, mew=2, zorder=6)[0])
+            artists.append(
+                ax.annotate(f"{stop.robot} stops, t = {stop.at:g} s", q[k, i], xytext=(6, -12),
+                            textcoords="offset points", fontsize="small")
+            )  # fmt: skip
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x")
     ax.set_ylabel("y")

@@ -347,6 +347,50 @@ def _is_position(c: str) -> bool:
     return c[:1] in ("x", "y") and c[1:].split("_")[0].isdigit()
 
 
+def shape_error_figure(
+    groups: Sequence[dict[str, Any]], parameter: str, *, title: str | None = None
+) -> Figure | None:
+    """Steady-state shape error (median, 10-90 % band) of every law against ``parameter``.
+
+    None when no group has a shape error (every trial collided).
+    """
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.2, 3.6))
+    drawn = False
+    swept: list[float] = []
+    for law, style, color in zip(
+        _laws(groups), itertools.cycle(["o-", "s--", "^-.", "D:", "v-"]),
+        itertools.cycle([f"C{i}" for i in range(10)]), strict=False,
+    ):  # fmt: skip
+        mine = [g for g in groups if g["law"] == law and g.get("shape_error")]
+        mine = [g for g in mine if parameter in g["parameters"]]
+        if not mine:
+            continue
+        xs = np.array([g["parameters"][parameter] for g in mine], dtype=float)
+        order = np.argsort(xs)
+        med, lo, hi = (
+            np.array([g["shape_error"][k] for g in mine])[order] for k in ("median", "p10", "p90")
+        )
+        ax.plot(xs[order], med, style, ms=4, color=color, label=law)
+        ax.fill_between(xs[order], lo, hi, color=color, alpha=0.15, lw=0)
+        swept += list(xs)
+        drawn = True
+    if not drawn:
+        plt.close(fig)
+        return None
+    _log_if_wide(ax, swept)
+    ax.set_yscale("symlog", linthresh=1e-3)
+    ax.set_xlabel(parameter)
+    ax.set_ylabel(r"final max $|r_{ij} - d_{ij}|$ (m)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize="small")
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    return fig
+
+
 def study_figures(
     summary: dict[str, Any], trials: pd.DataFrame, edges: np.ndarray
 ) -> dict[str, Figure]:
@@ -355,6 +399,7 @@ def study_figures(
     ``fractions[_K=V...]``: outcome fractions per law against the first swept
     parameter (one figure per value of the other swept parameters);
     ``desired[...]``: the desired fraction of every law on one axes;
+    ``shape_error[...]``: the steady-state shape error of every law (with a sweep);
     ``shapes_<law>``: final shapes of the non-desired outcomes.
     """
     groups = summary["groups"]
@@ -370,6 +415,10 @@ def study_figures(
         title = ", ".join(f"{k} = {v:g}" for k, v in fix.items()) or None
         figs[f"fractions{tag}"] = fractions_figure(mine, x, title=title)
         figs[f"desired{tag}"] = desired_figure(mine, x, title=title)
+        if x is not None:
+            err = shape_error_figure(mine, x, title=title)
+            if err is not None:
+                figs[f"shape_error{tag}"] = err
     diam = {int(g["group"]): np.asarray(g["diameters"], dtype=float) for g in groups}
     for law in _laws(groups):
         fig = shapes_figure(trials, np.asarray(edges), diam, law=law)

@@ -160,7 +160,10 @@ def delay_steps(delay: float, dt: float) -> int:
 
 @dataclass(frozen=True, kw_only=True)
 class Stop:
-    """Robot ``robot`` (1-based) stops moving at time ``at`` (s) and stays where it is."""
+    """Robot ``robot`` (1-based) stops moving at time ``at`` (s) and stays where it is.
+
+    ``at = inf`` never comes: the robot that a study's ``stop_at`` sweep stops.
+    """
 
     robot: int
     at: float = 0.0
@@ -172,7 +175,7 @@ class Stop:
                 f"faults.stop robot must be a robot number >= 1 (robots are numbered from "
                 f"1), got {self.robot!r}", key="faults.stop",
             )  # fmt: skip
-        _number(self.at, "faults.stop at", low=0.0, strict=False)
+        _number(self.at, "faults.stop at", low=0.0, strict=False, allow_inf=True)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -208,7 +211,7 @@ class Faults:
         """Which of ``n`` robots have stopped at time ``t``; ``(n,)``."""
         out = np.zeros(n, dtype=bool)
         for s in self.stop:
-            if t >= s.at:
+            if t >= s.at:  # (never for at = inf)
                 out[s.robot - 1] = True
         return out
 

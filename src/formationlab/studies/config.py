@@ -177,13 +177,15 @@ def parse_study(
     dt: float | None = None,
     duration: float | None = None,
     settle: bool | None = None,
+    sweep: dict[str, list[float]] | None = None,
     source: str = "scenario",
     text: str = "",
 ) -> StudyConfig:
     """Validate a ``[study]`` table (``None``: all defaults), with command-line overrides.
 
     ``trials``, ``chunk_size``, ``dt`` and ``duration``, when given, replace the table's;
-    ``settle``, when given, replaces ``settle.enabled`` (keeping its ``duration`` and ``dt``).
+    ``settle``, when given, replaces ``settle.enabled`` (keeping its ``duration`` and ``dt``);
+    ``sweep``, when given, replaces the table's ``sweep``.
     ``source`` and ``text`` (the scenario file and its TOML) place errors in the file.
 
     Raises
@@ -201,6 +203,8 @@ def parse_study(
     ):
         if value is not None:
             data[key] = value
+    if sweep is not None:
+        data["sweep"] = sweep
     if settle is not None:
         table_settle = data.get("settle")
         data["settle"] = {

@@ -101,7 +101,11 @@ def summarize_groups(
         ``trial_steps``; then ``settled`` (how many trials were settled with
         implicit Euler) and ``settled_counts``, ``settled_fractions`` and
         ``settled_ci95`` of the outcomes after settling (column
-        ``settled_outcome``; ``outcome`` where the table has no such column).
+        ``settled_outcome``; ``outcome`` where the table has no such column); and
+        ``shape_error`` (``median``, ``p10``, ``p90`` of the final ``max |r_ij - d_ij|``
+        of the trials that did not collide: the steady-state shape error under noise or
+        faults) and ``drift`` (median ``speed`` and ``|omega|`` of the rigid motion fitted
+        over the drift window, where the table has it), or None without such trials.
     """
     outs = study_outcomes(trials) if outcomes is None else list(outcomes)
     out = []
@@ -121,11 +125,38 @@ def summarize_groups(
         else:
             entry["median_converged_time"] = None
             entry["trial_steps"] = 0
+        entry["shape_error"], entry["drift"] = _steady(rows)
         settled = 0 if rows is None or "settled" not in rows else int(rows["settled"].sum())
         entry["settled"] = settled
         entry.update({f"settled_{k}": v for k, v in _fractions(rows, after, n, outs).items()})
         out.append(entry)
     return out
+
+
+def _steady(rows: pd.DataFrame | None) -> tuple[dict[str, float] | None, dict[str, float] | None]:
+    """Steady-state shape error and drift of the trials that did not collide."""
+    if rows is None or "max_distance_error" not in rows:
+        return None, None
+    ok = rows[rows["outcome"] != "collision"]
+    err = ok["max_distance_error"].to_numpy(dtype=float)
+    err = err[np.isfinite(err)]
+    if not err.size:
+        return None, None
+    shape = {
+        "median": float(np.median(err)),
+        "p10": float(np.quantile(err, 0.1)),
+        "p90": float(np.quantile(err, 0.9)),
+    }
+    drift = None
+    if "drift_speed" in ok:
+        sp = ok["drift_speed"].to_numpy(dtype=float)
+        om = np.abs(ok["drift_omega"].to_numpy(dtype=float))
+        if np.isfinite(sp).any():
+            drift = {
+                "median_speed": float(np.nanmedian(sp)),
+                "median_abs_omega": float(np.nanmedian(om)) if np.isfinite(om).any() else None,
+            }
+    return shape, drift
 
 
 def _fractions(rows: pd.DataFrame | None, column: str, n: int, outs: list[str]) -> dict[str, Any]:
