@@ -52,6 +52,7 @@ from ..controllers import LAWS, Law
 from ..dynamics import System
 from ..errors import ParameterError
 from ..integrators import Euler
+from ..integrators.base import steps_for
 from ..models import MODELS, RobotModel, SingleIntegrator
 from ..registry import resolve
 from ..sensing import Channel, Faults, Sensing, local_controls, rotate
@@ -123,6 +124,7 @@ class _World:
     def __init__(
         self, system: System, channel: Channel, x0: NDArray[np.float64], *, dt: float,
         bus: Bus, noise_rngs: Sequence[np.random.Generator], save_every: int,
+        periods: NDArray[np.float64], held: bool,
     ) -> None:  # fmt: skip
         self.system, self.model, self.channel = system, system.model, channel
         self.sensing, self.terms = channel.sensing, channel.terms
@@ -131,6 +133,7 @@ class _World:
         self.own = None if channel.own_distance is None else channel.own_distance[0]
         self.u_local = np.zeros((self.n, 2))
         self.t, self.j, self.on_grid, self.save_every = 0.0, 0, True, save_every
+        self.periods, self.held = periods, held  # held: a command outlives a step of dt
         self.saved_t: list[float] = []
         self.saved_x: list[NDArray[np.float64]] = []
         self.saved_v: list[NDArray[np.float64]] = []
@@ -216,6 +219,12 @@ class _World:
             if verdict:
                 self.status = Status.from_code(verdict)
                 self.message = self.system.step_message(self.x, x_new, self.status, t_b, h)
+                if self.held:
+                    self.message += (
+                        "; between its wake-ups each robot holds its command (periods "
+                        + ", ".join(f"{T:g}" for T in self.periods)
+                        + " s, robot 1 first): a long period can bring robots into contact too"
+                    )
                 if not saving:
                     self._save(v)
                 return False
@@ -299,17 +308,19 @@ async def arun(
     gens = [[np.random.Generator(np.random.PCG64(s)) for s in c] for c in streams]
     bus = Bus(n, delay=sensing.delay, drop=sensing.drop, rngs=[g[2] for g in gens])
     world = _World(system, channel, x0, dt=dt, bus=bus, noise_rngs=[g[1] for g in gens],
-                   save_every=save_every)  # fmt: skip
+                   save_every=save_every, periods=T,
+                   held=jitter > 0 or bool(np.any(np.abs(T - dt) > _SNAP * dt)))  # fmt: skip
+    end = steps_for(duration, dt) * dt  # as the synchronous run: whole steps of dt
     clock = VirtualClock()
     start = time.perf_counter()
     clock.start([
-        _robot(i, world, clock, _wake_times(T[i], jitter, gens[i][0], dt, duration))
+        _robot(i, world, clock, _wake_times(T[i], jitter, gens[i][0], dt, end))
         for i in range(n)
     ])  # fmt: skip
     await clock.idle()
     while True:
         due = clock.next_time()
-        if not world.advance_to(duration if due is None else min(due, duration)):
+        if not world.advance_to(end if due is None else min(due, end)):
             break
         if due is None:
             world.finish()
@@ -351,7 +362,8 @@ def run_async(
         As for :func:`formationlab.simulate` (``headings=`` for unicycles); the law needs
         kernel terms (every law of the package has them).
     duration : float
-        Simulated time, seconds.
+        Simulated time, seconds (rounded up to whole steps of ``dt``, as in
+        :func:`formationlab.simulate`).
     dt : float
         The physics step: the world integrates with explicit Euler on the grid ``j dt``
         (and saves there, every ``save_every``-th point).
