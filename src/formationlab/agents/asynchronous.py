@@ -90,7 +90,7 @@ class AsyncResult(SimulationResult):
         Robot ``i``'s commands ``(K_i, 2)``, in its own frame, one per wake-up.
     """
 
-    periods: NDArray[np.float64] = dataclasses.field(default=None)  # type: ignore[assignment]
+    periods: NDArray[np.float64] = dataclasses.field(default=None)  # type: ignore[arg-type]
     jitter: float = 0.0
     seed: int = 0
     update_times: tuple[NDArray[np.float64], ...] = ()
