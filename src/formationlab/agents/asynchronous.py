@@ -256,10 +256,10 @@ async def _robot(i: int, world: _World, clock: VirtualClock, times: Iterator[flo
 def _periods(periods: float | ArrayLike | None, n: int, dt: float) -> NDArray[np.float64]:
     if periods is None:
         return np.full(n, dt)
-    if isinstance(periods, int | float) and not isinstance(periods, bool):
+    if np.ndim(periods) == 0:  # one for all
         periods = [periods] * n
-    values = list(np.asarray(periods, dtype=object).ravel()) if np.ndim(periods) else None
-    if values is None or len(values) != n:
+    values = list(np.asarray(periods, dtype=object).ravel())
+    if np.ndim(periods) != 1 or len(values) != n:
         raise ParameterError(
             f"periods must be one number or one per robot ({n} robots, robot 1 first), got "
             f"{periods!r}", key="periods",
@@ -317,16 +317,18 @@ async def arun(
         _robot(i, world, clock, _wake_times(T[i], jitter, gens[i][0], dt, end))
         for i in range(n)
     ])  # fmt: skip
-    await clock.idle()
-    while True:
-        due = clock.next_time()
-        if not world.advance_to(end if due is None else min(due, end)):
-            break
-        if due is None:
-            world.finish()
-            break
-        await clock.wake(due)
-    await clock.close()
+    try:
+        await clock.idle()
+        while True:
+            due = clock.next_time()
+            if not world.advance_to(end if due is None else min(due, end)):
+                break
+            if due is None:
+                world.finish()
+                break
+            await clock.wake(due)
+    finally:
+        await clock.close()
     x = np.asarray(world.saved_x)
     v = np.asarray(world.saved_v)
     points = robot.points(x)
