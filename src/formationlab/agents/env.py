@@ -63,7 +63,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -123,7 +123,7 @@ class FormationEnv(ParallelEnv):
         The current episode's seed.
     """
 
-    metadata = {
+    metadata: ClassVar[dict[str, Any]] = {
         "name": "formationlab_v0",
         "render_modes": ["rgb_array"],
         "render_fps": 30,
@@ -132,7 +132,7 @@ class FormationEnv(ParallelEnv):
 
     def __init__(
         self,
-        scenario: Scenario,
+        scenario: Scenario | str,
         *,
         sensing: Sensing | None = None,
         faults: Faults | None = None,
@@ -195,11 +195,10 @@ class FormationEnv(ParallelEnv):
         self.terms = scenario.law.compiled_terms(self.formation)  # the law's local form
         # unicycles are driven by (v, omega): through the near-identity transform, which
         # is exactly invertible, the model's own limits and kinematics step them
-        self._driven = (
-            dataclasses.replace(self.system, model=dataclasses.replace(model, mapping="near-identity"))
-            if heading_unicycle
-            else self.system
-        )
+        self._driven = self.system
+        if isinstance(model, Unicycle) and model.mapping != NearIdentity.name:
+            twin = dataclasses.replace(model, mapping=NearIdentity.name)
+            self._driven = dataclasses.replace(self.system, model=twin)
         n = self.formation.n
         self.possible_agents = [f"robot_{i + 1}" for i in range(n)]
         self.agent_index = {a: i for i, a in enumerate(self.possible_agents)}
@@ -283,11 +282,13 @@ class FormationEnv(ParallelEnv):
     ) -> tuple[dict[str, dict[str, NDArray]], dict[str, dict[str, Any]]]:
         """Start an episode (module docstring for the seeds); ``options`` are not used."""
         if seed is not None:
-            if not (isinstance(seed, int | np.integer) and not isinstance(seed, bool) and seed >= 0):
+            if not (
+                isinstance(seed, int | np.integer) and not isinstance(seed, bool) and seed >= 0
+            ):
                 raise ParameterError(f"seed must be a whole number >= 0 or None, got {seed!r}")
             self._root, self._episode = int(seed), 0
         elif self._root is None:
-            self._root, self._episode = int(np.random.SeedSequence().entropy), 0
+            self._root, self._episode = int(np.random.SeedSequence().entropy), 0  # type: ignore[arg-type]
         assert self._root is not None
         self.seed = self._root if self._episode == 0 else (self._root, self._episode)
         self._episode += 1
@@ -305,7 +306,9 @@ class FormationEnv(ParallelEnv):
         if self.jitter == 0:
             return x0.copy()
         entropy = [int(s) for s in (seed if isinstance(seed, tuple) else (seed,))]
-        rng = np.random.default_rng(np.random.SeedSequence(entropy).spawn(5)[4])  # not the channel's
+        rng = np.random.default_rng(
+            np.random.SeedSequence(entropy).spawn(5)[4]
+        )  # not the channel's
         for _ in range(_JITTER_TRIES):
             x = x0.copy()
             x[:, :2] += self.jitter * rng.standard_normal((self.formation.n, 2))
@@ -427,8 +430,12 @@ class FormationEnv(ParallelEnv):
 
     def _infos(self, err: NDArray, end: dict[str, Any] | None = None) -> dict[str, dict[str, Any]]:
         return {
-            a: {"t": self.t, "seed": self.seed, "error": float(err[self.agent_index[a]]),
-                **(end or {})}  # fmt: skip
+            a: {
+                "t": self.t,
+                "seed": self.seed,
+                "error": float(err[self.agent_index[a]]),
+                **(end or {}),
+            }
             for a in self.agents
         }
 

@@ -40,7 +40,7 @@ def law_policy(env: FormationEnv) -> Policy:
     episode's own (``env.own_distance``, with ``[sensing] mismatch``).
     """
     n, others = env.formation.n, env.others
-    unicycle = isinstance(env.model, Unicycle)
+    transform = env.model.transform if isinstance(env.model, Unicycle) else None
 
     def policy(observations: Mapping[str, Mapping[str, Any]]) -> dict[str, NDArray[np.float64]]:
         z = np.zeros((n, n, 2))
@@ -53,9 +53,9 @@ def law_policy(env: FormationEnv) -> Policy:
         u = local_controls(
             env.terms, z[None], seen=seen[None], own_distance=None if own is None else own[None]
         )[0]
-        if unicycle:
+        if transform is not None:
             h = np.array([observations[a]["heading"] for a in observations])
-            v, omega = env.model.transform.commands(u[ids], np.arctan2(h[:, 1], h[:, 0]))
+            v, omega = transform.commands(u[ids], np.arctan2(h[:, 1], h[:, 0]))
             return {a: np.array([v[r], omega[r]]) for r, a in enumerate(observations)}
         return {a: u[i].copy() for a, i in zip(observations, ids, strict=True)}
 
