@@ -8,6 +8,7 @@ noise, delay, drops, range and local frames when the channel has the same seed.
 import dataclasses
 import importlib
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -83,7 +84,8 @@ def test_the_law_policy_reaches_the_triangle_and_is_simulate():
     assert np.abs(errors).max() <= fl.analysis.Tolerances().distance
     assert np.abs(fl.analysis.distance_errors(sc.formation, xs[-2])).max() > 1e-2  # first time
     # the reward is the negative local error: robot 1's edges are 1-2 and 1-3
-    assert rew["robot_1"] == pytest.approx(-(abs(errors[0]) + abs(errors[1])), abs=1e-15)
+    for robot, (e, f) in {"robot_1": (0, 1), "robot_2": (0, 2), "robot_3": (1, 2)}.items():
+        assert rew[robot] == pytest.approx(-(abs(errors[e]) + abs(errors[f])), abs=1e-15)
     res = reference(sc, env.t)
     assert res.x.shape == xs.shape
     np.testing.assert_allclose(xs, res.x, rtol=0, atol=1e-12)
@@ -105,6 +107,18 @@ def test_the_law_policy_on_other_models_is_simulate(name):
     assert all(trunc.values()) and not any(term.values())
     assert len(xs) == 801 and info["robot_2"]["outcome"] == "not-converged"
     np.testing.assert_allclose(xs, reference(sc, 0.8).x, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["triangle-obstacle", "square-marching", "square-safety"])
+def test_obstacles_marching_and_a_safety_filter_act_on_the_agents_commands(name):
+    """The closed loop adds repulsion and marching and filters the agents' commands."""
+    sc = scenario(name, duration=0.3)
+    xs, _, _ = run(parallel_env(sc))
+    res = fl.simulate(
+        sc.formation, sc.law, sc.x0, duration=0.3, integrator=sc.integrator, model=sc.model,
+        marching=sc.marching, obstacles=sc.obstacles, safety=sc.safety, backend="numpy",
+    )  # fmt: skip
+    np.testing.assert_allclose(xs, res.x, rtol=0, atol=1e-12)
 
 
 def test_a_sensed_episode_is_simulate_with_the_same_seed():
@@ -150,6 +164,7 @@ def test_observations_are_each_robots_measurements_in_its_frame():
     np.testing.assert_array_equal(obs["robot_3"]["relative"], [[-3.0, -6.0], [3.0, -6.0]])
     assert obs["robot_2"]["seen"].tolist() == [1, 1] == obs["robot_2"]["neighbour"].tolist()
     assert info["robot_1"]["error"] == pytest.approx(5.0 + math.sqrt(45.0) - 1.0, abs=1e-14)
+    assert info["robot_3"]["error"] == pytest.approx(2 * (math.sqrt(45.0) - 1.0), abs=1e-14)
     local = parallel_env(sc, sensing=Sensing(frames="local", range=7.0)).reset(seed=0)[0]
     rel = local["robot_1"]["relative"]  # a rotation keeps the lengths; 3 is within 7 m
     np.testing.assert_allclose(np.linalg.norm(rel, axis=-1), [6.0, math.sqrt(45.0)], atol=1e-12)
@@ -275,3 +290,13 @@ def test_a_missing_pettingzoo_names_the_extra(monkeypatch):
     monkeypatch.delitem(sys.modules, "formationlab.agents.env")
     with pytest.raises(ImportError, match=r"pip install formationlab\[agents\]"):
         importlib.import_module("formationlab.agents.env")
+
+
+def test_the_example_reaches_the_desired_formation(capsys):
+    import runpy
+
+    runpy.run_path(str(EXAMPLES / "agents" / "pettingzoo_paper_law.py"), run_name="__main__")
+    out = capsys.readouterr().out
+    assert out.startswith("outcome: desired at t = ")
+    errors = [float(e) for e in re.findall(r"= ([+-]\d\.\d+) m", out)]
+    assert len(errors) == 3 and max(map(abs, errors)) <= fl.analysis.Tolerances().distance
