@@ -202,6 +202,19 @@ class System:
         u = self.command(p, self.law.control_with(self.formation, p, weights), t)
         return self._faulty(self.model.derivative(x, u), t)
 
+    def rhs_commanded(
+        self, x: NDArray[np.float64], u: NDArray[np.float64], t: float = 0.0
+    ) -> NDArray[np.float64]:
+        """``x_dot`` when the law's part of the command is ``u`` ``(..., n, 2)``, given.
+
+        ``u`` is in the common frame, at the law's points, as :meth:`command` takes it:
+        robots whose commands come from elsewhere (the agents of
+        :mod:`formationlab.agents`). Marching, obstacle repulsion, the safety filter, the
+        robot model and the faults then act as in :meth:`rhs`.
+        """
+        p = self.model.points(x)
+        return self._faulty(self.model.derivative(x, self.command(p, u, t)), t)
+
     def speed(self, x: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
         """Largest robot speed (:meth:`RobotModel.speed`) of states and rates ``(..., n, k)``."""
         return np.max(self.model.speed(x, v), axis=-1)

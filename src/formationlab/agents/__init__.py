@@ -25,6 +25,7 @@ from .mismatch import (
     rigid_omega,
     steady_motion,
 )
+from .policy import law_policy
 
 __all__ = [
     "AsyncResult",
@@ -51,8 +52,4 @@ def __getattr__(name: str) -> Any:  # the environment imports PettingZoo: only w
         from . import env
 
         return getattr(env, name)
-    if name == "law_policy":
-        from .policy import law_policy
-
-        return law_policy
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

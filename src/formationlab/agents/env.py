@@ -1,0 +1,501 @@
+"""The robots of a scenario as the agents of a PettingZoo parallel environment.
+
+:func:`parallel_env` (``pip install formationlab[agents]``) makes a
+:class:`FormationEnv`: one agent per robot, ``"robot_1"`` to ``"robot_n"`` (1-based, as
+in the paper), stepped together by explicit Euler at the scenario's ``dt`` through the
+closed loop (:meth:`formationlab.System.rhs_commanded`: the robot model, marching,
+obstacle repulsion, the safety filter and faults act on the agents' commands as they act
+on the law's).
+
+Observation of robot ``i`` (a ``Dict`` space; ``gymnasium.spaces.flatten`` makes it one
+vector), one slot per *other* robot, in robot-number order (robot ``i`` left out):
+
+``relative`` ``(n - 1, 2)``
+    robot ``i``'s measurement of ``p_j - p_i`` in its own frame, from the measurement
+    channel (:class:`~formationlab.sensing.Channel`: local frames, noise, delay, drops,
+    range, as the scenario's or the given :class:`~formationlab.sensing.Sensing` says);
+    0 where robot ``j`` is not seen. ``p`` are the law's points (hand points of
+    near-identity unicycles, else the centres);
+``seen`` ``(n - 1,)`` of 0/1
+    whether robot ``i`` holds a measurement of robot ``j`` (range, delay, drops);
+``neighbour`` ``(n - 1,)`` of 0/1
+    whether ``j`` is a neighbour of ``i`` in the formation's graph (constant);
+``heading`` ``(2,)``, unicycles only
+    ``(cos, sin)`` of robot ``i``'s heading in its own frame (``(1, 0)`` in local frames);
+``velocity`` ``(2,)``, double integrators only
+    robot ``i``'s velocity in its own frame.
+
+The robot's own heading and velocity are exact (proprioception); only the relative
+positions pass through the channel.
+
+Action of robot ``i``, in its own frame (the frame of its observation): the velocity
+command of a single integrator, the acceleration command ``u_i`` of a double integrator
+(``q_ddot_i = -k_d q_dot_i + u_i``), ``(v_i, omega_i)`` of a unicycle. The ``Box`` is
+``[-b, b]`` per component, ``b`` the model's limit (``max_speed``, ``max_turn_rate``)
+or ``max_command`` (default :data:`MAX_COMMAND`); a unicycle's ``omega`` without a limit
+gets ``max_command / offset`` (near-identity) or ``2 turn_gain`` (heading transform),
+the largest turn rate the transform asks of a command of size ``max_command``. Actions
+are not clipped to the box: the robot model's own limits act (direction-preserving
+saturation, :mod:`formationlab.models.limits`), as they do on the law.
+
+Reward of robot ``i`` after a step: ``-sum_{j in N_i} |r_ij - d_ij|`` at the law's
+points (its local formation error), minus ``contact_penalty`` for every robot when the
+step is rejected by the package's contact rule (:meth:`formationlab.System.step_verdict`:
+contact at the end of the step, robots passing through each other, non-finite states).
+
+Every agent terminates when the desired formation is reached
+(:func:`formationlab.analysis.classify` gives ``"desired"`` at the given tolerances)
+or at a rejected step (the state stays the last accepted one, as in the stepping
+driver); every agent is truncated after ``duration / dt`` steps. ``infos`` hold the
+time ``t``, the episode's ``seed``, the agent's ``error`` and, at the end, the
+``outcome`` (and ``status`` and ``message`` of a rejected step).
+
+Seeding as in Gymnasium: ``reset(seed=s)`` makes episode ``s`` (the measurement
+channel seeded with ``s``, as ``simulate(sensing=Sensing(seed=s))`` seeds its own; the
+sensing's own ``seed`` is not used); later ``reset()`` calls make episodes ``(s, 1)``,
+``(s, 2)``, ... ; a first ``reset()`` without a seed draws ``s`` from the operating system. With ``jitter`` the start is the
+scenario's initial state with Gaussian noise (standard deviation ``jitter``, m) on each
+position, drawn from the episode's seed too.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+try:
+    from gymnasium import spaces
+    from pettingzoo import ParallelEnv
+except ImportError as exc:  # pragma: no cover - the extra is installed where tests run
+    raise ImportError(
+        "formationlab.agents.parallel_env needs PettingZoo and Gymnasium, the 'agents' "
+        "extra: pip install formationlab[agents]"
+    ) from exc
+
+from ..analysis import Tolerances, classify, distance_errors
+from ..dynamics import System
+from ..errors import FormationError, ParameterError
+from ..models import DoubleIntegrator, Unicycle
+from ..models.transforms import NearIdentity, heading_vectors
+from ..scenario import Scenario, parse_scenario
+from ..sensing import Channel, Faults, Seed, Sensing, rotate
+from ..simulation import initial_state
+from ..status import Status
+
+__all__ = ["MAX_COMMAND", "FormationEnv", "parallel_env"]
+
+#: the action bound (m/s, or m/s^2 for double integrators) of a model without a limit
+MAX_COMMAND = 5.0
+#: the reward lost by every robot at a step rejected by the contact rule
+CONTACT_PENALTY = 100.0
+#: draws of a jittered start before giving up on one clear of contact
+_JITTER_TRIES = 100
+_LIVE = np.zeros(1, dtype=np.intp)  # the channel's one trial
+
+
+def _positive(value: Any, name: str, *, zero: bool = False) -> float:
+    ok = isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
+    if not (ok and math.isfinite(value) and (value >= 0 if zero else value > 0)):
+        bound = ">= 0" if zero else "> 0"
+        raise ParameterError(f"{name} must be a finite number {bound}, got {value!r}", key=name)
+    return float(value)
+
+
+class FormationEnv(ParallelEnv):
+    """The robots of a scenario as agents (module docstring); made by :func:`parallel_env`.
+
+    Attributes
+    ----------
+    scenario : Scenario
+        The scenario (formation, law, robot model, initial state, dt, duration).
+    system : System
+        The closed loop the agents act in (its contact rule judges every step).
+    dt : float
+        The step, seconds; ``n_steps`` steps make the episode's ``duration``.
+    channel : Channel
+        The current episode's measurement channel (made by :meth:`reset`).
+    seed : int or tuple of int
+        The current episode's seed.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {
+        "name": "formationlab_v0",
+        "render_modes": ["rgb_array"],
+        "render_fps": 30,
+        "is_parallelizable": True,
+    }
+
+    def __init__(
+        self,
+        scenario: Scenario | str,
+        *,
+        sensing: Sensing | None = None,
+        faults: Faults | None = None,
+        render_mode: str | None = None,
+        contact_penalty: float = CONTACT_PENALTY,
+        max_command: float | None = None,
+        jitter: float = 0.0,
+        tolerances: Tolerances | None = None,
+    ) -> None:
+        if isinstance(scenario, str):
+            scenario = parse_scenario(scenario)
+        if not isinstance(scenario, Scenario):
+            raise ParameterError(
+                "parallel_env takes a Scenario (formationlab.io.load_scenario, "
+                f"parse_scenario) or a scenario's TOML text, got {type(scenario).__name__}"
+            )
+        sensing = getattr(scenario, "sensing", None) if sensing is None else sensing
+        faults = getattr(scenario, "faults", None) if faults is None else faults
+        if not isinstance(sensing, Sensing | None):
+            raise ParameterError(f"sensing must be a Sensing, got {type(sensing).__name__}")
+        if not isinstance(faults, Faults | None):
+            raise ParameterError(f"faults must be Faults, got {type(faults).__name__}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ParameterError(
+                f'render_mode must be None or "rgb_array", got {render_mode!r}', key="render_mode"
+            )
+        if not isinstance(tolerances, Tolerances | None):
+            raise ParameterError(
+                f"tolerances must be formationlab.analysis.Tolerances, got {tolerances!r}"
+            )
+        dt = getattr(scenario.integrator, "dt", None)
+        if dt is None:
+            raise ParameterError(
+                "the environment steps explicit Euler at the scenario's [simulation] dt; "
+                f"the integrator {scenario.integrator.name!r} has no dt: use euler",
+                key="simulation.integrator",
+            )
+        model = scenario.model
+        heading_unicycle = isinstance(model, Unicycle) and model.mapping != NearIdentity.name
+        if heading_unicycle and (scenario.marching or scenario.obstacles or scenario.safety):
+            raise ParameterError(
+                "the environment's unicycle actions (v, omega) pass marching, obstacles and "
+                "a safety filter through the near-identity hand points: use mapping = "
+                '"near-identity" for a scenario with them',
+                key="robots.mapping",
+            )
+        self.scenario, self.render_mode = scenario, render_mode
+        self.formation, self.model = scenario.formation, model
+        self.sensing = sensing or Sensing()
+        self.contact_penalty = _positive(contact_penalty, "contact_penalty", zero=True)
+        self.jitter = _positive(jitter, "jitter", zero=True)
+        self.tolerances = tolerances or Tolerances()
+        self.dt = float(dt)
+        self.n_steps = max(1, round(float(scenario.duration) / self.dt))
+        self.system = System(
+            formation=self.formation, law=scenario.law, model=model,
+            marching=scenario.marching, obstacles=scenario.obstacles, safety=scenario.safety,
+            sensing=sensing, faults=faults,
+        )  # fmt: skip
+        self.terms = scenario.law.compiled_terms(self.formation)  # the law's local form
+        # unicycles are driven by (v, omega): through the near-identity transform, which
+        # is exactly invertible, the model's own limits and kinematics step them
+        self._driven = self.system
+        if isinstance(model, Unicycle) and model.mapping != NearIdentity.name:
+            twin = dataclasses.replace(model, mapping=NearIdentity.name)
+            self._driven = dataclasses.replace(self.system, model=twin)
+        n = self.formation.n
+        self.possible_agents = [f"robot_{i + 1}" for i in range(n)]
+        self.agent_index = {a: i for i, a in enumerate(self.possible_agents)}
+        self.agents: list[str] = []
+        self.others = np.array([[j for j in range(n) if j != i] for i in range(n)], dtype=np.intp)
+        rows = np.arange(n)[:, None]
+        self.neighbours = self.formation.adjacency[rows, self.others].astype(np.int8)
+        self._edges = self.formation.edges
+        bound = self._action_bound(max_command)
+        self._obs_spaces = {a: self._observation_space() for a in self.possible_agents}
+        self._act_spaces = {
+            a: spaces.Box(-bound, bound, shape=(2,), dtype=np.float64) for a in self.possible_agents
+        }
+        self.state_space = spaces.Box(-np.inf, np.inf, shape=(n, model.state_size()))
+        self.seed: Seed | None = None
+        self._root: int | None = None
+        self._episode = 0
+        self._x = np.asarray(scenario.x0, dtype=float)
+        self._k = 0
+
+    # ------------------------------------------------------------------ spaces
+
+    def _action_bound(self, max_command: float | None) -> NDArray[np.float64]:
+        m = self.model
+        b = MAX_COMMAND if max_command is None else _positive(max_command, "max_command")
+        if isinstance(m, Unicycle):
+            v = m.max_speed if m.max_speed is not None else b
+            if m.max_turn_rate is not None:
+                w = m.max_turn_rate
+            elif m.mapping == NearIdentity.name:
+                w = b / m.offset  # omega = u . h_perp / l
+            else:
+                w = 2.0 * m.turn_gain  # omega_max atan2(.) / (pi / 2)
+            return np.array([v, w], dtype=float)
+        limit = getattr(m, "max_speed", None)
+        if limit is not None and not isinstance(m, DoubleIntegrator):
+            b = limit
+        return np.array([b, b], dtype=float)
+
+    def _observation_space(self) -> spaces.Dict:
+        n = self.formation.n
+        parts: dict[str, spaces.Space] = {
+            "relative": spaces.Box(-np.inf, np.inf, shape=(n - 1, 2), dtype=np.float64),
+            "seen": spaces.MultiBinary(n - 1),
+            "neighbour": spaces.MultiBinary(n - 1),
+        }
+        if isinstance(self.model, Unicycle):
+            parts["heading"] = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float64)
+        if isinstance(self.model, DoubleIntegrator):
+            parts["velocity"] = spaces.Box(-np.inf, np.inf, shape=(2,), dtype=np.float64)
+        return spaces.Dict(parts)
+
+    def observation_space(self, agent: str) -> spaces.Dict:
+        return self._obs_spaces[self._name(agent)]
+
+    def action_space(self, agent: str) -> spaces.Box:
+        return self._act_spaces[self._name(agent)]
+
+    def _name(self, agent: Any) -> str:
+        if agent not in self.agent_index:
+            raise ParameterError(
+                f"unknown agent {agent!r}: the agents are robot_1 to robot_{self.formation.n}"
+            )
+        return agent
+
+    # ------------------------------------------------------------------ episodes
+
+    @property
+    def own_distance(self) -> NDArray[np.float64] | None:
+        """Each robot's own desired distances ``(E, 2)`` this episode (None: the formation's)."""
+        od = self.channel.own_distance
+        return None if od is None else od[0]
+
+    @property
+    def t(self) -> float:
+        """The time of the current state, seconds."""
+        return self._k * self.dt
+
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, dict[str, NDArray]], dict[str, dict[str, Any]]]:
+        """Start an episode (module docstring for the seeds); ``options`` are not used."""
+        if seed is not None:
+            if not (
+                isinstance(seed, int | np.integer) and not isinstance(seed, bool) and seed >= 0
+            ):
+                raise ParameterError(f"seed must be a whole number >= 0 or None, got {seed!r}")
+            self._root, self._episode = int(seed), 0
+        elif self._root is None:
+            self._root, self._episode = int(np.random.SeedSequence().entropy), 0  # type: ignore[arg-type]
+        assert self._root is not None
+        self.seed = self._root if self._episode == 0 else (self._root, self._episode)
+        self._episode += 1
+        self.channel = Channel(
+            self.sensing, self.formation, self.scenario.law, self.model, [self.seed], self.dt
+        )
+        self._x, self._k = self._start(self.seed), 0
+        self.agents = list(self.possible_agents)
+        self._observe()
+        err = self._errors(self._x)
+        return self._observations(), self._infos(err)
+
+    def _start(self, seed: Seed) -> NDArray[np.float64]:
+        x0 = np.asarray(self.scenario.x0, dtype=float)
+        if self.jitter == 0:
+            return x0.copy()
+        entropy = [int(s) for s in (seed if isinstance(seed, tuple) else (seed,))]
+        rng = np.random.default_rng(
+            np.random.SeedSequence(entropy).spawn(5)[4]
+        )  # not the channel's
+        for _ in range(_JITTER_TRIES):
+            x = x0.copy()
+            x[:, :2] += self.jitter * rng.standard_normal((self.formation.n, 2))
+            try:
+                return initial_state(self.formation, self.model, x)
+            except FormationError:
+                continue
+        raise ParameterError(
+            f"jitter = {self.jitter:g} m: {_JITTER_TRIES} jittered starts all put robots in "
+            "contact; use a smaller jitter",
+            key="jitter",
+        )
+
+    def step(self, actions: Mapping[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        """Step every robot with its action (module docstring); all agents act together."""
+        if not self.agents:
+            raise RuntimeError("the episode has ended (or was never started): call reset()")
+        a = self._actions(actions)
+        x0, k, dt = self._x, self._k, self.dt
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            u = self._command(a, x0)
+            x1 = x0 + dt * self._driven.rhs_commanded(x0[None], u[None], k * dt)[0]
+        verdict = int(self.system.step_verdict(x0[None], x1[None])[0][0])
+        end: dict[str, Any] = {}
+        if verdict:
+            status = Status.from_code(verdict)
+            end = {
+                "outcome": "collision", "status": str(status),
+                "message": self.system.step_message(x0, x1, status, (k + 1) * dt, dt),
+            }  # fmt: skip
+            err = self._errors(x0)
+            rewards = -err - self.contact_penalty
+            done, cut = True, False
+        else:
+            self._x, self._k = x1, k + 1
+            self._observe()
+            err = self._errors(x1)
+            rewards = -err
+            p = self.model.points(x1)
+            w = self.model.point_rates(x0, (x1 - x0) / dt)
+            outcome = classify(self.formation, p, w, self.tolerances)
+            done = outcome == "desired"
+            cut = not done and self._k >= self.n_steps
+            if done or cut:
+                end = {"outcome": outcome}
+        obs = self._observations()
+        infos = self._infos(err, end)
+        agents = self.agents
+        if done or cut:
+            self.agents = []
+        return (
+            obs,
+            {a: float(rewards[i]) for i, a in enumerate(agents)},
+            dict.fromkeys(agents, done),
+            dict.fromkeys(agents, cut),
+            infos,
+        )
+
+    def _actions(self, actions: Mapping[str, Any]) -> NDArray[np.float64]:
+        if not isinstance(actions, Mapping):
+            raise ParameterError(
+                f"step takes a dict of actions by agent name, got {type(actions).__name__}"
+            )
+        unknown = sorted(set(actions) - set(self.agents), key=str)
+        missing = [a for a in self.agents if a not in actions]
+        if unknown or missing:
+            what = f"unknown agents {unknown}" if unknown else f"no action for {missing}"
+            raise ParameterError(f"step needs one action for each of {self.agents}: {what}")
+        out = np.empty((self.formation.n, 2))
+        for a in self.agents:
+            v = np.asarray(actions[a], dtype=float)
+            if v.shape != (2,):
+                raise ParameterError(
+                    f"the action of {a} must have shape (2,) (its command in its own frame), "
+                    f"got shape {v.shape}"
+                )
+            out[self.agent_index[a]] = v
+        return out
+
+    def _command(self, a: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The commands ``(n, 2)`` the closed loop takes (common frame, at the law's points)."""
+        if isinstance(self.model, Unicycle):  # (v, omega) -> v h + l omega h_perp
+            h = heading_vectors(x[:, 2])
+            turn = self.model.offset * a[:, 1]
+            return a[:, :1] * h + turn[:, None] * np.stack([-h[:, 1], h[:, 0]], axis=-1)
+        return self.channel.world(a[None], x[None], _LIVE)[0]
+
+    def _observe(self) -> None:
+        z, seen = self.channel.observe(self._x[None], _LIVE, self._k)
+        rows = np.arange(self.formation.n)[:, None]
+        self._seen = seen[0][rows, self.others]
+        self._rel = np.where(self._seen[..., None], z[0][rows, self.others], 0.0)
+        angles = self.channel.angles(self._x[None], _LIVE)
+        frame = np.zeros(self.formation.n) if angles is None else angles[0]
+        self._own: dict[str, NDArray[np.float64]] = {}
+        if isinstance(self.model, Unicycle):
+            self._own["heading"] = heading_vectors(self._x[:, 2] - frame)
+        if isinstance(self.model, DoubleIntegrator):
+            self._own["velocity"] = rotate(self._x[:, 2:4], -frame)
+
+    def _observations(self) -> dict[str, dict[str, NDArray]]:
+        seen = self._seen.astype(np.int8)
+        out = {}
+        for a in self.agents:
+            i = self.agent_index[a]
+            obs = {"relative": self._rel[i].copy(), "seen": seen[i].copy(),
+                   "neighbour": self.neighbours[i].copy()}  # fmt: skip
+            obs.update({key: v[i].copy() for key, v in self._own.items()})
+            out[a] = obs
+        return out
+
+    def _errors(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Each robot's local formation error ``sum_{j in N_i} |r_ij - d_ij|``; ``(n,)``."""
+        e = np.abs(distance_errors(self.formation, self.model.points(x)))
+        out = np.zeros(self.formation.n)
+        np.add.at(out, self._edges[:, 0], e)
+        np.add.at(out, self._edges[:, 1], e)
+        return out
+
+    def _infos(self, err: NDArray, end: dict[str, Any] | None = None) -> dict[str, dict[str, Any]]:
+        return {
+            a: {
+                "t": self.t,
+                "seed": self.seed,
+                "error": float(err[self.agent_index[a]]),
+                **(end or {}),
+            }
+            for a in self.agents
+        }
+
+    # ------------------------------------------------------------------ the rest of the API
+
+    def state(self) -> NDArray[np.float64]:
+        """The closed loop's state ``(n, k)`` (the model's columns: positions first)."""
+        return self._x.copy()
+
+    def render(self) -> NDArray[np.uint8] | None:
+        """An RGB frame ``(H, W, 3)`` of the robots with ``render_mode="rgb_array"``; else None."""
+        if self.render_mode is None:
+            return None
+        from ..plotting.agent_frame import agent_frame
+
+        return agent_frame(self.formation, self._x, model=self.model, t=self.t)
+
+    def close(self) -> None:
+        """Nothing to release (frames are drawn on figures that are not kept)."""
+
+
+def parallel_env(
+    scenario: Scenario | str,
+    *,
+    sensing: Sensing | None = None,
+    faults: Faults | None = None,
+    render_mode: str | None = None,
+    contact_penalty: float = CONTACT_PENALTY,
+    max_command: float | None = None,
+    jitter: float = 0.0,
+    tolerances: Tolerances | None = None,
+) -> FormationEnv:
+    """The robots of ``scenario`` as the agents of a PettingZoo ``ParallelEnv``.
+
+    Parameters
+    ----------
+    scenario : Scenario or str
+        A scenario (``formationlab.io.load_scenario``) or its TOML text.
+    sensing, faults : Sensing, Faults, optional
+        Override the scenario's ``[sensing]`` and ``[faults]`` (default: the scenario's;
+        without them the paper's exact, common-frame sensing and no faults).
+    render_mode : {None, "rgb_array"}
+        ``"rgb_array"``: :meth:`FormationEnv.render` returns an RGB frame.
+    contact_penalty : float
+        Reward lost by every robot at a step the contact rule rejects (>= 0).
+    max_command : float, optional
+        The action bound of a model without a limit (default :data:`MAX_COMMAND`).
+    jitter : float
+        Standard deviation (m) of a random perturbation of the start, per position.
+    tolerances : Tolerances, optional
+        When the formation counts as reached (:mod:`formationlab.analysis`).
+
+    Returns
+    -------
+    FormationEnv
+        Observations, actions, rewards and the end of an episode: module docstring of
+        :mod:`formationlab.agents.env`.
+    """
+    return FormationEnv(
+        scenario, sensing=sensing, faults=faults, render_mode=render_mode,
+        contact_penalty=contact_penalty, max_command=max_command, jitter=jitter,
+        tolerances=tolerances,
+    )  # fmt: skip

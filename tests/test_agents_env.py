@@ -1,0 +1,302 @@
+"""The PettingZoo environment of the robots as agents, and the law as every agent's policy.
+
+The environment driven by the law's decentralized policy is ``simulate`` with explicit
+Euler at the same ``dt``: state by state to rounding without sensing faults, and with
+noise, delay, drops, range and local frames when the channel has the same seed.
+"""
+
+import dataclasses
+import importlib
+import math
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pettingzoo.test import parallel_api_test, parallel_seed_test
+
+import formationlab as fl
+from formationlab.agents import law_policy, parallel_env
+from formationlab.errors import ParameterError
+from formationlab.io.scenario import load_scenario
+from formationlab.scenario import parse_scenario
+from formationlab.sensing import Faults, Sensing, Stop
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+NOISY = Sensing(frames="local", noise=0.02, drop=0.2)
+SENSED = Sensing(frames="local", noise=0.01, delay=0.002, drop=0.1, range=9.0)
+
+
+def scenario(name: str, duration: float | None = None):
+    sc = load_scenario(EXAMPLES / f"{name}.toml")
+    return sc if duration is None else dataclasses.replace(sc, duration=duration)
+
+
+def run(env, policy=None, seed=0):
+    """One episode: the states, observations and the last step's returns."""
+    obs, info = env.reset(seed=seed)
+    policy = policy or law_policy(env)
+    xs, seen = [env.state()], [obs]
+    while env.agents:
+        obs, rew, term, trunc, info = env.step(policy(obs))
+        xs.append(env.state())
+        seen.append(obs)
+    return np.array(xs), seen, (rew, term, trunc, info)
+
+
+def reference(sc, t_end, sensing=None):
+    return fl.simulate(
+        sc.formation, sc.law, sc.x0, duration=t_end, integrator=sc.integrator, model=sc.model,
+        backend="numpy", sensing=sensing,
+    )  # fmt: skip
+
+
+CASES = [
+    ("paper-simulation-1", None),
+    ("paper-simulation-1", NOISY),
+    ("paper-simulation-1-unicycle-near-identity", None),
+    ("paper-simulation-1-unicycle-near-identity", NOISY),
+]
+
+
+@pytest.mark.parametrize(("name", "sensing"), CASES)
+def test_pettingzoo_api_and_seed_tests_pass(name, sensing):
+    sc = scenario(name)
+    env = parallel_env(sc, sensing=sensing)
+    parallel_api_test(env, num_cycles=60)
+    parallel_seed_test(lambda: parallel_env(sc, sensing=sensing), num_cycles=60)
+    obs, _ = env.reset(seed=3)
+    for agent in env.agents:  # what the spaces promise
+        assert env.observation_space(agent).contains(obs[agent])
+        assert env.action_space(agent).contains(env.action_space(agent).sample())
+
+
+def test_the_law_policy_reaches_the_triangle_and_is_simulate():
+    """Paper's simulation 1: desired formation, and simulate's states to rounding."""
+    sc = scenario("paper-simulation-1")
+    env = parallel_env(sc)
+    xs, _, (rew, term, trunc, info) = run(env)
+    assert all(term.values()) and not any(trunc.values())
+    assert {i["outcome"] for i in info.values()} == {"desired"}
+    assert env.agents == [] and env.t < sc.duration
+    errors = fl.analysis.distance_errors(sc.formation, xs[-1])
+    assert np.abs(errors).max() <= fl.analysis.Tolerances().distance
+    assert np.abs(fl.analysis.distance_errors(sc.formation, xs[-2])).max() > 1e-2  # first time
+    # the reward is the negative local error: robot 1's edges are 1-2 and 1-3
+    for robot, (e, f) in {"robot_1": (0, 1), "robot_2": (0, 2), "robot_3": (1, 2)}.items():
+        assert rew[robot] == pytest.approx(-(abs(errors[e]) + abs(errors[f])), abs=1e-15)
+    res = reference(sc, env.t)
+    assert res.x.shape == xs.shape
+    np.testing.assert_allclose(xs, res.x, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "paper-simulation-1-unicycle-near-identity",
+        "paper-simulation-1-unicycle-heading",
+        "paper-simulation-1-double-integrator",
+    ],
+)
+def test_the_law_policy_on_other_models_is_simulate(name):
+    """(v, omega) of unicycles and accelerations of double integrators; truncated at 0.8 s."""
+    sc = scenario(name, duration=0.8)
+    env = parallel_env(sc)
+    xs, _, (_, term, trunc, info) = run(env)
+    assert all(trunc.values()) and not any(term.values())
+    assert len(xs) == 801 and info["robot_2"]["outcome"] == "not-converged"
+    np.testing.assert_allclose(xs, reference(sc, 0.8).x, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["triangle-obstacle", "square-marching", "square-safety"])
+def test_obstacles_marching_and_a_safety_filter_act_on_the_agents_commands(name):
+    """The closed loop adds repulsion and marching and filters the agents' commands."""
+    sc = scenario(name, duration=0.3)
+    xs, _, _ = run(parallel_env(sc))
+    res = fl.simulate(
+        sc.formation, sc.law, sc.x0, duration=0.3, integrator=sc.integrator, model=sc.model,
+        marching=sc.marching, obstacles=sc.obstacles, safety=sc.safety, backend="numpy",
+    )  # fmt: skip
+    np.testing.assert_allclose(xs, res.x, rtol=0, atol=1e-12)
+
+
+def test_a_sensed_episode_is_simulate_with_the_same_seed():
+    """Local frames, noise, delay, drops and range: the episode's seed is the channel's."""
+    sc = scenario("paper-simulation-1", duration=0.5)
+    env = parallel_env(sc, sensing=SENSED)
+    xs, _, _ = run(env, seed=11)
+    res = reference(sc, 0.5, dataclasses.replace(SENSED, seed=11))
+    np.testing.assert_allclose(xs, res.x, rtol=0, atol=1e-12)
+    other, _, _ = run(env, seed=12)
+    assert np.abs(other - xs).max() > 1e-4  # another seed, another run
+
+
+def test_same_seed_same_episode_and_another_seed_other_noise():
+    sc = scenario("paper-simulation-1")
+    env = parallel_env(sc, sensing=NOISY, jitter=0.05)
+
+    def episode(seed):
+        obs, info = env.reset(seed=seed)
+        for i, agent in enumerate(env.agents):
+            env.action_space(agent).seed(100 + i)
+        out = [obs]
+        for _ in range(30):
+            obs = env.step({a: env.action_space(a).sample() for a in env.agents})[0]
+            out.append(obs)
+        return env.state(), np.array([[o[a]["relative"] for a in o] for o in out]), info
+
+    x1, o1, i1 = episode(5)
+    x2, o2, _ = episode(5)
+    x3, o3, _ = episode(6)
+    assert i1["robot_1"]["seed"] == 5 and np.array_equal(x1, x2) and np.array_equal(o1, o2)
+    assert np.abs(o3 - o1).max() > 1e-3 and not np.array_equal(x3, x1)
+    env.reset(seed=5)
+    _, info = env.reset()  # the next episode of seed 5: another one
+    assert info["robot_1"]["seed"] == (5, 1)
+
+
+def test_observations_are_each_robots_measurements_in_its_frame():
+    sc = scenario("paper-simulation-1")
+    obs, info = parallel_env(sc).reset(seed=0)
+    # robot 1 at (-3, -3) sees robot 2 at (3, -3) and robot 3 at (0, 3)
+    np.testing.assert_array_equal(obs["robot_1"]["relative"], [[6.0, 0.0], [3.0, 6.0]])
+    np.testing.assert_array_equal(obs["robot_3"]["relative"], [[-3.0, -6.0], [3.0, -6.0]])
+    assert obs["robot_2"]["seen"].tolist() == [1, 1] == obs["robot_2"]["neighbour"].tolist()
+    assert info["robot_1"]["error"] == pytest.approx(5.0 + math.sqrt(45.0) - 1.0, abs=1e-14)
+    assert info["robot_3"]["error"] == pytest.approx(2 * (math.sqrt(45.0) - 1.0), abs=1e-14)
+    local = parallel_env(sc, sensing=Sensing(frames="local", range=7.0)).reset(seed=0)[0]
+    rel = local["robot_1"]["relative"]  # a rotation keeps the lengths; 3 is within 7 m
+    np.testing.assert_allclose(np.linalg.norm(rel, axis=-1), [6.0, math.sqrt(45.0)], atol=1e-12)
+    uni = scenario("paper-simulation-1-unicycle-near-identity")
+    theta = uni.x0[:, 2]
+    g = parallel_env(uni).reset(seed=0)[0]
+    np.testing.assert_allclose(g["robot_2"]["heading"], [math.cos(theta[1]), math.sin(theta[1])])
+    h = parallel_env(uni, sensing=Sensing(frames="local")).reset(seed=0)[0]
+    np.testing.assert_allclose(h["robot_2"]["heading"], [1.0, 0.0], atol=1e-15)
+    delayed = parallel_env(sc, sensing=Sensing(delay=0.002)).reset(seed=0)[0]
+    assert delayed["robot_1"]["seen"].tolist() == [0, 0]  # nothing has arrived at t = 0
+    assert delayed["robot_1"]["relative"].tolist() == [[0.0, 0.0], [0.0, 0.0]]
+
+
+def test_each_agents_action_uses_its_own_observation_only():
+    env = parallel_env(scenario("paper-simulation-1"))
+    obs, _ = env.reset(seed=0)
+    policy = law_policy(env)
+    before = policy(obs)
+    obs["robot_2"]["relative"] = obs["robot_2"]["relative"] + 0.3
+    after = policy(obs)
+    np.testing.assert_array_equal(before["robot_1"], after["robot_1"])
+    np.testing.assert_array_equal(before["robot_3"], after["robot_3"])
+    assert np.abs(before["robot_2"] - after["robot_2"]).max() > 1e-3
+
+
+TWO = """
+[robots]
+positions = [[0.0, 0.0], [0.6, 0.0]]
+diameters = 0.2
+[formation]
+edges = "complete"
+distances = 1.0
+[controller]
+law = "distance"
+[simulation]
+integrator = "euler"
+dt = 0.01
+duration = 1.0
+"""
+
+
+@pytest.mark.parametrize(
+    ("speed", "steps", "status"), [(5.0, 3, "step-collision"), (100.0, 0, "step-too-large")]
+)
+def test_contact_ends_the_episode_with_the_penalty(speed, steps, status):
+    """Two robots 0.6 m apart driven at each other, a = 0.2: each step closes 2 speed dt."""
+    env = parallel_env(TWO, contact_penalty=50.0)
+    env.reset(seed=0)
+    push = {"robot_1": np.array([speed, 0.0]), "robot_2": np.array([-speed, 0.0])}
+    for _ in range(steps):
+        rew, term = env.step(push)[1:3]
+        assert not any(term.values())
+    _, rew, term, _, info = env.step(push)
+    assert all(term.values()) and env.agents == []
+    assert info["robot_1"]["status"] == status and info["robot_1"]["outcome"] == "collision"
+    r = 0.6 - 2 * speed * 0.01 * steps  # the last accepted state is kept
+    assert np.linalg.norm(np.diff(env.state(), axis=0)) == pytest.approx(r, abs=1e-12)
+    assert rew["robot_1"] == pytest.approx(-abs(r - 1.0) - 50.0, abs=1e-12)
+    with pytest.raises(RuntimeError, match="call reset"):
+        env.step(push)
+
+
+def test_a_stopped_robot_ignores_its_action_and_truncation_comes_at_the_duration():
+    env = parallel_env(TWO, faults=Faults(stop=[Stop(robot=2, at=0.0)]))
+    env.reset(seed=0)
+    out = None
+    for _ in range(100):
+        out = env.step({"robot_1": np.array([-0.1, 0.0]), "robot_2": np.array([1.0, 1.0])})
+    np.testing.assert_allclose(env.state(), [[-0.1, 0.0], [0.6, 0.0]], atol=1e-12)
+    assert all(out[3].values()) and not any(out[2].values()) and env.t == pytest.approx(1.0)
+
+
+def test_render_modes():
+    env = parallel_env(
+        scenario("paper-simulation-1-unicycle-near-identity"), render_mode="rgb_array"
+    )
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
+    assert len(np.unique(frame.reshape(-1, 3), axis=0)) > 3  # robots drawn, not a blank page
+    none = parallel_env(scenario("paper-simulation-1"))
+    none.reset(seed=0)
+    assert none.render() is None
+
+
+def test_bad_arguments_are_parameter_errors():
+    sc = scenario("paper-simulation-1")
+    cases = [
+        (lambda: parallel_env(42), "takes a Scenario"),
+        (lambda: parallel_env(sc, render_mode="human"), "render_mode"),
+        (lambda: parallel_env(sc, contact_penalty=-1.0), "contact_penalty must be"),
+        (lambda: parallel_env(sc, max_command=0.0), "max_command must be a finite number > 0"),
+        (lambda: parallel_env(sc, jitter=float("nan")), "jitter must be"),
+        (lambda: parallel_env(sc, sensing="local"), "sensing must be a Sensing"),
+        (lambda: parallel_env(sc).observation_space("robot_4"), "robot_1 to robot_3"),
+        (lambda: parallel_env(sc).reset(seed=-1), "seed must be"),
+    ]
+    for make, message in cases:
+        with pytest.raises(ParameterError, match=message):
+            make()
+    env = parallel_env(sc)
+    env.reset(seed=0)
+    ok = {a: np.zeros(2) for a in env.agents}
+    for actions, message in [
+        ({"robot_1": np.zeros(2)}, r"no action for \['robot_2', 'robot_3'\]"),
+        ({**ok, "robot_9": np.zeros(2)}, "unknown agents"),
+        ({**ok, "robot_2": np.zeros(3)}, r"robot_2 must have shape \(2,\)"),
+        ([np.zeros(2)] * 3, "dict of actions"),
+    ]:
+        with pytest.raises(ParameterError, match=message):
+            env.step(actions)
+    heading = parse_scenario(
+        (EXAMPLES / "paper-simulation-1-unicycle-heading.toml").read_text()
+        + "\n[marching]\nvelocity = [0.1, 0.0]\n"
+    )
+    with pytest.raises(ParameterError, match="near-identity"):
+        parallel_env(heading)
+
+
+def test_a_missing_pettingzoo_names_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "pettingzoo", None)
+    monkeypatch.delitem(sys.modules, "formationlab.agents.env")
+    with pytest.raises(ImportError, match=r"pip install formationlab\[agents\]"):
+        importlib.import_module("formationlab.agents.env")
+
+
+def test_the_example_reaches_the_desired_formation(capsys):
+    import runpy
+
+    runpy.run_path(str(EXAMPLES / "agents" / "pettingzoo_paper_law.py"), run_name="__main__")
+    out = capsys.readouterr().out
+    assert out.startswith("outcome: desired at t = ")
+    errors = [float(e) for e in re.findall(r"= ([+-]\d\.\d+) m", out)]
+    assert len(errors) == 3 and max(map(abs, errors)) <= fl.analysis.Tolerances().distance
