@@ -380,6 +380,19 @@ class FaultsModel(BaseModel):
     stop: list[StopModel] = []
 
 
+class AsynchronousModel(BaseModel):
+    """``[asynchronous]``: run every robot as its own task (:func:`formationlab.agents.run_async`).
+
+    ``periods``: one control period (s) for all robots or one per robot (robot 1 first),
+    default the step ``dt``; ``jitter``: each wake-up is late by up to this fraction of a
+    period, in ``[0, 1)``. Values are checked by the runner's own validation.
+    """
+
+    model_config = _STRICT
+    periods: float | list[float] | None = None
+    jitter: float = 0.0
+
+
 class ScenarioModel(BaseModel):
     """The whole file. ``[study]`` and ``[equilibria]`` are passed through unvalidated."""
 
@@ -397,6 +410,7 @@ class ScenarioModel(BaseModel):
     safety: SafetyModel | None = None
     sensing: SensingModel | None = None
     faults: FaultsModel | None = None
+    asynchronous: AsynchronousModel | None = None
 
 
 #: The keys each table accepts (the fixed ones; laws and integrators add theirs).
@@ -410,4 +424,5 @@ SECTIONS: dict[str, tuple[str, ...]] = {
     "safety": tuple(SafetyModel.model_fields),
     "sensing": tuple(SensingModel.model_fields),
     "faults": tuple(FaultsModel.model_fields),
+    "asynchronous": tuple(AsynchronousModel.model_fields),
 }

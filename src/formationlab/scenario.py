@@ -108,6 +108,10 @@ class Scenario:
         is a whole number of steps of the integrator.
     faults : Faults or None
         The ``[faults]`` table, None when absent; its robots exist.
+    asynchronous : dict or None
+        The ``[asynchronous]`` table (``periods``: an array ``(n,)`` of seconds,
+        ``jitter``), None when absent: ``run`` then steps every robot as its own task
+        (:func:`formationlab.agents.run_async`) with the integrator's ``dt`` as physics step.
     """
 
     name: str
@@ -136,6 +140,7 @@ class Scenario:
     safety: Any = None
     sensing: Sensing | None = None
     faults: Faults | None = None
+    asynchronous: dict[str, Any] | None = None
 
     @property
     def n(self) -> int:
@@ -340,6 +345,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
             warnings.append(message)
             _warnings.warn(message, IgnoredKeyWarning, stacklevel=3)
     sensing, faults = _sensing(model, formation, integrator, fail)
+    asynchronous = _asynchronous(model, formation, integrator, fail)
     return Scenario(
         name=model.name or stem(source),
         text=text,
@@ -362,7 +368,42 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         safety=safety,
         sensing=sensing,
         faults=faults,
+        asynchronous=asynchronous,
     )
+
+
+def _asynchronous(
+    model: ScenarioModel, formation: Formation, integrator: Integrator, fail: Any
+) -> dict[str, Any] | None:
+    """The ``[asynchronous]`` table, checked by the runner's own rules."""
+    table = model.asynchronous
+    if table is None:
+        return None
+    if integrator.name != "euler":
+        raise fail(
+            "simulation.integrator",
+            "[asynchronous] steps the world with explicit Euler at the integrator's dt between "
+            f'the robots\' updates; set integrator = "euler" (got {integrator.name!r})',
+        )
+    for given, what in (
+        (model.marching is not None, "[marching]"),
+        (bool(model.obstacles), "[[obstacles]]"),
+        (model.safety is not None and model.safety.filter != "none", "a safety filter"),
+    ):
+        if given:
+            raise fail(
+                "asynchronous",
+                f"the asynchronous runner does not take {what} yet: remove it, or remove "
+                "[asynchronous] (the synchronous run takes it)",
+            )
+    from .agents.asynchronous import check_schedule
+
+    try:
+        dt = float(integrator.dt)  # type: ignore[attr-defined]
+        periods, jitter = check_schedule(table.periods, table.jitter, formation.n, dt)
+    except UserInputError as exc:
+        raise fail(f"asynchronous.{exc.key or 'periods'}", str(exc)) from None
+    return {"periods": periods, "jitter": jitter}
 
 
 def _sensing(

@@ -63,7 +63,7 @@ from ..validation import nonnegative, positive, whole
 from .bus import TIE, Bus, Message
 from .clock import VirtualClock
 
-__all__ = ["MEASUREMENT", "AsyncResult", "arun", "run_async"]
+__all__ = ["MEASUREMENT", "AsyncResult", "arun", "check_schedule", "run_async"]
 
 #: the bus topic of measured relative positions
 MEASUREMENT = "relative-position"
@@ -100,6 +100,18 @@ class AsyncResult(SimulationResult):
     def updates(self) -> NDArray[np.int64]:
         """How many times each robot updated its command, ``(n,)``."""
         return np.array([len(t) for t in self.update_times], dtype=np.int64)
+
+    def summary(self, tolerances: Any = None) -> dict[str, Any]:
+        """:meth:`SimulationResult.summary` with ``asynchronous``: periods, jitter, seed and
+        each robot's number of updates (robot 1 first)."""
+        out = super().summary(tolerances)
+        out["asynchronous"] = {
+            "periods": np.asarray(self.periods, dtype=float).tolist(),
+            "jitter": float(self.jitter),
+            "seed": int(self.seed),
+            "updates": self.updates.tolist(),
+        }
+        return out
 
 
 def _wake_times(
@@ -253,6 +265,23 @@ async def _robot(i: int, world: _World, clock: VirtualClock, times: Iterator[flo
         world.control(i, t)
 
 
+def check_schedule(
+    periods: float | ArrayLike | None, jitter: float, n: int, dt: float
+) -> tuple[NDArray[np.float64], float]:
+    """Each robot's period ``(n,)`` (default ``dt``) and the jitter, validated as by the runner."""
+    return _periods(periods, n, dt), _jitter(jitter)
+
+
+def _jitter(jitter: float) -> float:
+    jitter = nonnegative(jitter, "jitter")
+    if not jitter < 1:
+        raise ParameterError(
+            f"jitter is a fraction of each period in [0, 1), got {jitter!r}: a wake-up is "
+            "late by less than one period", key="jitter",
+        )  # fmt: skip
+    return jitter
+
+
 def _periods(periods: float | ArrayLike | None, n: int, dt: float) -> NDArray[np.float64]:
     if periods is None:
         return np.full(n, dt)
@@ -281,12 +310,7 @@ async def arun(
     duration = positive(duration, "duration")
     dt = positive(dt, "dt")
     save_every = whole(save_every, "save_every")
-    jitter = nonnegative(jitter, "jitter")
-    if not jitter < 1:
-        raise ParameterError(
-            f"jitter is a fraction of each period in [0, 1), got {jitter!r}: a wake-up is "
-            "late by less than one period", key="jitter",
-        )  # fmt: skip
+    jitter = _jitter(jitter)
     if sensing is not None and not isinstance(sensing, Sensing):
         raise ParameterError(f"sensing must be a Sensing, got {sensing!r}", key="sensing")
     if faults is not None and not isinstance(faults, Faults):

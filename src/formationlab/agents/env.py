@@ -53,9 +53,9 @@ time ``t``, the episode's ``seed``, the agent's ``error`` and, at the end, the
 Seeding as in Gymnasium: ``reset(seed=s)`` makes episode ``s`` (the measurement
 channel seeded with ``s``, as ``simulate(sensing=Sensing(seed=s))`` seeds its own; the
 sensing's own ``seed`` is not used); later ``reset()`` calls make episodes ``(s, 1)``,
-``(s, 2)``, ... ; a first ``reset()`` without a seed draws ``s`` from the operating system. With ``jitter`` the start is the
-scenario's initial state with Gaussian noise (standard deviation ``jitter``, m) on each
-position, drawn from the episode's seed too.
+``(s, 2)``, ... ; a first ``reset()`` without a seed draws ``s`` from the operating
+system. With ``jitter`` the start is the scenario's initial state with Gaussian noise
+(standard deviation ``jitter``, m) on each position, drawn from the episode's seed too.
 """
 
 from __future__ import annotations

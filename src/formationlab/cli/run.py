@@ -254,6 +254,9 @@ def _sensing_words(sc: Any) -> str:
             if d[k] not in (0, 0.0, None)
         ]  # fmt: skip
         out += f", sensing ({', '.join(parts)}, seed {d['seed']})"
+    if getattr(sc, "asynchronous", None) is not None:
+        periods = ", ".join(f"{p:g}" for p in sc.asynchronous["periods"])
+        out += f", asynchronous (periods {periods} s, jitter {sc.asynchronous['jitter']:g})"
     if sc.faults is not None and sc.faults.any:
         stops = ", ".join(
             f"robot {s.robot} stops at {s.at:g} s" if s.at < float("inf") else
@@ -279,6 +282,18 @@ def _simulate(simulate: Any, sc: Any, save_every: int, quiet: bool) -> Any:
         "sensing": sc.sensing,
         "faults": sc.faults,
     }
+    if sc.asynchronous is not None:  # every robot its own task (agents.run_async)
+        from ..agents import run_async
+
+        _note(
+            f"asynchronous: periods {', '.join(f'{p:g}' for p in sc.asynchronous['periods'])} s, "
+            f"jitter {sc.asynchronous['jitter']:g}", quiet,
+        )  # fmt: skip
+        return run_async(
+            sc.formation, sc.law, sc.x0, duration=sc.duration, dt=sc.integrator.dt,
+            periods=sc.asynchronous["periods"], jitter=sc.asynchronous["jitter"],
+            sensing=sc.sensing, faults=sc.faults, model=sc.model, save_every=save_every,
+        )  # fmt: skip
     if not show:
         return simulate(sc.formation, sc.law, sc.x0, **kwargs)
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn

@@ -116,6 +116,11 @@ def study(
         source=sc.source,
         text=sc.text,
     )
+    if sc.asynchronous is not None:
+        warn(
+            f"{sc.source}: [asynchronous] is not used by studies: their trials step every robot "
+            "at dt (the sensed synchronous path; `formationlab run` takes the table)"
+        )
     if safety_filter is not None:
         sc = _with_filter(sc, safety_filter)
     setup = StudySetup.from_scenario(sc, config)
