@@ -383,3 +383,12 @@ def test_a_noisy_study_is_the_same_whatever_chunks_and_workers(tmp_path: Path) -
     assert set(one["noise"]) == {0.0, 0.03} and set(one["stop_at"]) == {1.0}
     quiet, noisy = (one[one["noise"] == v] for v in (0.0, 0.03))
     assert not np.array_equal(quiet["x1"].to_numpy(), noisy["x1"].to_numpy())
+
+
+@pytest.mark.parametrize("sensing", [Sensing(delay=0.05), Sensing(drop=0.9, seed=1)])
+def test_robots_waiting_for_a_measurement_are_not_at_rest(sensing: Sensing) -> None:
+    """Before a first measurement arrives the robots stand still: that is not convergence."""
+    q0 = np.broadcast_to(Q0, (2, 3, 2)).copy()
+    res = run_batch(TRIANGLE, fl.DistanceLaw(), q0, dt=1e-2, duration=10.0, sensing=sensing)
+    assert np.all(res.steps > 5)
+    assert list(res.outcome) == ["desired", "desired"]

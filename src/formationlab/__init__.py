@@ -28,6 +28,7 @@ from .integrators import (
     get_integrator,
 )
 from .potentials import dphi_dr, khatib, phi, psi, triple_products
+from .sensing import Faults, Sensing, Stop
 from .simulation import SimulationResult, simulate
 from .spec import Formation, FormationError
 from .templates import lattice
@@ -55,6 +56,7 @@ __all__ = [
     "AngleRestrictedLaw",
     "DistanceLaw",
     "Euler",
+    "Faults",
     "Filippov",
     "Formation",
     "FormationError",
@@ -62,8 +64,10 @@ __all__ = [
     "Integrator",
     "Law",
     "Repulsion",
+    "Sensing",
     "SimulationResult",
     "SingleIntegrator",
+    "Stop",
     "System",
     "Tolerances",
     "__version__",

@@ -9,8 +9,9 @@ its own:
   depends on time) the scheme gives the next state ``x_{k+1}`` and the velocity
   ``v_k`` it followed (``x_{k+1} = x_k + dt v_k`` for explicit Euler; the
   Filippov velocity of a sliding step for implicit Euler);
-* **stopped** (only with a :class:`StopRule`): at a check, a step ``k`` with
-  ``k % check_every == 0`` (or the last step), the instantaneous speed
+* **stopped** (only with a :class:`StopRule`; with sensing, only while every robot
+  sees all its neighbours, :meth:`~formationlab.sensing.Channel.informed`): at a check,
+  a step ``k`` with ``k % check_every == 0`` (or the last step), the instantaneous speed
   ``max_i`` of the robot model's speed (:meth:`RobotModel.speed`; ``|v_i|`` of
   the positions for single integrators) or the net speed since the previous check,
   ``max_i |q_i(k) - q_i(k')| / ((k - k') dt)``, is at most ``speed``: the trial
@@ -211,6 +212,7 @@ def drive(
     saved: list[tuple[int, NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]] = []
     live = np.arange(B)
     xc, kc = x[..., :2].copy(), -1  # positions at the previous check, its step
+    seen_c = np.ones(B, dtype=bool)  # whether each trial's robots saw everyone then
     monitor = SwitchMonitor(sigma0=system.sigma(x[0]), t0=0.0) if diagnostics else None
     counters: dict[str, float] = {}
     start = last_report = time.perf_counter()
@@ -242,6 +244,10 @@ def drive(
                     net[live] = np.sqrt(np.max(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1], -1))
                     net[live] /= (k - kc) * dt
                     still |= net[live] <= stop.speed
+                if channel is not None:  # robots that wait for a measurement are not at rest
+                    informed = channel.informed(x, live)
+                    still &= informed & seen_c
+                    seen_c = informed
                 xc, kc = q.copy(), k
                 finish(still, Status.CONVERGED, k, x, v)
                 ending |= still
@@ -267,6 +273,7 @@ def drive(
             if not keep.any():
                 break
             live, x, xc, now = live[keep], x_new[keep], xc[keep], k + 1
+            seen_c = seen_c[keep]
             min_clear[live] = np.minimum(min_clear[live], clear[keep])
             if monitor is not None and live.size and live[0] == 0:
                 monitor.record((k + 1) * dt, system.sigma(x[0]))

@@ -192,6 +192,23 @@ class Channel:
         self._held[live], self._has[live] = held, has
         return held, has
 
+    def informed(self, x: NDArray[np.float64], live: NDArray[np.intp]) -> NDArray[np.bool_]:
+        """Whether every robot of each trial sees all its neighbours now, ``(L,)``.
+
+        A trial whose robots still wait for a measurement (before the first one arrives
+        after a delay, or while it is lost before a first one was received, or out of
+        range) is not at rest, however still its robots stand: the driver's stop rule
+        asks this too.
+        """
+        ei, ej = self.terms.edge_i, self.terms.edge_j
+        if self.sensing.sampled:
+            has = self._has[live]
+        else:
+            has = self.in_range(x)
+            if has is None:
+                return np.ones(live.size, dtype=bool)
+        return np.all(has[:, ei, ej] & has[:, ej, ei], axis=-1)
+
     # ------------------------------------------------------------------ commands
 
     def local(
