@@ -211,3 +211,27 @@ def test_an_interrupted_run_keeps_the_states_so_far(integ):
     stop = len(res.t) - 1  # the states so far are those of the uninterrupted run
     if integ != "filippov":
         np.testing.assert_array_equal(res.q[:stop], full.q[:stop])
+
+
+#: every sensing key and a fault at once (the sensed closed loop's contract)
+SENSED = fl.Sensing(frames="local", noise=0.005, range=4.0, delay=0.004, drop=0.2, mismatch=0.01)
+STOPS = fl.Faults(stop=[fl.Stop(robot=3, at=0.05)])
+EXPLICIT = sorted(n for n, c in INTEGRATORS.items() if getattr(c, "explicit", False))
+
+
+@pytest.mark.parametrize("model", sorted(MODELS))
+@pytest.mark.parametrize("integ", EXPLICIT)
+@pytest.mark.parametrize("law", sorted(LAWS))
+def test_the_sensed_loop_keeps_the_contract(law, integ, model):
+    """Sensed, faulty runs: translation invariance, a seed fixes the run, and finite states."""
+    shift = np.array([40.0, -25.0])
+    kw = {"duration": 0.2, "integrator": integrator(integ), "model": model,
+          "sensing": SENSED, "faults": STOPS, **EXTRA[model]}  # fmt: skip
+    a = fl.simulate(TRIANGLE, fl.get_law(law), START, **kw)
+    b = fl.simulate(TRIANGLE, fl.get_law(law), START + shift, **kw)
+    again = fl.simulate(TRIANGLE, fl.get_law(law), START, **kw)
+    np.testing.assert_array_equal(a.x, again.x)
+    np.testing.assert_allclose(b.q - shift, a.q, atol=1e-9)
+    assert np.all(np.isfinite(a.x)) and a.status in (Status.SUCCESS, Status.COLLISION)
+    k = int(np.searchsorted(a.t, 0.05))
+    assert np.all(a.q[k:, 2] == a.q[k, 2])  # robot 3 stopped

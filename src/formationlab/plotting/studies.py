@@ -196,10 +196,17 @@ def desired_figure(
             label=law,
             color=color,
         )
-    _log_if_wide(ax, swept)
     ax.set_ylim(-0.02, 1.02)
-    ax.set_xlabel(parameter or "")
-    ax.set_ylabel("fraction desired")
+    return _finish(fig, ax, swept, parameter or "", "fraction desired", title)
+
+
+def _finish(
+    fig: Figure, ax: Axes, swept: Sequence[float], xlabel: str, ylabel: str, title: str | None
+) -> Figure:
+    """Labels, grid, legend and title of a figure against a swept parameter."""
+    _log_if_wide(ax, swept)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
     ax.grid(alpha=0.3)
     ax.legend(fontsize="small")
     if title:
@@ -379,16 +386,8 @@ def shape_error_figure(
     if not drawn:
         plt.close(fig)
         return None
-    _log_if_wide(ax, swept)
     ax.set_yscale("symlog", linthresh=1e-3)
-    ax.set_xlabel(parameter)
-    ax.set_ylabel(r"final max $|r_{ij} - d_{ij}|$ (m)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize="small")
-    if title:
-        ax.set_title(title)
-    fig.tight_layout()
-    return fig
+    return _finish(fig, ax, swept, parameter, r"final max $|r_{ij} - d_{ij}|$ (m)", title)
 
 
 def study_figures(
