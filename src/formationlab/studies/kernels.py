@@ -21,9 +21,12 @@ The robot model enters as a :class:`~formationlab.studies.model_terms.ModelTerms
 (single integrators, unicycles through either transform, double integrators,
 each with its limits): :func:`_points` gives the points the law acts on,
 :func:`_rates` the state's rate from the law's control (``RobotModel.derivative``),
-:func:`_speed` the stop rule's speed (``RobotModel.speed``). Contact is decided
-on the centres: for near-identity unicycles, whose law acts on hand points,
-:func:`_contact` recomputes the clearances on the centres.
+:func:`_speed` the stop rule's speed (``RobotModel.speed``). A unicycle's
+``cos theta`` and ``sin theta`` are evaluated once per robot and step
+(:func:`_headings`) and read by the other two, whose loops then call no library function
+(the heading transform's ``atan2`` remains): a library call keeps a loop from being
+vectorised. Contact is decided on the centres: for near-identity unicycles, whose law
+acts on hand points, :func:`_contact` recomputes the clearances on the centres.
 
 The step rule is the one of :meth:`formationlab.dynamics.System.step_verdict`:
 a step is rejected when it is not finite, when it ends with a pair in contact
@@ -200,19 +203,46 @@ def _contact(x, xp, disp, gap, swept, nact, terms):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _points(x, p, nact, model):
-    """Near-identity hand points ``p = q + l (cos theta, sin theta)`` (``Unicycle.points``)."""
-    ell = model.offset
+def _headings(x, h, nact):
+    """``h = (cos theta, sin theta)`` of every robot of the first ``nact`` trials.
+
+    Once per step: :func:`_points` and :func:`_rates` read them, and their own loops,
+    free of library calls, are vectorised.
+    """
     for i in range(x.shape[0]):
         for b in range(nact):
             th = x[i, 2, b]
-            p[i, 0, b] = x[i, 0, b] + ell * math.cos(th)
-            p[i, 1, b] = x[i, 1, b] + ell * math.sin(th)
+            h[i, 0, b] = math.cos(th)
+            h[i, 1, b] = math.sin(th)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _rates(x, u, f, nact, model):
-    """``f = x_dot`` from the law's controls ``u`` (``RobotModel.derivative``, with limits)."""
+def _points(x, h, p, nact, model):
+    """Near-identity hand points ``p = q + l h`` (``Unicycle.points``); ``h``: :func:`_headings`."""
+    ell = model.offset
+    for i in range(x.shape[0]):
+        for b in range(nact):
+            p[i, 0, b] = x[i, 0, b] + ell * h[i, 0, b]
+            p[i, 1, b] = x[i, 1, b] + ell * h[i, 1, b]
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
+def _limit_unicycle(v, w, vmax, wmax):
+    """``(s v, s omega)``, ``s = min(1, v_max / |v|, omega_max / |omega|)`` (``limit_unicycle``)."""
+    av = abs(v)
+    aw = abs(w)
+    s = vmax / av if av > vmax else 1.0
+    s2 = wmax / aw if aw > wmax else 1.0
+    s = min(s, s2)
+    return v * s, w * s
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def _rates(x, h, u, f, nact, model):
+    """``f = x_dot`` from the law's controls ``u`` (``RobotModel.derivative``, with limits).
+
+    ``h``: the unicycles' headings ``(cos theta, sin theta)`` (:func:`_headings`).
+    """
     n = x.shape[0]
     vmax = model.max_speed
     wmax = model.max_turn_rate
@@ -245,34 +275,35 @@ def _rates(x, u, f, nact, model):
                 f[i, 1, b] = wy * s
                 f[i, 2, b] = ax
                 f[i, 3, b] = ay
-    else:  # unicycles: (v, omega) by the transform, limited together (limit_unicycle)
+    elif model.kind == NEAR_IDENTITY:  # v = u . h, omega = u . h_perp / l (NearIdentity)
         ell = model.offset
         for i in range(n):
             for b in range(nact):
-                c = math.cos(x[i, 2, b])
-                sn = math.sin(x[i, 2, b])
+                c = h[i, 0, b]
+                sn = h[i, 1, b]
                 along = c * u[i, 0, b] + sn * u[i, 1, b]
                 across = -sn * u[i, 0, b] + c * u[i, 1, b]
-                if model.kind == NEAR_IDENTITY:
-                    v = along
-                    w = across / ell
-                else:
-                    if model.backwards:
-                        if along == 0.0:
-                            turn = math.copysign(0.5 * math.pi, across) if across != 0 else 0.0
-                        else:
-                            turn = math.atan(across / along)
+                v, w = _limit_unicycle(along, across / ell, vmax, wmax)
+                f[i, 0, b] = v * c
+                f[i, 1, b] = v * sn
+                f[i, 2, b] = w
+    else:  # the Robotarium's si_to_uni (HeadingTransform)
+        kv = model.linear_gain
+        kw = model.turn_gain
+        for i in range(n):
+            for b in range(nact):
+                c = h[i, 0, b]
+                sn = h[i, 1, b]
+                along = c * u[i, 0, b] + sn * u[i, 1, b]
+                across = -sn * u[i, 0, b] + c * u[i, 1, b]
+                if model.backwards:
+                    if along == 0.0:
+                        turn = math.copysign(0.5 * math.pi, across) if across != 0 else 0.0
                     else:
-                        turn = math.atan2(across, along)
-                    v = model.linear_gain * along
-                    w = model.turn_gain * turn / (math.pi / 2)
-                av = abs(v)
-                aw = abs(w)
-                s = vmax / av if av > vmax else 1.0
-                s2 = wmax / aw if aw > wmax else 1.0
-                s = min(s, s2)
-                v *= s
-                w *= s
+                        turn = math.atan(across / along)
+                else:
+                    turn = math.atan2(across, along)
+                v, w = _limit_unicycle(kv * along, kw * turn / (math.pi / 2), vmax, wmax)
                 f[i, 0, b] = v * c
                 f[i, 1, b] = v * sn
                 f[i, 2, b] = w
@@ -303,6 +334,7 @@ def _run_chunk(
     k = x0.shape[2]
     m = stop - start
     hand = model.kind == NEAR_IDENTITY  # the law acts on points other than the centres
+    turns = hand or model.kind == HEADING  # the state has a heading
     # double buffers: (x, f) at step k, (xp, fp) at step k - 1; u the law's control at x
     x = np.empty((n, k, m))
     f = np.empty((n, k, m))
@@ -310,6 +342,7 @@ def _run_chunk(
     fp = np.empty((n, k, m))
     u = np.empty((n, 2, m))
     p = np.empty((n, 2, m) if hand else (1, 2, 1))  # hand points
+    h = np.empty((n, 2, m) if turns else (1, 2, 1))  # (cos theta, sin theta) at x
     ids = np.arange(start, stop)
     mc = np.full(m, np.inf)  # least clearance over accepted states
     gap = np.empty(m)  # clearance of the current state
@@ -330,13 +363,15 @@ def _run_chunk(
     step = 0
     kc = -1  # step of the previous check (the same for every live trial)
     while nact > 0:
+        if turns:
+            _headings(x, h, nact)
         if hand:
-            _points(x, p, nact, model)
+            _points(x, h, p, nact, model)
             _controls(p, p, disp, u, gap, swept, sigma, nact, terms)
             _contact(x, xp, disp, gap, swept, nact, terms)
         else:
             _controls(x, xp, disp, u, gap, swept, sigma, nact, terms)
-        _rates(x, u, f, nact, model)
+        _rates(x, h, u, f, nact, model)
         stopping = 0
         if step > 0:  # reject the step that led here (System.step_verdict)
             for b in range(nact):
