@@ -79,6 +79,16 @@ class KernelTerms(NamedTuple):
     radius: NDArray[np.float64]  #: rho_i / 2, so that a_ij = radius_i + radius_j
     term_surface: NDArray[np.int64]  #: the surface of each term
 
+    def writable(self) -> KernelTerms:
+        """These terms with every array a writable C-contiguous copy.
+
+        Numba types read-only arrays (a formation's are frozen) apart from writable
+        ones: with every law's arrays writable, one compiled kernel serves them all.
+        """
+        arrays = {k: np.array(v, order="C") for k, v in self._asdict().items()
+                  if isinstance(v, np.ndarray)}  # fmt: skip
+        return self._replace(**arrays)  # type: ignore[arg-type]
+
 
 def build_terms(
     formation: Formation,

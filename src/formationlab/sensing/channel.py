@@ -108,9 +108,9 @@ class Channel:
             cap = (0.5 * (d - a))[None, :, None]
             self.own_distance = d[None, :, None] + np.clip(e, -cap, cap)
         shape = (self.B, n, n)
-        self._ring_z = np.zeros((self.m + 1, *shape, 2))
-        self._ring_in = np.zeros((self.m + 1, *shape), dtype=bool)
-        self._held = np.zeros((*shape, 2))
+        # the delay ring and the held measurements (made at the first observed step: a
+        # compiled path keeps its own and asks the channel only for seeds and draws)
+        self._ring_z = self._ring_in = self._held = np.zeros(0)
         self._has = np.zeros(shape, dtype=bool)
         self._blocks: dict[str, NDArray[np.float64]] = {}
         self._eye = np.eye(n, dtype=bool)
@@ -138,20 +138,29 @@ class Channel:
         """``(z, seen)`` of states ``x`` now (a channel without noise, delay or drops)."""
         return measured(self.model.points(x), self.angles(x, live)), self.in_range(x)
 
+    def block(self, which: str, trials: NDArray[np.intp]) -> NDArray[np.float64]:
+        """The next :data:`BLOCK` steps of noise or losses of each of ``trials``.
+
+        ``which = "noise"``: standard normals ``(L, BLOCK, n, n, 2)``; ``"drop"``: uniforms
+        in ``[0, 1)`` ``(L, BLOCK, n, n)``; each trial's from its own generator, so a
+        trial's draws depend only on its seed and on how many blocks it has drawn.
+        """
+        n = self.n
+        out = np.empty((len(trials), BLOCK, n, n, *((2,) if which == "noise" else ())))
+        for row, b in enumerate(trials):
+            if which == "noise":
+                out[row] = self._noise[b].standard_normal(out.shape[1:])
+            else:
+                out[row] = self._drop[b].random(out.shape[1:])
+        return out
+
     def _draw(self, which: str, live: NDArray[np.intp], k: int, shape: tuple[int, ...]) -> NDArray:
-        gens = self._noise if which == "noise" else self._drop
         block, row = divmod(k, BLOCK)
         buf = self._blocks.get(which)
         if buf is None:
             buf = self._blocks[which] = np.zeros((self.B, BLOCK, *shape))
         if self._block_of.get(which, -1) != block:  # a new block for the live trials
-            for b in live:
-                g = gens[b]
-                buf[b] = (
-                    g.standard_normal((BLOCK, *shape))
-                    if which == "noise"
-                    else g.random((BLOCK, *shape))
-                )
+            buf[live] = self.block(which, live)
             self._block_of[which] = block
         return buf[live, row]
 
@@ -166,6 +175,11 @@ class Channel:
             raise RuntimeError(f"the channel observes steps in order: step {k} after {self.k}")
         self.k = k
         n, s = self.n, self.sensing
+        if k == 0:
+            shape = (self.B, n, n)
+            self._ring_z = np.zeros((self.m + 1, *shape, 2))
+            self._ring_in = np.zeros((self.m + 1, *shape), dtype=bool)
+            self._held = np.zeros((*shape, 2))
         z = measured(self.model.points(x), self.angles(x, live))
         if s.noise > 0:
             z = z + s.noise * np.where(

@@ -26,6 +26,12 @@ the readable specification, for any law). The compiled kernel knows no
 obstacles and no safety filter: with either, :func:`batch_backend` chooses the
 numpy path (the decentralized filter is itself batched in numba; the centralized
 QP runs one solve per trial and step), and :func:`run_batch` follows it.
+
+With sensing other than the paper's or faults, ``"numba"`` runs single integrators
+on the compiled sensed path (:mod:`.sensed_kernel`: the measurement channel, every
+robot's own command and the stop rule only while every robot sees its neighbours,
+as the driver does them, with each trial's noise and losses drawn by its own
+channel); sensed batches of other robot models run on the numpy driver path.
 """
 
 from __future__ import annotations
@@ -75,17 +81,26 @@ _KERNEL_LOCK = threading.Lock()
 
 
 def batch_backend(
-    backend: str, obstacles: Sequence[Any] = (), safety: Any = None, sensed: bool = False
+    backend: str,
+    obstacles: Sequence[Any] = (),
+    safety: Any = None,
+    sensed: bool = False,
+    model: RobotModel | None = None,
 ) -> tuple[Backend, str]:
     """The backend a batch runs on, and why it differs from ``backend`` ("" if it does not).
 
-    The numba kernel has neither obstacles nor a safety filter nor sensing and faults,
-    so any of them moves the batch to the numpy driver path.
+    The numba kernels have neither obstacles nor a safety filter, so either moves the
+    batch to the numpy driver path. Sensing and faults (``sensed``) have their own
+    compiled path, :mod:`.sensed_kernel`, for single integrators (``model``, default
+    the paper's); sensed batches of other robot models run on the numpy driver path.
     """
-    if backend == "numba" and sensed:
+    sensed_model = model is None or type(model) is SingleIntegrator
+    if backend == "numba" and sensed and not sensed_model:
+        assert model is not None
         return "numpy", (
-            "the compiled kernel has no sensing models or faults: the batch runs on the "
-            "numpy driver path (every trial with its own seeded measurement channel)"
+            f"the compiled sensed path steps single integrators, not {model.name!r}: the "
+            "batch runs on the numpy driver path (every trial with its own seeded "
+            "measurement channel)"
         )
     filtered = safety is not None and safety.enabled
     if backend == "numba" and (obstacles or filtered):
@@ -154,7 +169,8 @@ def run_batch(
         batch runs on the numpy path (:func:`batch_backend`).
     sensing : Sensing, optional
         How the robots sense each other (:mod:`formationlab.sensing`); with a sensing
-        model other than the paper's, or with ``faults``, the batch runs on the numpy
+        model other than the paper's, or with ``faults``, single integrators run on the
+        compiled sensed path (:mod:`.sensed_kernel`) and other robot models on the numpy
         driver path.
     faults : Faults, optional
         Robots that stop.
@@ -175,8 +191,13 @@ def run_batch(
         check_every = max(1, round(tol.window / dt))
     check_every = whole(check_every, "check_every")
     sensed = (sensing is not None and not sensing.ideal) or (faults is not None and faults.any)
-    backend, _ = batch_backend(backend, obstacles, safety, sensed)
-    if backend == "numba":
+    backend, _ = batch_backend(backend, obstacles, safety, sensed, model)
+    if backend == "numba" and sensed:
+        x, v, status, steps, mc, ns, qw, window_step = _run_sensed(
+            formation, law, model, q0, float(dt), n_steps, int(check_every), tol,
+            sensing, faults, seeds,
+        )  # fmt: skip
+    elif backend == "numba":
         x, v, status, steps, mc, ns, qw, window_step = _run_numba(
             formation, law, model, q0, float(dt), n_steps, int(check_every), tol
         )
@@ -248,7 +269,7 @@ def _run_numba(
     from . import kernels
     from .model_terms import model_terms
 
-    terms = law.compiled_terms(formation)
+    terms = law.compiled_terms(formation).writable()  # one signature for every law
     robots = model_terms(model)
     n_trials, n, k = q0.shape
     q_out = np.empty((n_trials, n, k))
@@ -273,6 +294,36 @@ def _run_numba(
         finally:
             numba.set_parallel_chunksize(previous)
     return q_out, u_out, status, steps, mc, ns, qw, window_step
+
+
+def _run_sensed(
+    formation: Formation,
+    law: Law,
+    model: RobotModel,
+    q0: NDArray[np.float64],
+    dt: float,
+    n_steps: int,
+    check_every: int,
+    tol: Tolerances,
+    sensing: Sensing | None,
+    faults: Faults | None,
+    seeds: Sequence[Seed] | None,
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, int]:
+    import numba
+
+    from .sensed_kernel import run_sensed
+
+    assert isinstance(model, SingleIntegrator)
+    System(formation=formation, law=law, model=model, sensing=sensing, faults=faults)  # checks
+    with _KERNEL_LOCK:
+        previous = numba.set_parallel_chunksize(1)  # trials stop early by different amounts
+        try:
+            return run_sensed(
+                formation, law, model, q0, dt, n_steps, check_every, tol, sensing, faults,
+                seeds,
+            )  # fmt: skip
+        finally:
+            numba.set_parallel_chunksize(previous)
 
 
 def _chunk_size(n_trials: int, threads: int) -> int:

@@ -59,17 +59,27 @@ _SWEPT_MARGIN = 2.01
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
+def segment_clearance(x0, y0, ex, ey, a):
+    """Least ``|(x0, y0) + s (ex, ey)| - a`` over ``s`` in ``[0, 1]``.
+
+    A pair's clearance along a straight step: ``(x0, y0) = q_j - q_i`` at its start,
+    ``(ex, ey)`` the change of ``q_j - q_i`` over the step, ``a = a_ij``.
+    """
+    dd = ex * ex + ey * ey
+    s = min(max(-(x0 * ex + y0 * ey) / (dd if dd > 0 else 1.0), 0.0), 1.0)
+    mx = x0 + s * ex
+    my = y0 + s * ey
+    return math.sqrt(mx * mx + my * my) - a
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
 def _swept(q, qp, i, j, b, a):
     """Least ``r_ij - a_ij`` along the straight step ``qp -> q`` (``System.swept_clearance``)."""
     x0 = qp[j, 0, b] - qp[i, 0, b]
     y0 = qp[j, 1, b] - qp[i, 1, b]
     ex = (q[j, 0, b] - q[i, 0, b]) - x0
     ey = (q[j, 1, b] - q[i, 1, b]) - y0
-    dd = ex * ex + ey * ey
-    s = min(max(-(x0 * ex + y0 * ey) / (dd if dd > 0 else 1.0), 0.0), 1.0)
-    mx = x0 + s * ex
-    my = y0 + s * ey
-    return math.sqrt(mx * mx + my * my) - a
+    return segment_clearance(x0, y0, ex, ey, a)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)

@@ -293,7 +293,7 @@ class StudySetup:
         from .batch import batch_backend
 
         sensed = any(g.sensed for g in self.groups)
-        return batch_backend(self.config.backend, self.obstacles, self.safety, sensed)
+        return batch_backend(self.config.backend, self.obstacles, self.safety, sensed, self.model)
 
     def safety_description(self) -> dict[str, Any] | None:
         """JSON-ready obstacles and filter (None without either)."""
@@ -451,19 +451,29 @@ def _warm_kernels(tasks: list[ChunkTask], notify: Callable[[str], None] | None) 
     """Compile (or load from numba's cache) the kernel for each law, on one trial of two
     steps, so that the study's throughput does not count it; returns the time taken."""
     first = {t.group.law.name: t for t in tasks if t.backend == "numba" and not t.group.sensed}
-    if not first:
+    sensed = [  # one sensed trial compiles the sensed kernel for every law
+        t for t in tasks if t.backend == "numba" and t.group.sensed and not t.obstacles
+        and type(t.model) is SingleIntegrator and (t.safety is None or not t.safety.enabled)
+    ][:1]  # fmt: skip
+    if not first and not sensed:
         return 0.0
     from .batch import run_batch
     from .kernels import run_chunks
     from .sampling import trial_initial_states
+    from .sensed_kernel import run_block
 
-    if notify is not None and not _kernel_cached(run_chunks):
+    cached = _kernel_cached(run_chunks) if first else True
+    if notify is not None and not (cached and (not sensed or _kernel_cached(run_block))):
         notify("compiling kernels (once; later studies load them from the cache) ...")
     start = time.perf_counter()
-    for t in first.values():
-        f = t.group.formation
+    for t in [*first.values(), *sensed]:
+        f, g = t.group.formation, t.group
         q0 = trial_initial_states(f, t.initial, t.seed, np.arange(1), center=t.center)
-        run_batch(f, t.group.law, q0, dt=t.dt, duration=2 * t.dt, tolerances=t.tolerances)
+        run_batch(
+            f, g.law, q0, dt=t.dt, duration=2 * t.dt, tolerances=t.tolerances,
+            sensing=g.sensing if g.sensed else None, faults=g.faults if g.sensed else None,
+            seeds=[(t.seed, 0)] if g.sensed else None,
+        )  # fmt: skip
     return time.perf_counter() - start
 
 
