@@ -99,6 +99,7 @@ class System:
             from .sensing import SENSING_LIMIT
 
             if self.formation.n > SENSING_LIMIT:
+                assert self.sensing is not None
                 Channel(self.sensing, self.formation, self.law, self.model, [], 1.0)  # says why
             self.law.compiled_terms(self.formation)  # a law without kernel terms says so now
         if self.marching is not None:

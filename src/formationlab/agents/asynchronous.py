@@ -285,10 +285,9 @@ def _jitter(jitter: float) -> float:
 def _periods(periods: float | ArrayLike | None, n: int, dt: float) -> NDArray[np.float64]:
     if periods is None:
         return np.full(n, dt)
-    if np.ndim(periods) == 0:  # one for all
-        periods = [periods] * n
-    values = list(np.asarray(periods, dtype=object).ravel())
-    if np.ndim(periods) != 1 or len(values) != n:
+    given: Any = [periods] * n if np.ndim(periods) == 0 else periods  # one for all
+    values = list(np.asarray(given, dtype=object).ravel())
+    if np.ndim(given) != 1 or len(values) != n:
         raise ParameterError(
             f"periods must be one number or one per robot ({n} robots, robot 1 first), got "
             f"{periods!r}", key="periods",

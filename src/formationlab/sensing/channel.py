@@ -215,9 +215,8 @@ class Channel:
         asks this too.
         """
         ei, ej = self.terms.edge_i, self.terms.edge_j
-        if self.sensing.sampled:
-            has = self._has[live]
-        else:
+        has: NDArray[np.bool_] | None = self._has[live] if self.sensing.sampled else None
+        if has is None:
             has = self.in_range(x)
             if has is None:
                 return np.ones(live.size, dtype=bool)

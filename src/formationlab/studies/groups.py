@@ -111,7 +111,7 @@ def _sensed(
     point: dict[str, float], sensing: Sensing | None, faults: Faults | None
 ) -> tuple[Sensing | None, Faults | None]:
     """The point's sensing and faults: the scenario's with the swept keys changed."""
-    given = {k: v for k, v in point.items() if k in SENSING_KEYS}
+    given: dict[str, Any] = {k: v for k, v in point.items() if k in SENSING_KEYS}
     if given:
         sensing = dataclasses.replace(sensing or Sensing(), **given)
     if "stop_at" in point:

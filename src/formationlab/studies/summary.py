@@ -133,7 +133,9 @@ def summarize_groups(
     return out
 
 
-def _steady(rows: pd.DataFrame | None) -> tuple[dict[str, float] | None, dict[str, float] | None]:
+def _steady(
+    rows: pd.DataFrame | None,
+) -> tuple[dict[str, float] | None, dict[str, float | None] | None]:
     """Steady-state shape error and drift of the trials that did not collide."""
     if rows is None or "max_distance_error" not in rows:
         return None, None
