@@ -38,6 +38,16 @@ def invoke(*args: object) -> Result:
     return runner.invoke(app, [str(a) for a in args], catch_exceptions=False)
 
 
+def _default_sigint() -> None:
+    """In the child before it runs: SIGINT as a shell leaves it (default, not blocked).
+
+    A child inherits an ignored or blocked SIGINT from its parent, and the test runner's
+    worker processes need not have the disposition a user's shell gives a program.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 def start(args: list[str], *, group: bool) -> subprocess.Popen[str]:
     return subprocess.Popen(
         [*CLI, *args],
@@ -45,6 +55,7 @@ def start(args: list[str], *, group: bool) -> subprocess.Popen[str]:
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=group,  # its own process group, to signal it as a terminal does
+        preexec_fn=_default_sigint,
     )
 
 
