@@ -3,7 +3,10 @@
 ``triangle(name, duration, extra)`` is the section-4 formation (robots, distances, the
 simulation-2 alpha table and the paper's gains) with explicit Euler at dt = 1e-3, the
 given ``duration`` (a number or a placeholder the test replaces) and ``extra`` tables.
+``clear_starts(n, batch, seed)`` draws random positions of ``n`` robots clear of contact.
 """
+
+import numpy as np
 
 TABLES = """\
 [robots]
@@ -28,3 +31,15 @@ dt = 1e-3
 def triangle(name: str, duration: str, extra: str = "") -> str:
     """Scenario text of the paper's triangle named ``name``."""
     return f'name = "{name}"\n{TABLES}duration = {duration}\n{extra}'
+
+
+def clear_starts(n: int, batch: int, seed: int) -> np.ndarray:
+    """``batch`` draws ``(batch, n, 2)`` of ``n`` robots in [-2, 2]^2, at least 0.3 m apart."""
+    rng = np.random.default_rng(seed)
+    out = []
+    while len(out) < batch:
+        q = rng.uniform(-2, 2, (n, 2))
+        r = np.linalg.norm(q[:, None] - q[None], axis=-1) + np.eye(n) * 9
+        if r.min() > 0.3:
+            out.append(q)
+    return np.array(out)

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _scenarios import clear_starts
 
 import formationlab as fl
 from formationlab.controllers import LAWS
@@ -38,18 +39,6 @@ CASES = {
     "mismatch": (Sensing(mismatch=0.05), None),
     "stop": (None, Faults(stop=[Stop(robot=2, at=0.5)])),
 }
-
-
-def _starts(f: fl.Formation, batch: int, seed: int) -> np.ndarray:
-    """Uniform starts in [-2, 2]^2, robots at least 0.3 m apart."""
-    rng = np.random.default_rng(seed)
-    out = []
-    while len(out) < batch:
-        q = rng.uniform(-2, 2, (f.n, 2))
-        r = np.linalg.norm(q[:, None] - q[None], axis=-1) + np.eye(f.n) * 9
-        if r.min() > 0.3:
-            out.append(q)
-    return np.array(out)
 
 
 def _both(f, law, q0, duration, sensing, faults, seeds):
@@ -77,7 +66,7 @@ def test_the_kernel_is_the_driver_trial_by_trial(
 ) -> None:
     sensing, faults = CASES[case]
     law = fl.get_law(name)
-    q0 = _starts(formation, 6, 1)
+    q0 = clear_starts(formation.n, 6, 1)
     seeds = [(5, t) for t in range(len(q0))]
     fast, reference = _both(formation, law, q0, 3.0, sensing, faults, seeds)
     _same(fast, reference)
@@ -93,7 +82,7 @@ def test_everything_at_once_over_several_blocks() -> None:
     """Frames, noise, range, delay, losses, mismatch and a stop, for more than BLOCK steps."""
     s = Sensing(frames="local", noise=0.01, range=2.5, delay=0.03, drop=0.3, mismatch=0.02)
     faults = Faults(stop=[Stop(robot=3, at=1.0)])
-    q0 = _starts(SQUARE, 5, 2)
+    q0 = clear_starts(SQUARE.n, 5, 2)
     seeds = [(9, t) for t in range(5)]
     duration = 3 * BLOCK * DT
     fast, reference = _both(SQUARE, fl.AngleRestrictedLaw(), q0, duration, s, faults, seeds)
@@ -103,7 +92,7 @@ def test_everything_at_once_over_several_blocks() -> None:
 
 def test_a_trial_is_the_same_alone_and_in_a_batch() -> None:
     s = Sensing(frames="local", noise=0.02, drop=0.3, mismatch=0.03, delay=0.02)
-    q0 = _starts(TRIANGLE, 7, 3)
+    q0 = clear_starts(TRIANGLE.n, 7, 3)
     seeds = [(4, t) for t in range(7)]
     law = fl.DistanceLaw()
     whole = run_batch(TRIANGLE, law, q0, dt=DT, duration=6.0, sensing=s, seeds=seeds)

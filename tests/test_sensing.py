@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _scenarios import triangle
+from _scenarios import clear_starts, triangle
 from typer.testing import CliRunner
 
 import formationlab as fl
@@ -41,18 +41,6 @@ SQUARE = parse_scenario(
 Q0 = np.array([[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]])
 
 
-def _states(f: fl.Formation, batch: int, seed: int) -> np.ndarray:
-    """Random states clear of contact (the laws' domain)."""
-    rng = np.random.default_rng(seed)
-    out = []
-    while len(out) < batch:
-        q = rng.uniform(-2, 2, (f.n, 2))
-        r = np.linalg.norm(q[:, None] - q[None], axis=-1) + np.eye(f.n) * 9
-        if r.min() > 0.3:
-            out.append(q)
-    return np.array(out)
-
-
 # ----------------------------------------------------------------------------- local frames
 
 
@@ -60,7 +48,7 @@ def _states(f: fl.Formation, batch: int, seed: int) -> np.ndarray:
 @pytest.mark.parametrize("formation", [TRIANGLE, SQUARE], ids=["triangle", "square"])
 def test_local_frames_equal_the_centralized_law(name: str, formation: fl.Formation) -> None:
     law = fl.get_law(name)
-    q = _states(formation, 20, 1)
+    q = clear_starts(formation.n, 20, 1)
     u = law.control(formation, q)
     angles = np.random.default_rng(2).uniform(-np.pi, np.pi, (20, formation.n))
     u_local = local_controls(law.compiled_terms(formation), measured(q, angles))
@@ -78,7 +66,7 @@ def test_local_frames_equal_the_centralized_law(name: str, formation: fl.Formati
 )
 def test_local_frames_in_the_closed_loop_of_every_model(name: str, model: object) -> None:
     law = fl.get_law(name)
-    q = _states(TRIANGLE, 5, 3)
+    q = clear_starts(TRIANGLE.n, 5, 3)
     x = model.initial_state(q, **({"headings": np.linspace(0, 3, 3)} if model.has_heading else {}))  # type: ignore[attr-defined]
     central = System(formation=TRIANGLE, law=law, model=model)  # type: ignore[arg-type]
     local = dataclasses.replace(central, sensing=Sensing(frames="local", seed=5))
@@ -107,7 +95,7 @@ def test_a_reflected_frame_breaks_the_angular_term_not_the_distance_term() -> No
     term, built of lengths and radial directions, is unchanged.
     """
     f = TRIANGLE
-    q = _states(f, 10, 7)
+    q = clear_starts(f.n, 10, 7)
     reflect = np.array([[1.0, 0.0], [0.0, -1.0]])
     for name, same in (("distance", True), ("angle-restricted", False)):
         law = fl.get_law(name, theta=2.0) if name == "angle-restricted" else fl.get_law(name)
@@ -129,7 +117,7 @@ def test_the_papers_sensing_changes_nothing() -> None:
     plain = fl.simulate(TRIANGLE, law, Q0, duration=3.0)
     ideal = fl.simulate(TRIANGLE, law, Q0, duration=3.0, sensing=Sensing(), faults=Faults())
     np.testing.assert_array_equal(ideal.x, plain.x)
-    q0 = _states(TRIANGLE, 6, 4) * 2
+    q0 = clear_starts(TRIANGLE.n, 6, 4) * 2
     a = run_batch(TRIANGLE, law, q0, dt=1e-2, duration=5.0)
     b = run_batch(TRIANGLE, law, q0, dt=1e-2, duration=5.0, sensing=Sensing(), faults=Faults())
     np.testing.assert_array_equal(a.q_final, b.q_final)
@@ -221,7 +209,7 @@ def test_each_robot_holds_its_own_desired_distances() -> None:
     assert own.shape == (3, 2) and np.all(own[:, 0] != own[:, 1])
     assert np.all(np.abs(own - d[:, None]) <= 0.5 * (d[:, None] - a))
     # robot i's command is the law's with robot i's own distances
-    q = _states(TRIANGLE, 1, 5)[0]
+    q = clear_starts(TRIANGLE.n, 1, 5)[0]
     u = system.rhs(q)
     for robot in range(3):
         mine = np.array(
@@ -250,7 +238,7 @@ def test_a_seed_fixes_a_noisy_run_and_another_seed_changes_it() -> None:
 def test_a_trial_is_the_same_alone_and_in_any_batch() -> None:
     law = fl.DistanceLaw()
     s = Sensing(noise=0.02, drop=0.3, mismatch=0.03)
-    q0 = _states(TRIANGLE, 5, 8) * 2
+    q0 = clear_starts(TRIANGLE.n, 5, 8) * 2
     seeds = [(7, t) for t in range(5)]
     whole = run_batch(TRIANGLE, law, q0, dt=1e-2, duration=4.0, sensing=s, seeds=seeds)
     for t in (0, 3):

@@ -37,7 +37,8 @@ channel); sensed batches of other robot models run on the numpy driver path.
 from __future__ import annotations
 
 import threading
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any, Literal
 
 import numpy as np
@@ -281,19 +282,29 @@ def _run_numba(
     qw = np.full((n_trials, n, 2), np.nan)
     window_step = n_steps - tol.drift_steps(dt)  # negative: never reached
     chunk = _chunk_size(n_trials, numba.get_num_threads())
+    with _one_chunk_at_a_time():
+        kernels.run_chunks(
+            q0, chunk, terms, robots, dt, n_steps, check_every, tol.speed,
+            q_out, u_out, steps, status, mc, ns, window_step, qw,
+        )  # fmt: skip
+    return q_out, u_out, status, steps, mc, ns, qw, window_step
+
+
+@contextmanager
+def _one_chunk_at_a_time() -> Iterator[None]:
+    """Hold the kernel lock and let numba hand the parallel chunks out one at a time.
+
+    Chunks (and sensed trials) stop early by different amounts, and a busy machine may
+    slow one thread down; numba's setting is per thread and is restored on the way out.
+    """
+    import numba
+
     with _KERNEL_LOCK:
-        # hand the chunks out one at a time (numba's setting is per thread, restored
-        # below): chunks stop early by different amounts, and a busy machine may slow
-        # one thread down
         previous = numba.set_parallel_chunksize(1)
         try:
-            kernels.run_chunks(
-                q0, chunk, terms, robots, dt, n_steps, check_every, tol.speed,
-                q_out, u_out, steps, status, mc, ns, window_step, qw,
-            )  # fmt: skip
+            yield
         finally:
             numba.set_parallel_chunksize(previous)
-    return q_out, u_out, status, steps, mc, ns, qw, window_step
 
 
 def _run_sensed(
@@ -309,21 +320,14 @@ def _run_sensed(
     faults: Faults | None,
     seeds: Sequence[Seed] | None,
 ) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, int]:
-    import numba
-
     from .sensed_kernel import run_sensed
 
     assert isinstance(model, SingleIntegrator)
     System(formation=formation, law=law, model=model, sensing=sensing, faults=faults)  # checks
-    with _KERNEL_LOCK:
-        previous = numba.set_parallel_chunksize(1)  # trials stop early by different amounts
-        try:
-            return run_sensed(
-                formation, law, model, q0, dt, n_steps, check_every, tol, sensing, faults,
-                seeds,
-            )  # fmt: skip
-        finally:
-            numba.set_parallel_chunksize(previous)
+    with _one_chunk_at_a_time():
+        return run_sensed(
+            formation, law, model, q0, dt, n_steps, check_every, tol, sensing, faults, seeds
+        )
 
 
 def _chunk_size(n_trials: int, threads: int) -> int:
