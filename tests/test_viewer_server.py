@@ -33,6 +33,21 @@ def _until(ws, kind, limit=5000):
     pytest.fail(f"no {kind!r} among {len(seen)} messages: {seen[-5:]}")
 
 
+def _hello_answered(ws, within=60.0):
+    """Send hello every half second until an info reply comes (bounded by ``within`` s)."""
+    deadline = time.monotonic() + within
+    while time.monotonic() < deadline:
+        ws.send(json.dumps({"type": "hello"}))
+        try:
+            while True:
+                msg, _ = _recv(ws, timeout=0.5)
+                if msg["type"] == "info":
+                    return msg
+        except TimeoutError:
+            continue
+    pytest.fail(f"no info reply to hello within {within:g} s after the flood")
+
+
 def _answers(srv):
     """A new connection gets info and a frame: the server is up and answering."""
     with connect(srv.ws_url, max_size=None) as ws:
@@ -105,9 +120,10 @@ def test_a_flood_is_rate_limited_and_the_server_keeps_answering(srv):
         ws.send(json.dumps({"type": "step", "count": 7}))
         msg, _ = _until(ws, "error")
         assert msg["code"] == "rate-limited" and "dropped" in msg["message"]
-        time.sleep(0.2)  # the bucket refills at 200 messages per second
-        ws.send(json.dumps({"type": "hello"}))  # after the flood: still answering on this one
-        assert _until(ws, "info")[0]["n"] == 3
+        # After the flood: still answering on this connection. The server may still be
+        # working through the backlog (on a loaded machine), and a hello that arrives while
+        # the bucket is empty is dropped like any other message, so ask again until answered.
+        assert _hello_answered(ws)["n"] == 3
     assert _answers(srv)
     assert np.all(np.isfinite(srv.controller.session.q))
 
