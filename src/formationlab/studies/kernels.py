@@ -83,12 +83,15 @@ def _swept(q, qp, i, j, b, a):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _controls(q, qp, disp, u, gap, swept, sigma, nact, terms):
+def _controls(q, qp, disp, u, gap, swept, sigma, nact, terms, clearances):
     """``u = f(q)`` for the first ``nact`` trials of a chunk.
 
-    ``gap``: least ``r_ij - a_ij`` at ``q``; ``swept``: least clearance along the
-    straight step from ``qp`` to ``q`` (pairs within ``_SWEPT_MARGIN disp`` only;
-    ``disp`` is each trial's largest displacement, 0 before the first step).
+    With ``clearances``: ``gap``, least ``r_ij - a_ij`` at ``q``; ``swept``, least
+    clearance along the straight step from ``qp`` to ``q`` (pairs within
+    ``_SWEPT_MARGIN disp`` only; ``disp`` is each trial's largest displacement, 0
+    before the first step). Without (the law acts on hand points; :func:`_contact`
+    decides contact on the centres), neither is touched, and the pair loops, plain
+    arithmetic then, are vectorised.
     """
     t = terms
     n = q.shape[0]
@@ -96,9 +99,10 @@ def _controls(q, qp, disp, u, gap, swept, sigma, nact, terms):
         for b in range(nact):
             u[i, 0, b] = 0.0
             u[i, 1, b] = 0.0
-    for b in range(nact):
-        gap[b] = np.inf
-        swept[b] = np.inf
+    if clearances:
+        for b in range(nact):
+            gap[b] = np.inf
+            swept[b] = np.inf
     s0 = t.repulsion_influence
     rep = -t.repulsion_gain * t.repulsion_eta / s0
     # (arrays are indexed directly, without views: a view costs reference counting; one
@@ -114,9 +118,10 @@ def _controls(q, qp, disp, u, gap, swept, sigma, nact, terms):
                 dy = q[j, 1, b] - q[i, 1, b]
                 r = math.sqrt(dx * dx + dy * dy)
                 clr = r - a
-                gap[b] = min(gap[b], clr)
-                if clr <= _SWEPT_MARGIN * disp[b]:
-                    swept[b] = min(swept[b], _swept(q, qp, i, j, b, a))
+                if clearances:
+                    gap[b] = min(gap[b], clr)
+                    if clr <= _SWEPT_MARGIN * disp[b]:
+                        swept[b] = min(swept[b], _swept(q, qp, i, j, b, a))
                 g = t.edge_gain * (clr * inv_da - 1.0) / (clr * r)  # k_c phi'(r) / r, eqs. (7), (8)
                 u[i, 0, b] += g * dx
                 u[i, 1, b] += g * dy
@@ -129,9 +134,10 @@ def _controls(q, qp, disp, u, gap, swept, sigma, nact, terms):
                 dy = q[j, 1, b] - q[i, 1, b]
                 r2 = dx * dx + dy * dy
                 clr = math.sqrt(r2) - a
-                gap[b] = min(gap[b], clr)
-                if clr <= _SWEPT_MARGIN * disp[b]:
-                    swept[b] = min(swept[b], _swept(q, qp, i, j, b, a))
+                if clearances:
+                    gap[b] = min(gap[b], clr)
+                    if clr <= _SWEPT_MARGIN * disp[b]:
+                        swept[b] = min(swept[b], _swept(q, qp, i, j, b, a))
                 g = t.edge_gain * (r2 - d2)  # Krick et al. 2009
                 u[i, 0, b] += g * dx
                 u[i, 1, b] += g * dy
@@ -143,9 +149,10 @@ def _controls(q, qp, disp, u, gap, swept, sigma, nact, terms):
                 dy = q[j, 1, b] - q[i, 1, b]
                 r = math.sqrt(dx * dx + dy * dy)
                 clr = r - a
-                gap[b] = min(gap[b], clr)
-                if clr <= _SWEPT_MARGIN * disp[b]:
-                    swept[b] = min(swept[b], _swept(q, qp, i, j, b, a))
+                if clearances:
+                    gap[b] = min(gap[b], clr)
+                    if clr <= _SWEPT_MARGIN * disp[b]:
+                        swept[b] = min(swept[b], _swept(q, qp, i, j, b, a))
                 # k_r gamma'(s) / r with gamma'(s) = -eta (1/s - 1/s0) / s^2 (Khatib)
                 g = rep * (s0 - clr) / (clr * clr * clr * r) if clr < s0 else 0.0
                 u[i, 0, b] += g * dx
@@ -194,11 +201,18 @@ def _controls(q, qp, disp, u, gap, swept, sigma, nact, terms):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _contact(x, xp, disp, gap, swept, nact, terms):
-    """``gap`` and ``swept`` of the centres ``x`` (``_controls`` computed them at the points)."""
+def _contact(x, xp, disp, gap, swept, near, nact, terms):
+    """``gap`` and ``swept`` of the centres ``x`` (the law acts on other points).
+
+    The clearances :func:`_controls` computes, at the centres, in two passes: every
+    trial's least clearance, flagging in ``near`` the trials with a pair within
+    ``_SWEPT_MARGIN disp`` (plain arithmetic, vectorised); then the swept test of those
+    pairs of the flagged trials (rare: a pair about to touch).
+    """
     for b in range(nact):
         gap[b] = np.inf
         swept[b] = np.inf
+        near[b] = 0.0
     for p in range(terms.pair_i.shape[0]):
         i = terms.pair_i[p]
         j = terms.pair_j[p]
@@ -208,7 +222,17 @@ def _contact(x, xp, disp, gap, swept, nact, terms):
             dy = x[j, 1, b] - x[i, 1, b]
             clr = math.sqrt(dx * dx + dy * dy) - a
             gap[b] = min(gap[b], clr)
-            if clr <= _SWEPT_MARGIN * disp[b]:
+            near[b] = 1.0 if clr <= _SWEPT_MARGIN * disp[b] else near[b]
+    for b in range(nact):
+        if near[b] == 0.0:
+            continue
+        for p in range(terms.pair_i.shape[0]):
+            i = terms.pair_i[p]
+            j = terms.pair_j[p]
+            a = terms.pair_contact[p]
+            dx = x[j, 0, b] - x[i, 0, b]
+            dy = x[j, 1, b] - x[i, 1, b]
+            if math.sqrt(dx * dx + dy * dy) - a <= _SWEPT_MARGIN * disp[b]:
                 swept[b] = min(swept[b], _swept(x, xp, i, j, b, a))
 
 
@@ -256,6 +280,7 @@ def _rates(x, h, u, f, nact, model):
     n = x.shape[0]
     vmax = model.max_speed
     wmax = model.max_turn_rate
+    limited = vmax < np.inf or wmax < np.inf  # no limit: no scaling (limit_unicycle)
     if model.kind == SINGLE:
         for i in range(n):
             for b in range(nact):
@@ -293,7 +318,9 @@ def _rates(x, h, u, f, nact, model):
                 sn = h[i, 1, b]
                 along = c * u[i, 0, b] + sn * u[i, 1, b]
                 across = -sn * u[i, 0, b] + c * u[i, 1, b]
-                v, w = _limit_unicycle(along, across / ell, vmax, wmax)
+                v, w = along, across / ell
+                if limited:
+                    v, w = _limit_unicycle(v, w, vmax, wmax)
                 f[i, 0, b] = v * c
                 f[i, 1, b] = v * sn
                 f[i, 2, b] = w
@@ -313,7 +340,9 @@ def _rates(x, h, u, f, nact, model):
                         turn = math.atan(across / along)
                 else:
                     turn = math.atan2(across, along)
-                v, w = _limit_unicycle(kv * along, kw * turn / (math.pi / 2), vmax, wmax)
+                v, w = kv * along, kw * turn / (math.pi / 2)
+                if limited:
+                    v, w = _limit_unicycle(v, w, vmax, wmax)
                 f[i, 0, b] = v * c
                 f[i, 1, b] = v * sn
                 f[i, 2, b] = w
@@ -357,6 +386,7 @@ def _run_chunk(
     mc = np.full(m, np.inf)  # least clearance over accepted states
     gap = np.empty(m)  # clearance of the current state
     swept = np.empty(m)  # least clearance along the step to the current state
+    near = np.empty(m if hand else 1)  # 1: a pair of centres may have met during the step
     disp = np.zeros(m)  # largest displacement of the step to the current state
     sigma = np.empty(m)  # switching function of one surface
     fin = np.zeros(m)  # 0 while the last Euler step was finite
@@ -377,10 +407,10 @@ def _run_chunk(
             _headings(x, h, nact)
         if hand:
             _points(x, h, p, nact, model)
-            _controls(p, p, disp, u, gap, swept, sigma, nact, terms)
-            _contact(x, xp, disp, gap, swept, nact, terms)
+            _controls(p, p, disp, u, gap, swept, sigma, nact, terms, False)
+            _contact(x, xp, disp, gap, swept, near, nact, terms)
         else:
-            _controls(x, xp, disp, u, gap, swept, sigma, nact, terms)
+            _controls(x, xp, disp, u, gap, swept, sigma, nact, terms, True)
         _rates(x, h, u, f, nact, model)
         stopping = 0
         if step > 0:  # reject the step that led here (System.step_verdict)
