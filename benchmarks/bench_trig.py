@@ -108,7 +108,7 @@ def certified(theta, cos_out, sin_out, ok):
     tab = TABLE  # a global constant: its loads alias no store, so the loop is vectorised
     for b in range(theta.shape[0]):
         x = theta[b]
-        k = math.floor(x * TWO_OVER_PI + 0.5)
+        k = np.floor(x * TWO_OVER_PI + 0.5)
         a = x - k * P1  # exact
         kb = k * P2  # exact
         s0 = a - kb  # two_sum: s0 + e0 = a - kb
@@ -117,9 +117,9 @@ def certified(theta, cos_out, sin_out, ok):
         lo = e0 - k * P3
         rh = s0 + lo  # r = rh + rl = x - k pi / 2
         rl = lo - (rh - s0)
-        jf = math.floor(rh * N + 0.5)
+        jf = np.floor(rh * N + 0.5)
         t = rh - jf * (1.0 / N)  # exact
-        row = np.int64(jf) + JMAX
+        row = int(jf) + JMAX
         sh, sl, ch, cl = tab[row, 0], tab[row, 1], tab[row, 2], tab[row, 3]
         t2 = t * t
         st = rl + t * t2 * (-1.0 / 6.0 + t2 * (1.0 / 120.0))  # sin(t + rl) - t
@@ -139,7 +139,7 @@ def certified(theta, cos_out, sin_out, ok):
         cr = v + lo_c
         cr_lo = lo_c - (cr - v)
         # quadrant q: (sin, cos) = (s, c), (c, -s), (-s, -c), (-c, s) of r
-        q = k - 4.0 * math.floor(k * 0.25)
+        q = k - 4.0 * np.floor(k * 0.25)
         odd = (q == 1.0) | (q == 3.0)
         sv, sv_lo = (cr, cr_lo) if odd else (sr, sr_lo)
         cv, cv_lo = (sr, sr_lo) if odd else (cr, cr_lo)
@@ -151,12 +151,20 @@ def certified(theta, cos_out, sin_out, ok):
 
 
 @njit(cache=False, fastmath=False, error_model="numpy")
-def library_rest(theta, cos_out, sin_out, ok):
-    """The library's values where ``certified`` could not decide."""
+def library_rest(theta, cos_out, sin_out, ok, rest):
+    """The library's values where ``certified`` could not decide.
+
+    The arguments are listed first: with the calls under a condition in one loop the
+    compiler may call for every argument and select (the calls have no side effects).
+    """
+    m = 0
     for b in range(theta.shape[0]):
-        if ok[b] == 0.0:
-            cos_out[b] = math.cos(theta[b])
-            sin_out[b] = math.sin(theta[b])
+        rest[m] = b
+        m += ok[b] == 0.0
+    for r in range(m):
+        b = rest[r]
+        cos_out[b] = math.cos(theta[b])
+        sin_out[b] = math.sin(theta[b])
 
 
 @njit(cache=False, fastmath=False, error_model="numpy")
@@ -187,11 +195,12 @@ def main() -> None:
               f"{bad}; numpy equals math on {same:.1%}")  # fmt: skip
     theta = rng.uniform(-math.pi, math.pi, 768)  # a chunk of headings
     c, s, ok = np.empty_like(theta), np.empty_like(theta), np.empty_like(theta)
+    rest = np.empty(theta.size, dtype=np.int64)
     runs = {
         "vectorised part": lambda: certified(theta, c, s, ok),
         "whole (vectorised + library for the rest)": lambda: (
             certified(theta, c, s, ok),
-            library_rest(theta, c, s, ok),
+            library_rest(theta, c, s, ok, rest),
         ),
         "library sincos": lambda: library(theta, c, s),
     }
