@@ -10,13 +10,16 @@ import pytest
 import formationlab as fl
 from formationlab.errors import ParameterError
 from formationlab.models import DoubleIntegrator, RobotModel, SingleIntegrator, Unicycle
+from formationlab.status import Status
 from formationlab.studies.batch import run_batch
+from formationlab.studies.config import BoxInitial
 from formationlab.studies.sampling import model_initial_states, trial_initial_states
 
 TRIANGLE = fl.Formation.from_alpha_table(
     [[1, 2, 3, 1.0], [3, 1, 2, 1.0], [2, 1, 3, -1.0]], n=3, distances=1.0, diameters=0.2
 )
 SQUARE = fl.Formation.from_template([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+IDX = np.arange(60)
 
 
 MODELS = [
@@ -74,6 +77,34 @@ def test_the_kernel_equals_the_driver_trial_by_trial(model, law, shape):
     np.testing.assert_allclose(a.net_speed[smooth], b.net_speed[smooth], rtol=0, atol=10 * ulp)
     assert a.x_final.shape[-1] == model.state_size()
     assert np.abs(a.x_final[..., :2] - x0[..., :2]).max() > 0.1  # the trials moved
+
+
+@pytest.mark.parametrize(
+    ("model", "ends"),
+    [
+        (Unicycle(offset=0.05), {Status.COLLISION, Status.STEP_TOO_LARGE}),
+        (Unicycle(mapping="heading"), {Status.COLLISION}),
+    ],
+    ids=["near-identity", "heading"],
+)
+def test_contact_of_unicycles_in_the_kernel_is_the_drivers(model, ends):
+    # large steps of a stiff law: trials end in contact at the end of a step and in
+    # contact along a step; near-identity unicycles decide both on the centres while the
+    # law acts on the hand points (kernels._contact), the heading transform on the centres
+    f = fl.Formation.from_template([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], diameters=0.2)
+    law = fl.get_law("squared-distance", k=2.0)
+    q0 = trial_initial_states(f, BoxInitial(half_width=1.0), 5, IDX)
+    x0 = model_initial_states(f, model, q0, 5, IDX)
+    a, b = (
+        run_batch(f, law, x0, dt=0.05, duration=4.0, backend=backend, model=model)
+        for backend in ("numba", "numpy")
+    )
+    np.testing.assert_array_equal(a.status, b.status)
+    np.testing.assert_array_equal(a.steps, b.steps)
+    ended = {Status.from_code(int(c)) for c in a.status}
+    assert ends <= ended
+    np.testing.assert_allclose(a.x_final, b.x_final, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a.min_clearance, b.min_clearance, rtol=0, atol=1e-9)
 
 
 def test_a_batch_trial_is_the_simulated_run():

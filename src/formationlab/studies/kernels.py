@@ -24,9 +24,10 @@ each with its limits): :func:`_points` gives the points the law acts on,
 :func:`_speed` the stop rule's speed (``RobotModel.speed``). A unicycle's
 ``cos theta`` and ``sin theta`` are evaluated once per robot and step
 (:func:`_headings`) and read by the other two, whose loops then call no library function
-(the heading transform's ``atan2`` remains): a library call keeps a loop from being
-vectorised. Contact is decided on the centres: for near-identity unicycles, whose law
-acts on hand points, :func:`_contact` recomputes the clearances on the centres.
+(the heading transform's ``atan2`` remains): a library call, or a branch that calls,
+keeps a loop from being vectorised. So the law's loops (:func:`_controls`) compute the
+control only, and contact is decided apart, on the centres, for every model
+(:func:`_contact`; near-identity unicycles' law acts on the hand points).
 
 The step rule is the one of :meth:`formationlab.dynamics.System.step_verdict`:
 a step is rejected when it is not finite, when it ends with a pair in contact
@@ -34,6 +35,11 @@ a step is rejected when it is not finite, when it ends with a pair in contact
 contact (``Status.STEP_TOO_LARGE``). The swept test is computed only for pairs
 whose end clearance is below twice the largest displacement of the step
 (farther pairs cannot have met during it).
+
+What a trial-step costs, per model: ``benchmarks/bench_models.py`` and
+docs/robot-models.md. The unicycle's floor is the C library's ``sincos`` (and the
+heading transform's ``atan2``) per robot and step: vectorised versions equal to it bit
+for bit are not to be had here (``benchmarks/bench_trig.py``).
 """
 
 from __future__ import annotations
@@ -83,12 +89,11 @@ def _swept(q, qp, i, j, b, a):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _controls(q, qp, disp, u, gap, swept, sigma, nact, terms):
+def _controls(q, u, sigma, nact, terms):
     """``u = f(q)`` for the first ``nact`` trials of a chunk.
 
-    ``gap``: least ``r_ij - a_ij`` at ``q``; ``swept``: least clearance along the
-    straight step from ``qp`` to ``q`` (pairs within ``_SWEPT_MARGIN disp`` only;
-    ``disp`` is each trial's largest displacement, 0 before the first step).
+    Plain arithmetic, no branch that calls: every loop over trials is vectorised
+    (:func:`_contact` decides contact, in loops of its own).
     """
     t = terms
     n = q.shape[0]
@@ -96,9 +101,6 @@ def _controls(q, qp, disp, u, gap, swept, sigma, nact, terms):
         for b in range(nact):
             u[i, 0, b] = 0.0
             u[i, 1, b] = 0.0
-    for b in range(nact):
-        gap[b] = np.inf
-        swept[b] = np.inf
     s0 = t.repulsion_influence
     rep = -t.repulsion_gain * t.repulsion_eta / s0
     # (arrays are indexed directly, without views: a view costs reference counting; one
@@ -114,9 +116,6 @@ def _controls(q, qp, disp, u, gap, swept, sigma, nact, terms):
                 dy = q[j, 1, b] - q[i, 1, b]
                 r = math.sqrt(dx * dx + dy * dy)
                 clr = r - a
-                gap[b] = min(gap[b], clr)
-                if clr <= _SWEPT_MARGIN * disp[b]:
-                    swept[b] = min(swept[b], _swept(q, qp, i, j, b, a))
                 g = t.edge_gain * (clr * inv_da - 1.0) / (clr * r)  # k_c phi'(r) / r, eqs. (7), (8)
                 u[i, 0, b] += g * dx
                 u[i, 1, b] += g * dy
@@ -128,10 +127,6 @@ def _controls(q, qp, disp, u, gap, swept, sigma, nact, terms):
                 dx = q[j, 0, b] - q[i, 0, b]
                 dy = q[j, 1, b] - q[i, 1, b]
                 r2 = dx * dx + dy * dy
-                clr = math.sqrt(r2) - a
-                gap[b] = min(gap[b], clr)
-                if clr <= _SWEPT_MARGIN * disp[b]:
-                    swept[b] = min(swept[b], _swept(q, qp, i, j, b, a))
                 g = t.edge_gain * (r2 - d2)  # Krick et al. 2009
                 u[i, 0, b] += g * dx
                 u[i, 1, b] += g * dy
@@ -143,9 +138,6 @@ def _controls(q, qp, disp, u, gap, swept, sigma, nact, terms):
                 dy = q[j, 1, b] - q[i, 1, b]
                 r = math.sqrt(dx * dx + dy * dy)
                 clr = r - a
-                gap[b] = min(gap[b], clr)
-                if clr <= _SWEPT_MARGIN * disp[b]:
-                    swept[b] = min(swept[b], _swept(q, qp, i, j, b, a))
                 # k_r gamma'(s) / r with gamma'(s) = -eta (1/s - 1/s0) / s^2 (Khatib)
                 g = rep * (s0 - clr) / (clr * clr * clr * r) if clr < s0 else 0.0
                 u[i, 0, b] += g * dx
@@ -194,11 +186,21 @@ def _controls(q, qp, disp, u, gap, swept, sigma, nact, terms):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _contact(x, xp, disp, gap, swept, nact, terms):
-    """``gap`` and ``swept`` of the centres ``x`` (``_controls`` computed them at the points)."""
+def _contact(x, xp, disp, gap, swept, near, nact, terms):
+    """Clearances of the centres ``x`` for the step rule (``System.step_verdict``).
+
+    ``gap``: least ``r_ij - a_ij`` at ``x``; ``swept``: least clearance along the
+    straight step from ``xp`` to ``x`` of the pairs within ``_SWEPT_MARGIN disp``
+    (``disp`` is each trial's largest displacement, 0 before the first step). Two
+    passes: every trial's least clearance, flagging in ``near`` the trials with such a
+    pair (plain arithmetic, vectorised); then the swept test of those pairs of the
+    flagged trials (rare: a pair about to touch). A call in the first loop would keep
+    it, and the law's loops if they held it, from being vectorised.
+    """
     for b in range(nact):
         gap[b] = np.inf
         swept[b] = np.inf
+        near[b] = 0.0
     for p in range(terms.pair_i.shape[0]):
         i = terms.pair_i[p]
         j = terms.pair_j[p]
@@ -208,7 +210,17 @@ def _contact(x, xp, disp, gap, swept, nact, terms):
             dy = x[j, 1, b] - x[i, 1, b]
             clr = math.sqrt(dx * dx + dy * dy) - a
             gap[b] = min(gap[b], clr)
-            if clr <= _SWEPT_MARGIN * disp[b]:
+            near[b] = 1.0 if clr <= _SWEPT_MARGIN * disp[b] else near[b]
+    for b in range(nact):
+        if near[b] == 0.0:
+            continue
+        for p in range(terms.pair_i.shape[0]):
+            i = terms.pair_i[p]
+            j = terms.pair_j[p]
+            a = terms.pair_contact[p]
+            dx = x[j, 0, b] - x[i, 0, b]
+            dy = x[j, 1, b] - x[i, 1, b]
+            if math.sqrt(dx * dx + dy * dy) - a <= _SWEPT_MARGIN * disp[b]:
                 swept[b] = min(swept[b], _swept(x, xp, i, j, b, a))
 
 
@@ -256,6 +268,7 @@ def _rates(x, h, u, f, nact, model):
     n = x.shape[0]
     vmax = model.max_speed
     wmax = model.max_turn_rate
+    limited = vmax < np.inf or wmax < np.inf  # no limit: no scaling (limit_unicycle)
     if model.kind == SINGLE:
         for i in range(n):
             for b in range(nact):
@@ -293,7 +306,9 @@ def _rates(x, h, u, f, nact, model):
                 sn = h[i, 1, b]
                 along = c * u[i, 0, b] + sn * u[i, 1, b]
                 across = -sn * u[i, 0, b] + c * u[i, 1, b]
-                v, w = _limit_unicycle(along, across / ell, vmax, wmax)
+                v, w = along, across / ell
+                if limited:
+                    v, w = _limit_unicycle(v, w, vmax, wmax)
                 f[i, 0, b] = v * c
                 f[i, 1, b] = v * sn
                 f[i, 2, b] = w
@@ -313,7 +328,9 @@ def _rates(x, h, u, f, nact, model):
                         turn = math.atan(across / along)
                 else:
                     turn = math.atan2(across, along)
-                v, w = _limit_unicycle(kv * along, kw * turn / (math.pi / 2), vmax, wmax)
+                v, w = kv * along, kw * turn / (math.pi / 2)
+                if limited:
+                    v, w = _limit_unicycle(v, w, vmax, wmax)
                 f[i, 0, b] = v * c
                 f[i, 1, b] = v * sn
                 f[i, 2, b] = w
@@ -357,6 +374,7 @@ def _run_chunk(
     mc = np.full(m, np.inf)  # least clearance over accepted states
     gap = np.empty(m)  # clearance of the current state
     swept = np.empty(m)  # least clearance along the step to the current state
+    near = np.empty(m)  # 1: a pair may have met during the step to the current state
     disp = np.zeros(m)  # largest displacement of the step to the current state
     sigma = np.empty(m)  # switching function of one surface
     fin = np.zeros(m)  # 0 while the last Euler step was finite
@@ -377,10 +395,10 @@ def _run_chunk(
             _headings(x, h, nact)
         if hand:
             _points(x, h, p, nact, model)
-            _controls(p, p, disp, u, gap, swept, sigma, nact, terms)
-            _contact(x, xp, disp, gap, swept, nact, terms)
+            _controls(p, u, sigma, nact, terms)
         else:
-            _controls(x, xp, disp, u, gap, swept, sigma, nact, terms)
+            _controls(x, u, sigma, nact, terms)
+        _contact(x, xp, disp, gap, swept, near, nact, terms)
         _rates(x, h, u, f, nact, model)
         stopping = 0
         if step > 0:  # reject the step that led here (System.step_verdict)
