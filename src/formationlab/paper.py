@@ -228,9 +228,18 @@ def exchanged_pairs(q: NDArray[np.float64]) -> list[str]:
 def _polylines_cross(
     p: NDArray[np.float64], r: NDArray[np.float64], max_points: int = 1500
 ) -> bool:
+    """Whether some segment of polyline ``p`` properly crosses one of ``r`` (both ``(T, 2)``,
+    thinned to at most ``max_points`` points).
+
+    Two segments cross only if their bounding boxes overlap, so the exact orientation test
+    runs on those pairs only (found by sorting the segments along x): the same answer as
+    testing all pairs, without the ``max_points^2`` arrays.
+    """
     step = max(1, len(p) // max_points)
     p, r = p[::step], r[::step]
-    a, b, c, d = p[:-1, None], p[1:, None], r[None, :-1], r[None, 1:]
+    a, b, c, d = p[:-1], p[1:], r[:-1], r[1:]
+    i, j = _overlapping_boxes(a, b, c, d)
+    a, b, c, d = a[i], b[i], c[j], d[j]
 
     def orient(x: NDArray, y: NDArray, z: NDArray) -> NDArray:
         return np.sign(
@@ -240,6 +249,18 @@ def _polylines_cross(
 
     hit = (orient(a, b, c) * orient(a, b, d) < 0) & (orient(c, d, a) * orient(c, d, b) < 0)
     return bool(np.any(hit))
+
+
+def _overlapping_boxes(
+    a: NDArray[np.float64], b: NDArray[np.float64], c: NDArray[np.float64], d: NDArray[np.float64]
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Pairs ``(i, j)`` of segments ``a_i b_i`` and ``c_j d_j`` whose bounding boxes overlap."""
+    lo1, hi1 = np.minimum(a, b), np.maximum(a, b)
+    lo2, hi2 = np.minimum(c, d), np.maximum(c, d)
+    box = (lo2[None, :, 0] <= hi1[:, None, 0]) & (hi2[None, :, 0] >= lo1[:, None, 0])
+    box &= (lo2[None, :, 1] <= hi1[:, None, 1]) & (hi2[None, :, 1] >= lo1[:, None, 1])
+    i, j = np.nonzero(box)
+    return i, j
 
 
 def reproduce(

@@ -33,6 +33,11 @@ The last four exist only for a run with obstacles or a safety filter; the global
 attribute ``obstacles`` then holds the obstacles (JSON of their scenario form) and
 ``safety`` the filter's parameters.
 
+Storage: every numeric variable is compressed (zlib level :data:`COMPRESSION` with the
+byte shuffle filter, lossless) in chunks of whole saved states of about
+:data:`CHUNK_BYTES` (``(k, robot, axis)`` for ``q``), so that a reader that wants some
+times (an animation's frames) reads and decompresses only those.
+
 Coordinates: ``time`` in seconds, ``robot`` = 1..n, ``axis`` = ``"x"``, ``"y"``,
 ``edge`` = labels ``"i-j"``, ``surface`` = labels ``"alpha_ijk"``. Global
 attributes: ``scenario`` (the scenario's TOML text), ``formationlab_version``,
@@ -52,10 +57,23 @@ import numpy as np
 
 from .files import atomic_path, to_jsonable
 
-__all__ = ["ENGINE", "load_trajectory", "trajectory_dataset", "write_trajectory"]
+__all__ = [
+    "CHUNK_BYTES",
+    "COMPRESSION",
+    "ENGINE",
+    "encoding",
+    "load_trajectory",
+    "open_trajectory",
+    "trajectory_dataset",
+    "write_trajectory",
+]
 
 #: The netCDF engine used for reading and writing.
 ENGINE = "h5netcdf"
+#: zlib level of the variables of ``trajectory.nc`` (1 fastest ... 9 smallest)
+COMPRESSION = 4
+#: target bytes of one chunk (HDF5 reads and decompresses whole chunks)
+CHUNK_BYTES = 1 << 20
 
 
 def trajectory_dataset(result: Any, *, attrs: dict[str, Any] | None = None) -> Any:
@@ -171,13 +189,45 @@ def write_trajectory(
     """
     ds = trajectory_dataset(result, attrs=attrs)
     with atomic_path(target, suffix=".nc") as tmp:
-        ds.to_netcdf(tmp, engine=ENGINE, invalid_netcdf=False)
+        ds.to_netcdf(tmp, engine=ENGINE, invalid_netcdf=False, encoding=encoding(ds))
     return Path(target)
+
+
+def encoding(ds: Any) -> dict[str, dict[str, Any]]:
+    """The storage of each numeric variable of ``ds``: compressed, chunked by saved states.
+
+    A chunk holds whole states ``(k, ...)`` of about :data:`CHUNK_BYTES`, at least one
+    (a state larger than that is split along its first axis after time).
+    """
+    out: dict[str, dict[str, Any]] = {}
+    for name, var in ds.variables.items():
+        shape = tuple(int(k) for k in var.shape)
+        if var.dtype.kind not in "fiub" or not shape or 0 in shape:
+            continue
+        chunks = list(shape)
+        size = var.dtype.itemsize
+        row = size * int(np.prod(shape[1:]))
+        if row <= CHUNK_BYTES:
+            chunks[0] = min(shape[0], max(1, CHUNK_BYTES // row))
+        else:
+            chunks[0] = 1
+            inner = size * int(np.prod(shape[2:]))
+            chunks[1] = min(shape[1], max(1, CHUNK_BYTES // inner))
+        out[str(name)] = {
+            "zlib": True, "complevel": COMPRESSION, "shuffle": True, "chunksizes": tuple(chunks),
+        }  # fmt: skip
+    return out
+
+
+def open_trajectory(path: str | os.PathLike[str]) -> Any:
+    """Open a ``trajectory.nc`` lazily: an ``xarray.Dataset`` whose variables are read when
+    indexed (close it when done, e.g. ``with open_trajectory(p) as ds: ds["q"][-1]``)."""
+    import xarray as xr
+
+    return xr.open_dataset(path, engine=ENGINE)
 
 
 def load_trajectory(path: str | os.PathLike[str]) -> Any:
     """Read a ``trajectory.nc`` into memory and close the file; returns an ``xarray.Dataset``."""
-    import xarray as xr
-
-    with xr.open_dataset(path, engine=ENGINE) as ds:
+    with open_trajectory(path) as ds:
         return ds.load()
