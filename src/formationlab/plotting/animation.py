@@ -212,6 +212,10 @@ def animate_run(
         return [graph.artist, constrained, *drawn, clock, *extra]
 
     draw(0)
+    # lay the figure out once (the limits are fixed), not at every frame: the constrained
+    # layout measures every tick label each time, about half the cost of a frame
+    fig.draw_without_rendering()
+    fig.set_layout_engine("none")
     return FuncAnimation(fig, draw, frames=len(frames), interval=1000 / fps, blit=False)
 
 

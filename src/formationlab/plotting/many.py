@@ -27,6 +27,8 @@ from matplotlib.axes import Axes
 from matplotlib.collections import EllipseCollection, LineCollection
 from numpy.typing import ArrayLike, NDArray
 
+from ..chunked import time_slices
+
 __all__ = [
     "BAND_TIMES",
     "COLLECTION_LIMIT",
@@ -129,20 +131,24 @@ def draw_discs(
 
 
 def quantile_bands(
-    t: ArrayLike, values: Callable[[NDArray[np.int64]], NDArray[np.float64]]
+    t: ArrayLike, values: Callable[[NDArray[np.int64]], NDArray[np.float64]], width: int
 ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-    """The :data:`QUANTILES` of ``values(rows)`` ``(len(rows), k)`` over its last axis.
+    """The :data:`QUANTILES` of ``values(rows)`` ``(len(rows), width)`` over its last axis.
 
-    Evaluated at most at :data:`BAND_TIMES` times evenly spaced in ``t`` (and in slices of
-    them, so that the values of all of them are never held at once). Returns the rows and
-    the quantiles ``(len(QUANTILES), len(rows))``.
+    Evaluated at most at :data:`BAND_TIMES` times evenly spaced in ``t``, in slices of
+    them whose values and scratch fit :data:`formationlab.chunked.BUDGET` (the values of
+    all of them are never held at once). Returns the rows and the quantiles
+    ``(len(QUANTILES), len(rows))``.
     """
     rows = even_indices(t, BAND_TIMES)
     out = np.empty((len(QUANTILES), len(rows)))
-    for a in range(0, len(rows), 64):
-        sel = rows[a : a + 64]
-        out[:, a : a + len(sel)] = np.percentile(values(sel), QUANTILES, axis=-1)
+    for part in time_slices(len(rows), _SCRATCH * max(width, 1)):
+        out[:, part] = np.percentile(values(rows[part]), QUANTILES, axis=-1)
     return rows, out
+
+
+#: scratch bytes per value of a band (the values, their differences and the sort's copy)
+_SCRATCH = 8 * 8
 
 
 def draw_bands(
@@ -150,13 +156,15 @@ def draw_bands(
     t: ArrayLike,
     values: Callable[[NDArray[np.int64]], NDArray[np.float64]],
     *,
+    width: int,
     of: str,
     color: Any = "C0",
 ) -> list[Any]:
-    """The range, the 10-90 % band and the median of ``values(rows)`` over ``of`` (robots,
-    edges) at each time (:func:`quantile_bands`); labelled for a legend of three entries."""
+    """The range, the 10-90 % band and the median of ``values(rows)`` (``width`` values per
+    time) over ``of`` (robots, edges) at each time (:func:`quantile_bands`); labelled for
+    a legend of three entries."""
     t = np.asarray(t, dtype=float)
-    rows, qs = quantile_bands(t, values)
+    rows, qs = quantile_bands(t, values, width)
     x = t[rows]
     return [
         ax.fill_between(x, qs[0], qs[4], color=color, alpha=0.2, lw=0, label=f"range over {of}"),

@@ -226,7 +226,7 @@ def plot_controls(
     artists = _shade_active(ax, result)
     if n > LINE_LIMIT:
         u = result.u
-        artists += draw_bands(ax, result.t, lambda rows: u[rows, :, axis], of="robots")
+        artists += draw_bands(ax, result.t, lambda rows: u[rows, :, axis], width=n, of="robots")
     else:
         for i in range(n):
             artists += ax.plot(
@@ -273,7 +273,12 @@ def plot_distance_errors(
     if m > LINE_LIMIT:
         f, p = result.formation, getattr(result, "points", result.q)
         artists += draw_bands(
-            ax, result.t, lambda rows: distance_errors(f, p[rows]), of="edges", color="C3"
+            ax,
+            result.t,
+            lambda rows: distance_errors(f, p[rows]),
+            width=m,
+            of="edges",
+            color="C3",
         )
     else:
         err = result.distance_errors
