@@ -10,7 +10,9 @@ Delaunay edges, start perturbed by 0.05, seed 1, distance law or ``--law angle-r
   table, drawing the figures), the process's peak resident memory, its memory after the
   imports, and the size of what is saved (the arrays of ``trajectory.nc`` before
   compression); "memory bounded by what is saved" reads as: peak minus the memory of the
-  setup grows with the saved size, not with N times the steps;
+  setup grows with the saved size (plus at most ``chunked.BUDGET`` of scratch and the
+  libraries the writing and the figures import), not with N times the steps; ``+sim`` and
+  ``+write`` are what simulating and writing added to the peak;
 * ``animate``: ``formationlab animate DIR --format gif --frames F`` on the run stored every
   step (51 states), wall time per frame and peak memory.
 
@@ -151,7 +153,8 @@ def main() -> None:
     print(f"law {args.law}; 50 steps of dt = 1e-3 stored every K steps")
     head = (f"{'N':>7} {'K':>2} {'saved':>6} {'edges':>7} {'load':>6} {'simulate':>8} "
             f"{'(loop)':>7} {'write':>6} {'figures':>7} {'saved MB':>8} {'nc MB':>6} "
-            f"{'setup MB':>8} {'peak MB':>7} {'peak-setup':>10}")  # fmt: skip
+            f"{'setup MB':>8} {'+sim MB':>7} {'+write MB':>9} {'peak MB':>7} "
+            f"{'peak-setup':>10}")  # fmt: skip
     print(head)
     orientation = "template" if args.law == "angle-restricted" else "free"
     sizes = [n for n in (100, 1_000, 10_000, 100_000) if n <= args.max]
@@ -166,7 +169,9 @@ def main() -> None:
                 print(f"{n:>7} {k:>2} {f['states']:>6.0f} {f['edges']:>7.0f} {f['load_s']:>6.2f} "
                       f"{f['simulate_s']:>8.2f} {f['loop_s']:>7.2f} {f['write_s']:>6.2f} "
                       f"{f['figures_s']:>7.2f} {f['saved_mb']:>8.1f} {f['nc_mb']:>6.1f} "
-                      f"{f['rss_setup_mb']:>8.0f} {f['rss_peak_mb']:>7.0f} "
+                      f"{f['rss_setup_mb']:>8.0f} "
+                      f"{f['rss_simulate_mb'] - f['rss_setup_mb']:>7.0f} "
+                      f"{f['rss_write_mb'] - f['rss_simulate_mb']:>9.0f} {f['rss_peak_mb']:>7.0f} "
                       f"{f['rss_peak_mb'] - f['rss_setup_mb']:>10.0f}", flush=True)  # fmt: skip
                 runs[n] = out
         print("\nanimate (GIF), on the run stored every step:")

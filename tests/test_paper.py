@@ -150,3 +150,15 @@ def test_path_crossing_of_the_paper_runs_equals_all_pairs(reproduction):
             assert got == _crossing_reference(res.q[:, i], res.q[:, j])
             crossed += got
     assert crossed == 1  # robots 1 and 2 of simulation 2
+
+
+def test_the_diameter_scan_in_batches_equals_single_runs():
+    """The study kernel, one batch per formation, against a 10 s single run per row."""
+    from formationlab.paper import diameter_scan
+
+    setup = PaperSetup(diameters=(0.05, 0.2, 0.6))
+    batched, single = diameter_scan(setup, batch=True), diameter_scan(setup, batch=False)
+    assert batched == single
+    outcomes = {row["diameter"]: row["simulation_2"]["outcome"] for row in batched}
+    assert outcomes == {0.05: "desired", 0.2: "desired", 0.6: "incorrect"}  # a real test
+    assert all(row["simulation_1"]["status"] == "success" for row in batched)
