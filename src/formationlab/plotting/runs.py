@@ -76,7 +76,9 @@ def _legend(ax: Axes) -> None:
     """The legend: where it hides least of the data, unless the lines have more than
     :data:`_BEST_LIMIT` points (matplotlib's ``loc="best"`` tests every point: seconds for
     ten robots over 60,000 saved states), then in the upper right corner."""
-    points = sum(len(line.get_xdata()) for line in ax.get_lines())
+    points = 0
+    for line in ax.get_lines():
+        points += int(np.size(line.get_xdata()))
     ax.legend(loc="best" if points <= _BEST_LIMIT else "upper right", fontsize="small")
 
 
