@@ -307,6 +307,17 @@ def plot_distance_errors(
     return artists
 
 
+def _prefixed(prefix: str, title: str) -> str:
+    """``"name: title"``, on two lines when longer than :data:`_TITLE_CHARACTERS` (the
+    figures are saved at their size, so a longer line would be cut)."""
+    one = f"{prefix}: {title}"
+    return one if len(one) <= _TITLE_CHARACTERS else f"{prefix}:\n{title}"
+
+
+#: most characters of a one-line title of a run's figure (about the width of 5.5 inches)
+_TITLE_CHARACTERS = 55
+
+
 def run_figures(result: Any, *, prefix: str = "") -> dict[str, Figure]:
     """The standard figures of a run, by name: ``trajectories``, ``controls_x``,
     ``controls_y``, ``lyapunov``, ``distance_errors`` (and ``safety`` for a run with
@@ -328,7 +339,7 @@ def run_figures(result: Any, *, prefix: str = "") -> dict[str, Figure]:
             ax = fig.add_subplot()
             fn(result, ax=ax, **kw)
             if prefix:
-                ax.set_title(f"{displayable(prefix)}: {ax.get_title()}")
+                ax.set_title(_prefixed(displayable(prefix), ax.get_title()), wrap=True)
         out[name] = fig
     if getattr(result, "safety", None) is not None:
         from .safety import plot_filter_activity
@@ -337,6 +348,6 @@ def run_figures(result: Any, *, prefix: str = "") -> dict[str, Figure]:
         top, bottom = fig.subplots(2, 1, sharex=True)
         plot_filter_activity(result, ax=top, ax_distance=bottom)
         if prefix:
-            top.set_title(f"{prefix}: {top.get_title()}")
+            top.set_title(_prefixed(displayable(prefix), top.get_title()), wrap=True)
         out["safety"] = fig
     return out
