@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from .chunked import over_time, row_bytes
 from .controllers import Law
 from .marching import March
 from .models import RobotModel, SingleIntegrator
@@ -250,9 +251,13 @@ class System:
 
         ``law.potential`` plus ``weight Gamma_o`` (:class:`~formationlab.controllers.base.
         ObstacleRepulsion`), so that the obstacle-repelled law still descends it. A safety
-        filter only removes descent directions, so it is not part of ``V``.
+        filter only removes descent directions, so it is not part of ``V``. A long history
+        ``(T, n, k)`` is evaluated slice by slice (:func:`formationlab.chunked.over_time`).
         """
-        p = self.model.points(np.asarray(x, dtype=float))
+        return over_time(self._potential, np.asarray(x, dtype=float), self._row_bytes)
+
+    def _potential(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        p = self.model.points(x)
         v = self.law.potential(self.formation, p)
         if self.obstacles:
             from .safety import obstacle_potential
@@ -283,7 +288,16 @@ class System:
         return swept_clearances(self.positions(x0), self.positions(x1), self._radii, self.obstacles)
 
     def sigma(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The law's switching functions at ``x``, ``(..., s)`` (slice by slice along a long
+        leading axis: :func:`formationlab.chunked.over_time`)."""
+        return over_time(self._sigma, np.asarray(x, dtype=float), self._row_bytes)
+
+    def _sigma(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         return self.law.switching(self.formation, self.model.points(x))
+
+    @cached_property
+    def _row_bytes(self) -> int:
+        return row_bytes(self.formation, self.model.state_size())
 
     def positions(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Robot centres ``(..., n, 2)``."""

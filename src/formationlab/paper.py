@@ -28,20 +28,24 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from .analysis import Tolerances
+from .analysis import Tolerances, triangle_orientation
 from .controllers import AngleRestrictedLaw
 from .errors import ParameterError
 from .integrators import get_integrator
 from .simulation import SimulationResult, simulate
 from .spec import Formation
+from .status import Status
 
 __all__ = [
     "PAPER_ALPHA",
     "PAPER_Q0",
     "PaperReproduction",
     "PaperSetup",
+    "diameter_scan",
     "paper_formation",
     "paper_law",
+    "paper_runs",
+    "paper_scans",
     "reproduce",
 ]
 
@@ -228,9 +232,18 @@ def exchanged_pairs(q: NDArray[np.float64]) -> list[str]:
 def _polylines_cross(
     p: NDArray[np.float64], r: NDArray[np.float64], max_points: int = 1500
 ) -> bool:
+    """Whether some segment of polyline ``p`` properly crosses one of ``r`` (both ``(T, 2)``,
+    thinned to at most ``max_points`` points).
+
+    Two segments cross only if their bounding boxes overlap, so the exact orientation test
+    runs on those pairs only (found by sorting the segments along x): the same answer as
+    testing all pairs, without the ``max_points^2`` arrays.
+    """
     step = max(1, len(p) // max_points)
     p, r = p[::step], r[::step]
-    a, b, c, d = p[:-1, None], p[1:, None], r[None, :-1], r[None, 1:]
+    a, b, c, d = p[:-1], p[1:], r[:-1], r[1:]
+    i, j = _overlapping_boxes(a, b, c, d)
+    a, b, c, d = a[i], b[i], c[j], d[j]
 
     def orient(x: NDArray, y: NDArray, z: NDArray) -> NDArray:
         return np.sign(
@@ -242,15 +255,23 @@ def _polylines_cross(
     return bool(np.any(hit))
 
 
-def reproduce(
-    setup: PaperSetup | None = None, *, progress: Callable[[str], None] | None = None
-) -> PaperReproduction:
-    """Run section 4: both simulations, the unperturbed simulation 2, and the two scans.
+def _overlapping_boxes(
+    a: NDArray[np.float64], b: NDArray[np.float64], c: NDArray[np.float64], d: NDArray[np.float64]
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Pairs ``(i, j)`` of segments ``a_i b_i`` and ``c_j d_j`` whose bounding boxes overlap."""
+    lo1, hi1 = np.minimum(a, b), np.maximum(a, b)
+    lo2, hi2 = np.minimum(c, d), np.maximum(c, d)
+    box = (lo2[None, :, 0] <= hi1[:, None, 0]) & (hi2[None, :, 0] >= lo1[:, None, 0])
+    box &= (lo2[None, :, 1] <= hi1[:, None, 1]) & (hi2[None, :, 1] >= lo1[:, None, 1])
+    i, j = np.nonzero(box)
+    return i, j
 
-    The symmetry scan runs simulation 2 with each perturbation of ``setup.scan``;
-    the diameter scan runs simulations 1 and 2 (perturbed) for each diameter of
-    ``setup.diameters``.
-    """
+
+def paper_runs(
+    setup: PaperSetup | None = None, *, progress: Callable[[str], None] | None = None
+) -> dict[str, SimulationResult]:
+    """The three runs of section 4 (stored every ``setup.save_every`` steps), by name:
+    ``simulation_1``, ``simulation_2`` (perturbed) and ``simulation_2_unperturbed``."""
     setup = setup or PaperSetup()
     say = progress or (lambda _msg: None)
     say("simulation 1")
@@ -259,6 +280,26 @@ def reproduce(
     sim2 = setup.run(2, perturbation=setup.perturbation)
     say("simulation 2, unperturbed")
     sim2u = setup.run(2, perturbation=0.0)
+    return {"simulation_1": sim1, "simulation_2": sim2, "simulation_2_unperturbed": sim2u}
+
+
+def paper_scans(
+    setup: PaperSetup | None = None, *, progress: Callable[[str], None] | None = None
+) -> dict[str, list[dict[str, Any]]]:
+    """The symmetry scan and the diameter scan of the summary: ``symmetry_scan``,
+    ``diameter_scan``.
+
+    The symmetry scan runs simulation 2 with each perturbation of ``setup.scan``, stored
+    every 10 steps: single runs on the compiled path, because it needs each run's paths
+    to find the robots that exchange positions. The diameter scan runs simulations 1 and 2
+    (perturbed and not) for each diameter of ``setup.diameters`` as batches of the study
+    kernel (:func:`formationlab.studies.run_batch`; one batch per formation, the trials
+    stopped once they have converged) when ``setup`` is the kernel's case (explicit
+    Euler); its rows equal those of single runs (outcome, converged time; a trial that
+    converged is a run that ended with status ``success``: tested).
+    """
+    setup = setup or PaperSetup()
+    say = progress or (lambda _msg: None)
     tol = setup.tolerances
     scan = []
     for eps in setup.scan:
@@ -268,32 +309,74 @@ def reproduce(
             {
                 "perturbation": eps,
                 "outcome": r.outcome(tol),
-                "orientation": r.summary(tol)["orientation"],
+                "orientation": triangle_orientation(r.points[-1]),
                 "exchanged_pairs": exchanged_pairs(r.q),
                 "converged_time": r.converged_time(tol),
             }
         )
-    dscan = []
+    say("diameter scan")
+    rows = diameter_scan(setup, batch=setup.integrator == "euler")
+    return {"symmetry_scan": scan, "diameter_scan": rows}
+
+
+def diameter_scan(setup: PaperSetup, *, batch: bool = True) -> list[dict[str, Any]]:
+    """Rows of the diameter scan: for each diameter, the outcome, status and converged time
+    of simulation 1 and of simulation 2 with and without the perturbation.
+
+    ``batch``: each formation's trials as one batch of the study kernel (explicit Euler);
+    otherwise single runs stored every 10 steps (any integrator).
+    """
+    tol = setup.tolerances
+    cases = (("simulation_1", 1, 0.0), ("simulation_2", 2, setup.perturbation),
+             ("simulation_2_unperturbed", 2, 0.0))  # fmt: skip
+    out = []
     for rho in setup.diameters:
-        say(f"diameter scan, rho = {rho:g}")
         row: dict[str, Any] = {"diameter": rho}
-        for key, sim, eps in (
-            ("simulation_1", 1, 0.0),
-            ("simulation_2", 2, setup.perturbation),
-            ("simulation_2_unperturbed", 2, 0.0),
-        ):
-            r = setup.run(sim, perturbation=eps, diameter=rho, save_every=10)  # type: ignore[arg-type]
-            row[key] = {
-                "outcome": r.outcome(tol),
-                "status": r.status,
-                "converged_time": r.converged_time(tol),
-            }
-        dscan.append(row)
+        if not batch:
+            for key, sim, eps in cases:
+                r = setup.run(sim, perturbation=eps, diameter=rho, save_every=10)  # type: ignore[arg-type]
+                row[key] = {
+                    "outcome": r.outcome(tol),
+                    "status": r.status,
+                    "converged_time": r.converged_time(tol),
+                }
+            out.append(row)
+            continue
+        from .studies import run_batch
+
+        for sim in (1, 2):
+            mine = [(key, eps) for key, s, eps in cases if s == sim]
+            b = run_batch(
+                paper_formation(sim, diameter=rho), paper_law(),  # type: ignore[arg-type]
+                np.stack([setup.initial(eps) for _, eps in mine]), dt=setup.dt,
+                duration=setup.duration, tolerances=tol,
+            )  # fmt: skip
+            for k, (key, _) in enumerate(mine):
+                status = Status.from_code(int(b.status[k]))
+                converged = float(b.converged_time[k])
+                row[key] = {
+                    "outcome": str(b.outcome[k]),
+                    # a trial that stopped moving is a run that ends at its duration
+                    "status": Status.SUCCESS if status is Status.CONVERGED else status,
+                    "converged_time": converged if np.isfinite(converged) else None,
+                }
+        out.append(row)
+    return out
+
+
+def reproduce(
+    setup: PaperSetup | None = None, *, progress: Callable[[str], None] | None = None
+) -> PaperReproduction:
+    """Run section 4: both simulations, the unperturbed simulation 2, and the two scans
+    (:func:`paper_runs`, then :func:`paper_scans`)."""
+    setup = setup or PaperSetup()
+    runs = paper_runs(setup, progress=progress)
+    scans = paper_scans(setup, progress=progress)
     return PaperReproduction(
         setup=setup,
-        simulation_1=sim1,
-        simulation_2=sim2,
-        simulation_2_unperturbed=sim2u,
-        symmetry_scan=scan,
-        diameter_scan=dscan,
+        simulation_1=runs["simulation_1"],
+        simulation_2=runs["simulation_2"],
+        simulation_2_unperturbed=runs["simulation_2_unperturbed"],
+        symmetry_scan=scans["symmetry_scan"],
+        diameter_scan=scans["diameter_scan"],
     )

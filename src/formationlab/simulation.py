@@ -27,9 +27,11 @@ from .analysis import (
     converged_time,
     distance_errors,
     edge_labels,
+    error_statistics,
     final_motion,
     net_speed,
 )
+from .chunked import over_time
 from .controllers import LAWS, Law
 from .dynamics import System
 from .errors import FormationError, ParameterError
@@ -47,7 +49,11 @@ from .validation import whole
 if TYPE_CHECKING:
     from .safety import Obstacle, SafetyFilter, SafetyRecord
 
-__all__ = ["SimulationResult", "simulate"]
+__all__ = ["LIST_LIMIT", "SimulationResult", "simulate"]
+
+#: Most edges (robots, surfaces) whose values a run's summary lists one by one; beyond,
+#: summary statistics and counts (the per-edge values go to a table file).
+LIST_LIMIT = 100
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -162,8 +168,12 @@ class SimulationResult:
     @cached_property
     def shape_error(self) -> NDArray[np.float64]:
         """``max_ij |r_ij - d_ij|`` over the edges, ``(T,)``, at the law's points."""
-        err = distance_errors(self.formation, self.points)
-        return np.max(np.abs(err), axis=-1)
+        f = self.formation
+
+        def largest(p: NDArray[np.float64]) -> NDArray[np.float64]:
+            return np.max(np.abs(distance_errors(f, p)), axis=-1)
+
+        return over_time(largest, self.points, 8 * 8 * len(f.edges))
 
     def centroid_velocity(self) -> NDArray[np.float64]:
         """Velocity of the centroid of the law's points, ``(T, 2)`` (central differences)."""
@@ -200,7 +210,8 @@ class SimulationResult:
     @cached_property
     def distance_errors(self) -> NDArray[np.float64]:
         """``r_ij - d_ij`` per edge over time (at the law's points), shape ``(T, m)``."""
-        return distance_errors(self.formation, self.points)
+        f = self.formation
+        return over_time(lambda p: distance_errors(f, p), self.points, 8 * 8 * len(f.edges))
 
     @property
     def edge_labels(self) -> list[str]:
@@ -253,11 +264,14 @@ class SimulationResult:
         """A JSON-ready summary of the run (the ``summary.json`` of ``run`` and ``paper``).
 
         Keys: ``model`` (name and parameters), ``state_names``, ``outcome``, ``status``,
-        ``message``, ``final_positions`` (``[[x, y], ...]``,
+        ``message``, ``n_robots``, ``n_edges``, ``final_positions`` (``[[x, y], ...]``,
         robot 1 first), ``distance_errors`` (final ``r_ij - d_ij`` keyed by edge label
-        ``"i-j"``, 1-based), ``max_distance_error``, ``converged_time`` (or None),
+        ``"i-j"``, 1-based), ``max_distance_error``, ``distance_error_stats``
+        (:func:`~formationlab.analysis.error_statistics` of the final errors: max, mean,
+        rms, percentiles, how many within the tolerance), ``converged_time`` (or None),
         ``final_time``, ``orientation`` (``"ccw"``/``"cw"`` of robots 1, 2, 3),
-        ``active_restrictions_final`` (labels), ``diagnostics`` (integrator statistics),
+        ``active_restrictions_final`` (labels) and ``active_restrictions_final_count``,
+        ``diagnostics`` (integrator statistics),
         ``tolerances``; for a ``drifting`` or ``rotating`` outcome ``rigid_motion``:
         ``velocity`` (of the centroid, ``[vx, vy]``), ``speed``, ``angular_velocity``,
         ``centre`` (of the rotation; None for a drift), ``shape_rate`` and ``window``;
@@ -268,31 +282,49 @@ class SimulationResult:
         ``net_speed`` are measured relative to the centroid.
         With obstacles or a filter also ``safety``
         (:meth:`formationlab.safety.SafetyRecord.summary`).
+
+        **Many robots.** The lists stay readable: per-edge values (``distance_errors``,
+        the sensing's ``own_distances``) only up to :data:`LIST_LIMIT` edges, per-robot
+        values (``final_positions``, ``final_points``, ``final_state``,
+        ``final_headings``) up to :data:`LIST_LIMIT` robots, ``active_restrictions_final``
+        up to :data:`LIST_LIMIT` surfaces; beyond, the statistics and counts remain
+        (:meth:`edge_table` holds every edge; ``formationlab run`` writes it to a file).
         """
         from .analysis import triangle_orientation
 
         tol = tolerances or Tolerances()
-        err = self.distance_errors[-1]
+        n, m = self.formation.n, len(self.formation.edges)
+        p_final = self.points[-1]
+        err = distance_errors(self.formation, p_final)
         outcome = self.outcome(tol)
         moving = outcome in ("drifting", "rotating")
-        active = [
-            lab for lab, on in zip(self.restriction_labels, self.active[-1], strict=True) if on
-        ]
+        on = self.active[-1]
+        lists: dict[str, Any] = {}  # per robot, per edge, per surface: for few only
+        if n <= LIST_LIMIT:
+            lists["final_positions"] = self.q[-1].tolist()
+        if m <= LIST_LIMIT:
+            lists["distance_errors"] = dict(zip(self.edge_labels, err.tolist(), strict=True))
+        if on.size <= LIST_LIMIT:
+            lists["active_restrictions_final"] = [
+                lab for lab, a in zip(self.restriction_labels, on, strict=True) if a
+            ]
         extra: dict[str, Any] = {}
         if self.headings is not None:
-            extra["final_headings"] = self.headings[-1].tolist()
+            if n <= LIST_LIMIT:
+                extra["final_headings"] = self.headings[-1].tolist()
             extra["heading_spread"] = float(self.heading_spread[-1])  # type: ignore[index]
-        if type(self.model).state_size() > 2:
+        if type(self.model).state_size() > 2 and n <= LIST_LIMIT:
             extra["final_state"] = self.x[-1].tolist()
-        if self.points is not self.q and not np.array_equal(self.points, self.q):
-            extra["final_points"] = self.points[-1].tolist()
+        differ = self.points is not self.q and not np.array_equal(p_final, self.q[-1])
+        if differ and n <= LIST_LIMIT:
+            extra["final_points"] = p_final.tolist()
         if self.marching is not None and len(self.t) > 2:
             extra["marching"] = self._marching_summary()
         if self.safety is not None:
             extra["safety"] = self.safety.summary()
         if self.sensing is not None:
             extra["sensing"] = self.sensing.describe()
-            if self.own_distances is not None:
+            if self.own_distances is not None and m <= LIST_LIMIT:
                 extra["sensing"]["own_distances"] = dict(
                     zip(self.edge_labels, self.own_distances.tolist(), strict=True)
                 )
@@ -305,20 +337,41 @@ class SimulationResult:
             "status": self.status,
             "message": self.message,
             "final_time": float(self.t[-1]),
-            "final_positions": self.q[-1].tolist(),
-            "distance_errors": dict(zip(self.edge_labels, err.tolist(), strict=True)),
+            "n_robots": n,
+            "n_edges": m,
+            **{k: lists.pop(k) for k in ("final_positions", "distance_errors") if k in lists},
             "max_distance_error": float(np.max(np.abs(err))),
+            "distance_error_stats": error_statistics(err, tol.distance),
             "converged_time": self.converged_time(tol),
             "final_speed": float(np.max(np.linalg.norm(self._shape_frame[1][-1], axis=-1))),
             "net_speed": self.net_speed(tol),
-            "orientation": (
-                triangle_orientation(self.points[-1]) if self.formation.n >= 3 else None
-            ),
-            "active_restrictions_final": active,
+            "orientation": (triangle_orientation(p_final) if n >= 3 else None),
+            **lists,
+            "active_restrictions_final_count": int(np.count_nonzero(on)),
             "diagnostics": dict(self.stats),
             "tolerances": dataclasses.asdict(tol),
             **({"rigid_motion": _motion_dict(self.motion(tol), outcome)} if moving else {}),
             **extra,
+        }
+
+    def edge_table(self) -> dict[str, NDArray[Any]]:
+        """Every edge at the end of the run, as columns of equal length ``m``.
+
+        ``edge`` (label ``"i-j"``), ``i`` and ``j`` (1-based robots), ``desired_distance``
+        ``d_ij``, ``distance`` ``r_ij`` and ``distance_error`` ``r_ij - d_ij`` (at the law's
+        points). ``formationlab run`` writes it to ``distance_errors.parquet`` when the
+        formation has more than :data:`LIST_LIMIT` edges.
+        """
+        f = self.formation
+        p, e = self.points[-1], f.edges
+        r = np.linalg.norm(p[e[:, 1]] - p[e[:, 0]], axis=-1)
+        return {
+            "edge": np.array(self.edge_labels),
+            "i": e[:, 0] + 1,
+            "j": e[:, 1] + 1,
+            "desired_distance": np.asarray(f.distances, dtype=float),
+            "distance": r,
+            "distance_error": r - f.distances,  # as analysis.distance_errors
         }
 
     def _marching_summary(self) -> dict[str, Any]:
@@ -486,7 +539,7 @@ def simulate(
     status, message = raw.status, raw.message
     try:
         with np.errstate(over="ignore", invalid="ignore"):  # a diverged run: V is inf
-            V, sigma = system.potential(raw.x), law.switching(formation, points)
+            V, sigma = system.potential(raw.x), system.sigma(raw.x)
     except KeyboardInterrupt:  # while reading the run: keep the states, not V and sigma
         if not interruptible:
             raise

@@ -526,7 +526,8 @@ class Formation:
         """1-based label of each switching surface, ``"alpha_ijk"`` of its first triple."""
         _, _, surface = self.surfaces
         first = np.unique(surface, return_index=True)[1]
-        return ["alpha_{}{}{}".format(*(self.restricted_triples[m] + 1)) for m in first]
+        firsts = (self.restricted_triples[first] + 1).tolist()  # ints: 10x faster to format
+        return ["alpha_{}{}{}".format(*ijk) for ijk in firsts]
 
     @property
     def kappa(self) -> float:

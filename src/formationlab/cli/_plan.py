@@ -6,14 +6,19 @@ unless ``--force``, and suggests the ``--save-every`` that makes it fit.
 
 The memory of a run is what the integrator keeps per saved state (the state
 and its Python list entry) plus what the post-processing (controls, Lyapunov
-function, switching functions) allocates per state. The latter depends on the
-law and the formation, so it is measured, not guessed: the law is evaluated on
-a small stack of copies of the initial state under :mod:`tracemalloc`, which
-counts numpy's allocations.
+function, switching functions) allocates per state, for at most the states of
+one slice of the post-processing (:mod:`formationlab.chunked`: it works slice by
+slice along time). The latter depends on the law and the formation, so it is
+measured, not guessed: the law is evaluated on a small stack of copies of the
+initial state under :mod:`tracemalloc`, which counts numpy's allocations.
+
+The size of ``trajectory.nc`` is that of its data before compression: an upper
+bound (trajectories compress by a factor of about 1.1 to 2).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import shutil
@@ -24,12 +29,15 @@ from typing import Any
 
 import numpy as np
 
+from ..chunked import BUDGET, row_bytes
 from ..errors import ParameterError
 
 __all__ = ["RunPlan", "available_disk", "available_memory", "check_plan", "plan_run"]
 
-#: states in the stack whose post-processing is measured
+#: states in the stack whose post-processing is measured (fewer for many robots: each
+#: state of a swarm costs a k-d tree, and 400,000 robot-states measure well enough)
 _PROBE = 64
+_PROBE_ROBOTS = 400_000
 #: share of the available memory (and disk) a run may plan to use
 _SHARE = 0.8
 #: Python's cost of a saved state beyond its data: the ndarray object, the
@@ -49,10 +57,16 @@ class RunPlan:
         States kept (every ``save_every``-th step, the first and the last).
     save_every : int
     memory_per_state : float
-        Bytes of memory per saved state (integrator's list, stacked arrays,
-        post-processing).
+        Bytes of memory per saved state (integrator's list, stacked arrays).
+    post_per_state : float
+        Bytes the post-processing allocates per state it evaluates at once.
+    post_states : int
+        Most states the post-processing evaluates at once (one slice along time).
     output_per_state : float
-        Bytes of ``trajectory.nc`` per saved state.
+        Bytes of ``trajectory.nc`` per saved state, before compression.
+    output_fixed : float
+        Bytes of ``trajectory.nc`` that do not grow with time (header, coordinates, the
+        graph), before compression.
     """
 
     steps: int
@@ -60,33 +74,34 @@ class RunPlan:
     save_every: int
     memory_per_state: float
     output_per_state: float
+    post_per_state: float = 0.0
+    post_states: int = 1 << 62
+    output_fixed: float = 64e3
 
     @property
     def memory(self) -> float:
-        """Estimated peak memory of the saved trajectory, bytes."""
-        return self.saved * self.memory_per_state
+        """Estimated peak memory of the saved trajectory and its post-processing, bytes."""
+        return self.saved * self.memory_per_state + min(self.saved, self.post_states) * (
+            self.post_per_state
+        )
 
     @property
     def output(self) -> float:
-        """Estimated size of ``trajectory.nc``, bytes."""
-        return self.saved * self.output_per_state + 64e3  # + header and coordinates
+        """Estimated size of ``trajectory.nc`` before compression (an upper bound), bytes."""
+        return self.saved * self.output_per_state + self.output_fixed
 
     def with_save_every(self, save_every: int) -> RunPlan:
         """The same run storing every ``save_every``-th step."""
-        return RunPlan(
-            steps=self.steps,
-            saved=_saved(self.steps, save_every),
-            save_every=save_every,
-            memory_per_state=self.memory_per_state,
-            output_per_state=self.output_per_state,
+        return dataclasses.replace(
+            self, saved=_saved(self.steps, save_every), save_every=save_every
         )
 
     def describe(self) -> str:
-        """``"10,000 steps, 10,001 saved: ~13 MB of memory, ~2.1 MB trajectory.nc"``."""
+        """``"10,000 steps, 10,001 saved: ~13 MB of memory, trajectory.nc at most ~2.1 MB"``."""
         saved = "all saved" if self.save_every == 1 else f"{self.saved:,} saved"
         return (
             f"{self.steps:,} steps, {saved}: ~{_size(self.memory)} of memory, "
-            f"~{_size(self.output)} trajectory.nc"
+            f"trajectory.nc at most ~{_size(self.output)}"
         )
 
 
@@ -111,13 +126,14 @@ def plan_run(sc: Any, save_every: int) -> RunPlan:
         raise ParameterError("no fixed step: the run's size is not known in advance")
     steps = steps_for(sc.duration, float(dt))
     f, law = sc.formation, sc.law
-    q = np.broadcast_to(np.asarray(sc.q0, float), (_PROBE, f.n, 2)).copy()
+    probe = int(np.clip(_PROBE_ROBOTS // f.n, 4, _PROBE))
+    q = np.broadcast_to(np.asarray(sc.q0, float), (probe, f.n, 2)).copy()
     tracemalloc.start()
     try:
         base = tracemalloc.get_traced_memory()[0]
         sigma = law.switching(f, q)  # what simulate computes over the saved states
         law.potential(f, q)
-        post = (tracemalloc.get_traced_memory()[1] - base) / _PROBE
+        post = (tracemalloc.get_traced_memory()[1] - base) / probe
     finally:
         tracemalloc.stop()
     n, m, s = f.n, len(f.edges), int(sigma.shape[-1])
@@ -127,8 +143,11 @@ def plan_run(sc: Any, save_every: int) -> RunPlan:
         steps=steps,
         saved=_saved(steps, save_every),
         save_every=save_every,
-        memory_per_state=stored + post,
+        memory_per_state=stored,
         output_per_state=8.0 * (floats + 1),  # + time
+        post_per_state=post,
+        output_fixed=64e3 + 16.0 * n + 40.0 * m + 16.0 * s,  # robots, edges (and labels)
+        post_states=max(1, int(BUDGET // row_bytes(f))),  # one slice (chunked.over_time)
     )
 
 
@@ -170,9 +189,12 @@ def check_plan(plan: RunPlan, out: Path, *, save_every_given: bool) -> str | Non
         return None
     states = math.inf
     if memory is not None:
-        states = min(states, 0.5 * _SHARE * memory / plan.memory_per_state)
+        room = 0.5 * _SHARE * memory  # k states take k m + min(k, P) p: either bound fits
+        every = room / (plan.memory_per_state + plan.post_per_state)
+        sliced = (room - plan.post_states * plan.post_per_state) / plan.memory_per_state
+        states = min(states, max(every, sliced))
     if disk is not None:
-        states = min(states, 0.5 * _SHARE * (disk - 64e3) / plan.output_per_state)
+        states = min(states, 0.5 * _SHARE * (disk - plan.output_fixed) / plan.output_per_state)
     k = max(plan.save_every + 1, math.ceil(plan.steps / max(states - 2, 1)))
     what = " and ".join(b[0] for b in budgets)
     given = f" with --save-every {plan.save_every}" if save_every_given else ""

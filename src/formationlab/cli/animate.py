@@ -4,13 +4,17 @@ from __future__ import annotations
 
 import json
 import subprocess
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
 
+import numpy as np
 import typer
+from numpy.typing import NDArray
 
 from ..errors import OutputExistsError, ParameterError, UserInputError
-from ._app import INTERRUPTED, command, fail, warn
+from ._app import INTERRUPTED, command, err_console, fail, warn
 
 __all__: list[str] = []
 
@@ -42,43 +46,82 @@ def write_animation(
     frames: int,
     formats: tuple[str, ...] = FORMATS_ALL,
     done: list[Path] | None = None,
+    *,
+    progress: bool = False,
 ) -> list[Path]:
-    """Animate a run (a SimulationResult, or the Dataset of its trajectory.nc) into
-    ``folder/animation.*``; each file is appended to ``done`` once complete."""
+    """Animate a run (a SimulationResult, or the Dataset of its trajectory.nc, opened lazily)
+    into ``folder/animation.*``; each file is appended to ``done`` once complete.
+
+    Only the saved states the animation draws are read (its frames and its trails'
+    states, :func:`formationlab.plotting.animation.used_indices`), so memory is bounded
+    by the frames, not by the run. ``progress`` shows a bar per file on a terminal.
+    """
     from ..io.animation import save_animation
-    from ..plotting.animation import animate_run
+    from ..plotting.animation import animate_run, used_indices
 
     safety: dict[str, Any] = {}
     faults: dict[str, Any] | None = None
     if hasattr(result_or_ds, "formation"):
         r = result_or_ds
         faults = None if r.faults is None else r.faults.describe()
-        t, q, edges, diam = r.t, r.q, r.formation.edges, r.formation.diameters
-        headings, points = r.headings, (None if r.points is r.q else r.points)
+        rows = used_indices(r.t, frames, r.formation.n)
+        t, q, edges, diam = r.t[rows], r.q[rows], r.formation.edges, r.formation.diameters
+        headings = None if r.headings is None else r.headings[rows]
+        points = None if r.points is r.q else r.points[rows]
         if r.safety is not None:
             safety = {
-                "obstacles": r.safety.obstacles, "active": r.safety.active,
-                "active_pairs": r.safety.active_pairs,
-            }  # fmt: skip
+                "obstacles": r.safety.obstacles,
+                "active": r.safety.active[rows],
+                "active_pairs": _pairs_at(np.asarray(r.safety.active_pairs), rows),
+            }
     else:
         ds = result_or_ds
-        t, q = ds["time"].values, ds["q"].values
+        t_all = ds["time"].values
+        rows = used_indices(t_all, frames, ds.sizes["robot"])
+        part = ds.isel(time=rows)
+        t, q = t_all[rows], part["q"].values
         edges, diam = ds["edge_robots"].values - 1, ds["diameter"].values
-        headings = ds["theta"].values if "theta" in ds else None
-        points = ds["point"].values if "point" in ds else None
+        headings = part["theta"].values if "theta" in ds else None
+        points = part["point"].values if "point" in ds else None
         faults = json.loads(str(ds.attrs["faults"])) if "faults" in ds.attrs else None
         if "filter_active" in ds:
             safety = {
                 "obstacles": json.loads(str(ds.attrs.get("obstacles", "[]"))),
-                "active": ds["filter_active"].values.astype(bool),
-                "active_pairs": ds["active_pair"].values.reshape(-1, 3) - [0, 1, 1],
+                "active": part["filter_active"].values.astype(bool),
+                "active_pairs": _pairs_at(
+                    ds["active_pair"].values.reshape(-1, 3) - [0, 1, 1], rows
+                ),
             }
     anim = animate_run(
         t, q, edges=edges, diameters=diam, max_frames=frames, title=title,
         headings=headings, points=points, **safety,
         stops=[(s["robot"] - 1, s["at"]) for s in (faults or {}).get("stop", [])],
     )  # fmt: skip
-    return save_animation(anim, folder / ANIMATION_STEM, formats=formats, written=done)
+    return save_animation(
+        anim, folder / ANIMATION_STEM, formats=formats, written=done,
+        progress=_progress_bar if progress and err_console.is_terminal else None,
+    )  # fmt: skip
+
+
+def _pairs_at(pairs: NDArray[np.int64], rows: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Active pair constraints ``(time index, i, j)`` at the saved states ``rows``, with the
+    time index renumbered into ``rows``."""
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 3)
+    keep = np.isin(pairs[:, 0], rows)
+    out = pairs[keep].copy()
+    out[:, 0] = np.searchsorted(rows, out[:, 0])
+    return out
+
+
+@contextmanager
+def _progress_bar(label: str) -> Iterator[Callable[[int, int], None]]:
+    """A transient progress bar of the frames of one file; yields ``update(done, total)``."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+    columns = (TextColumn(f"writing {label}"), BarColumn(), MofNCompleteColumn())
+    with Progress(*columns, console=err_console, transient=True) as bar:
+        task = bar.add_task(label, total=None)
+        yield lambda done, total: bar.update(task, completed=done, total=total)
 
 
 @command(
@@ -105,7 +148,7 @@ def animate_cmd(
     self-contained player), with at most --frames frames evenly spaced in time.
     """
     from ..io.animation import FORMATS
-    from ..io.netcdf import load_trajectory
+    from ..io.netcdf import open_trajectory
 
     formats = tuple(dict.fromkeys(fmt or FORMATS))
     bad = [f for f in formats if f not in FORMATS]
@@ -133,22 +176,23 @@ def animate_cmd(
             f"{folder} already holds {', '.join(existing)}; pass --force to replace it"
         )
     try:
-        ds = load_trajectory(nc)
+        ds = open_trajectory(nc)
     except (OSError, ValueError) as exc:
         raise UserInputError(f"cannot read {nc} as netCDF: {exc}") from None
-    if "q" not in ds or "edge_robots" not in ds:
-        raise UserInputError(f"{nc} is not a formationlab trajectory (no q or edge_robots)")
-    title = str(ds.attrs.get("scenario_name", folder.name))
-    done: list[Path] = []
-    try:
-        write_animation(folder, ds, title, frames, formats, done)
-    except (KeyboardInterrupt, subprocess.CalledProcessError):  # Ctrl-C, also killing ffmpeg
-        _add_to_manifest(folder, [p.name for p in done])
-        kept = f"; kept {', '.join(p.name for p in done)}" if done else ""
-        fail(f"interrupted{kept}", INTERRUPTED)
-    finally:
-        for p in done:
-            typer.echo(f"wrote {p}")
+    with ds:
+        if "q" not in ds or "edge_robots" not in ds:
+            raise UserInputError(f"{nc} is not a formationlab trajectory (no q or edge_robots)")
+        title = str(ds.attrs.get("scenario_name", folder.name))
+        done: list[Path] = []
+        try:
+            write_animation(folder, ds, title, frames, formats, done, progress=True)
+        except (KeyboardInterrupt, subprocess.CalledProcessError):  # Ctrl-C, also killing ffmpeg
+            _add_to_manifest(folder, [p.name for p in done])
+            kept = f"; kept {', '.join(p.name for p in done)}" if done else ""
+            fail(f"interrupted{kept}", INTERRUPTED)
+        finally:
+            for p in done:
+                typer.echo(f"wrote {p}")
     _add_to_manifest(folder, [p.name for p in done])
 
 

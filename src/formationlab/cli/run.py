@@ -17,10 +17,11 @@ from .animate import ANIMATION_STEM, FORMATS_ALL, usable_formats, write_animatio
 
 __all__: list[str] = []
 
-#: Files ``run`` writes besides the plots (summary.json last: it marks a finished run).
+#: Files ``run`` writes besides the plots and the per-edge table (summary.json last: it
+#: marks a finished run).
 RUN_FILES = ("scenario.toml", "trajectory.nc", "summary.json")
 #: files of an earlier run (without a manifest) that ``run --force`` replaces
-EARLIER_PATTERNS = (*RUN_FILES, "*.png", f"{ANIMATION_STEM}.*")
+EARLIER_PATTERNS = (*RUN_FILES, "distance_errors.parquet", "*.png", f"{ANIMATION_STEM}.*")
 
 
 def _say(message: str, quiet: bool) -> None:
@@ -129,7 +130,12 @@ def _run(
     force: bool,
     quiet: bool,
 ) -> None:
-    """Simulate, write the results, then animate (so that Ctrl-C while animating keeps them)."""
+    """Simulate, write the results, then the figures, then animate.
+
+    What took the time is written first: ``trajectory.nc``, the per-edge table and
+    ``summary.json`` before the figures (which a Ctrl-C or a failure may stop), so that
+    nothing that comes after can lose a finished simulation.
+    """
     from .. import simulate
     from ..io.files import earlier_files, prepare_output_dir, remove_stale
 
@@ -137,13 +143,20 @@ def _run(
     earlier = earlier_files(folder, EARLIER_PATTERNS) if force else []
     result = _simulate(simulate, sc, save_every, quiet)
     interrupted = result.status == "interrupted"
-    summary = result.summary()
-    written = _write_results(folder, sc, scenario, result, summary, save_every)
+    summary, written = _write_data(folder, sc, scenario, result, save_every, quiet)
+    try:
+        written = _write_figures(folder, sc, scenario, result, summary, save_every, written, quiet)
+    except KeyboardInterrupt:
+        remove_stale(folder, earlier, written)
+        _say(f"{sc.name}: {_verdict(summary)}; wrote {folder}/", quiet)
+        fail(
+            f"interrupted while drawing the figures; the run's results are in {folder}", INTERRUPTED
+        )
     if formats and not interrupted:
         _note(f"animating ({frames} frames at most) ...", quiet)
         done: list[Path] = []
         try:
-            write_animation(folder, result, sc.name, frames, formats, done)
+            write_animation(folder, result, sc.name, frames, formats, done, progress=not quiet)
         except (KeyboardInterrupt, subprocess.CalledProcessError):
             # Ctrl-C reaches ffmpeg too, which then fails: the simulation's results stay
             written = [*written, *(p.name for p in done)]
@@ -167,27 +180,60 @@ def _run(
         fail(f"the run stopped early: {result.message} (results up to then are in {folder})", 1)
 
 
-def _write_results(
-    folder: Path, sc: Any, scenario: Path, result: Any, summary: dict[str, Any], save_every: int
-) -> list[str]:
-    """Write scenario.toml, trajectory.nc, the plots and summary.json (last, atomically:
-    it marks the folder as holding a run); returns the manifest, the names written."""
-    from ..io.figures import save_figure
+#: robots times saved states beyond which ``run`` says what it is writing
+_LARGE = 1e6
+
+
+def _write_data(
+    folder: Path, sc: Any, scenario: Path, result: Any, save_every: int, quiet: bool
+) -> tuple[dict[str, Any], list[str]]:
+    """Write scenario.toml, trajectory.nc, the per-edge table of a formation with more than
+    ``LIST_LIMIT`` edges and summary.json (last: it marks the folder as holding a finished
+    run); returns the summary and the names written."""
+    from ..io.edges import EDGE_TABLE, write_edge_table
     from ..io.files import atomic_write_text
     from ..io.netcdf import write_trajectory
-    from ..plotting.runs import run_figures
+    from ..simulation import LIST_LIMIT
 
+    large = result.q.size / 2 > _LARGE
     atomic_write_text(folder / "scenario.toml", sc.text)
+    if large:
+        _note(f"writing trajectory.nc ({len(result.t):,} saved states) ...", quiet)
     write_trajectory(
         result,
         folder / "trajectory.nc",
         attrs={"scenario": sc.text, "scenario_name": sc.name, "save_every": save_every},
     )
+    summary = result.summary()
+    names = list(RUN_FILES)
+    if len(sc.formation.edges) > LIST_LIMIT:
+        write_edge_table(result.edge_table(), folder / EDGE_TABLE)
+        summary["distance_errors_table"] = EDGE_TABLE
+        names.insert(2, EDGE_TABLE)
+    return summary, _write_summary(folder, sc, scenario, summary, save_every, names)
+
+
+def _write_figures(
+    folder: Path,
+    sc: Any,
+    scenario: Path,
+    result: Any,
+    summary: dict[str, Any],
+    save_every: int,
+    written: list[str],
+    quiet: bool,
+) -> list[str]:
+    """Draw and save the run's figures, then list them in summary.json; returns the names."""
+    from ..io.figures import save_figure
+    from ..plotting.runs import run_figures
+
+    if result.q.size / 2 > _LARGE:
+        _note("drawing the figures ...", quiet)
     pictures = [
         save_figure(fig, folder / f"{name}.png").name
         for name, fig in run_figures(result, prefix=sc.name).items()
     ]
-    return _write_summary(folder, sc, scenario, summary, save_every, [*RUN_FILES, *pictures])
+    return _write_summary(folder, sc, scenario, summary, save_every, [*written, *pictures])
 
 
 def _write_summary(
@@ -200,15 +246,16 @@ def _write_summary(
 ) -> list[str]:
     from .. import __version__
     from ..io.files import MANIFEST, atomic_write_json
+    from ..simulation import LIST_LIMIT
 
+    edges = sc.formation.edges
     data: dict[str, Any] = {
         "scenario": sc.name,
         "description": sc.description,
         "source": str(scenario),
         **summary,
         "parameters": sc.parameters,
-        "n_robots": sc.n,
-        "edges": [[int(i) + 1, int(j) + 1] for i, j in sc.formation.edges],
+        **({"edges": (edges + 1).tolist()} if len(edges) <= LIST_LIMIT else {}),
         "save_every": save_every,
         "warnings": list(sc.warnings),
         "formationlab_version": __version__,

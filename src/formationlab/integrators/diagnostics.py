@@ -147,6 +147,11 @@ def switching_diagnostics(
 ) -> dict[str, float]:
     """The switching diagnostics of a stored history (every step, not a thinned one).
 
+    What :class:`SwitchMonitor` gives when fed the states one by one (tested equal), with
+    the loop over time done by numpy: the crossings of each surface and the maxima of
+    ``|sigma|`` between them, the steps spent on a surface, and the union of the sliding
+    intervals.
+
     Parameters
     ----------
     t : array_like, shape (T,)
@@ -165,9 +170,59 @@ def switching_diagnostics(
     t = np.asarray(t, dtype=float)
     sigma = np.asarray(sigma, dtype=float)
     sigma = sigma.reshape(len(t), -1)
-    if sigma.shape[1] == 0:  # a smooth law: nothing switches
+    if sigma.shape[1] == 0 or len(t) < 2:  # a smooth law: nothing switches
         return SwitchMonitor(sigma0=sigma[0] if len(t) else np.zeros(0)).stats()
-    mon = SwitchMonitor(sigma0=sigma[0], t0=float(t[0]), tol=tol, chatter_factor=chatter_factor)
-    for tk, sk in zip(t[1:], sigma[1:], strict=True):
-        mon.record(float(tk), sk)
-    return mon.stats()
+    label = _labels(sigma, tol)
+    absval = np.abs(sigma)
+    switches = int(np.count_nonzero(label[1:] != label[:-1]))
+    intervals: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+    excursions = [np.zeros(1)]
+    # resting: on the surface at both ends of step k (k = 1..T-1)
+    resting = (label[1:] == 0) & (label[:-1] == 0)
+    steps = np.flatnonzero(resting.any(axis=1)) + 1
+    if steps.size:
+        intervals.append((t[steps - 1], t[steps]))
+        excursions.append(np.where(resting, absval[1:], 0.0).max(axis=1))
+    # crossings: a strict change of side at step k; a crossing back at k after one at k'
+    # with max |sigma| over k'..k-1 at most chatter_factor times the jump of step k' chatters
+    crossed = (label[1:].astype(np.int16) * label[:-1]) == -1
+    surface, k = np.nonzero(crossed.T)  # by surface, then step (of k = 1..T-1, minus one)
+    k = k + 1
+    again = np.flatnonzero(surface[1:] == surface[:-1])  # pairs (k', k) of one surface
+    if again.size:
+        c, first, then = surface[again], k[again], k[again + 1]
+        T = len(t)
+        flat = absval.T.ravel()
+        bounds = np.stack([c * T + first, c * T + then], axis=1).ravel()
+        peak = np.maximum.reduceat(flat, bounds)[::2]  # max |sigma| over k'..k-1
+        jump = np.abs(sigma[first, c] - sigma[first - 1, c])
+        chatter = peak <= chatter_factor * jump
+        if chatter.any():
+            intervals.append((t[first[chatter] - 1], t[then[chatter]]))
+            excursions += [peak[chatter], absval[then[chatter], c[chatter]]]
+    merged = _union(intervals)
+    return {
+        "switch_count": float(switches),
+        "sliding_time": float(sum(b - a for a, b in merged)),
+        "sliding_start": float(merged[0][0]) if merged else float("nan"),
+        "sliding_end": float(merged[-1][1]) if merged else float("nan"),
+        "max_excursion": float(np.max(np.concatenate(excursions))),
+    }
+
+
+def _union(
+    intervals: list[tuple[NDArray[np.float64], NDArray[np.float64]]],
+) -> list[tuple[float, float]]:
+    """The union of closed intervals ``[a, b]``, as sorted disjoint ones (touching ones merged)."""
+    if not intervals:
+        return []
+    a = np.concatenate([iv[0] for iv in intervals])
+    b = np.concatenate([iv[1] for iv in intervals])
+    order = np.argsort(a, kind="stable")
+    out: list[tuple[float, float]] = []
+    for lo, hi in zip(a[order].tolist(), b[order].tolist(), strict=True):
+        if out and lo <= out[-1][1]:
+            out[-1] = (out[-1][0], max(out[-1][1], hi))
+        else:
+            out.append((lo, hi))
+    return out

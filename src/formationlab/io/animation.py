@@ -13,13 +13,18 @@ import html
 import os
 import re
 import shutil
-from collections.abc import Iterable
+import tempfile
+from collections.abc import Callable, Iterable
+from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 from typing import Any
 
 from .files import atomic_path, atomic_write_text
 
-__all__ = ["FORMATS", "ffmpeg_executable", "missing_writer", "save_animation"]
+__all__ = ["FORMATS", "Progress", "ffmpeg_executable", "missing_writer", "save_animation"]
+
+#: ``update(frames done, frames in all)``, called as the frames of a file are drawn
+Progress = Callable[[int, int], None]
 
 #: The formats :func:`save_animation` writes, with their file suffixes.
 FORMATS = {"gif": ".gif", "mp4": ".mp4", "html": ".html"}
@@ -51,6 +56,7 @@ def save_animation(
     formats: Iterable[str] = ("gif", "mp4", "html"),
     fps: int = 15,
     written: list[Path] | None = None,
+    progress: Callable[[str], AbstractContextManager[Progress]] | None = None,
 ) -> list[Path]:
     """Save a :class:`matplotlib.animation.Animation` as ``stem.gif``, ``stem.mp4``, ``stem.html``.
 
@@ -68,43 +74,62 @@ def save_animation(
     written : list, optional
         Each file is appended as soon as it is complete, so that a caller
         interrupted during a later format knows which files exist.
+    progress : callable, optional
+        ``progress(file name)``: a context manager yielding ``update(done, total)``,
+        called as the frames of each file are drawn (e.g. a progress bar).
 
     Returns
     -------
     list of Path
         The files written.
     """
-    import matplotlib as mpl
-    from matplotlib.animation import FFMpegWriter, PillowWriter
-
     stem = Path(stem)
     written = [] if written is None else written
     for fmt in formats:
         if fmt not in FORMATS:
             raise ValueError(f"unknown animation format {fmt!r}; choose from {', '.join(FORMATS)}")
         target = stem.with_suffix(FORMATS[fmt])
-        if fmt == "gif":
-            with atomic_path(target) as tmp:
-                anim.save(tmp, writer=PillowWriter(fps=fps))
-        elif fmt == "mp4":
-            missing = missing_writer(fmt)
-            if missing:
-                raise ModuleNotFoundError(missing)
-            with (
-                mpl.rc_context({"animation.ffmpeg_path": ffmpeg_executable()}),
-                atomic_path(target) as tmp,
-            ):
-                # yuv420p + even frame size: playable in browsers and common players
-                writer = FFMpegWriter(
-                    fps=fps, codec="libx264", extra_args=["-pix_fmt", "yuv420p", "-vf", _EVEN]
-                )
-                anim.save(tmp, writer=writer)
-        else:
-            with mpl.rc_context({"animation.embed_limit": 200.0}):  # MB; frames are bounded
-                player = anim.to_jshtml(fps=fps, default_mode="once")
-            atomic_write_text(target, _page(player, stem.name))
+        with nullcontext(None) if progress is None else progress(target.name) as update:
+            _save(anim, fmt, target, fps, update)
         written.append(target)
     return written
+
+
+def _save(anim: Any, fmt: str, target: Path, fps: int, update: Progress | None) -> None:
+    """Write one format of ``anim`` to ``target`` atomically (each frame drawn once)."""
+    import matplotlib as mpl
+    from matplotlib.animation import FFMpegWriter, HTMLWriter, PillowWriter
+
+    def callback(done: int, total: int) -> None:
+        if update is not None:
+            update(done + 1, total)
+
+    if fmt == "gif":
+        with atomic_path(target) as tmp:
+            anim.save(tmp, writer=PillowWriter(fps=fps), progress_callback=callback)
+    elif fmt == "mp4":
+        missing = missing_writer(fmt)
+        if missing:
+            raise ModuleNotFoundError(missing)
+        with (
+            mpl.rc_context({"animation.ffmpeg_path": ffmpeg_executable()}),
+            atomic_path(target) as tmp,
+        ):
+            # yuv420p + even frame size: playable in browsers and common players
+            writer = FFMpegWriter(
+                fps=fps, codec="libx264", extra_args=["-pix_fmt", "yuv420p", "-vf", _EVEN]
+            )
+            anim.save(tmp, writer=writer, progress_callback=callback)
+    else:  # what Animation.to_jshtml does, with the progress callback
+        with (
+            mpl.rc_context({"animation.embed_limit": 200.0}),  # MB; frames are bounded
+            tempfile.TemporaryDirectory() as tmpdir,
+        ):
+            page = Path(tmpdir, "player.html")
+            html_writer = HTMLWriter(fps=fps, embed_frames=True, default_mode="once")
+            anim.save(str(page), writer=html_writer, progress_callback=callback)
+            player = page.read_text(encoding="utf-8")
+        atomic_write_text(target, _page(player, target.stem))
 
 
 _EVEN = "pad=ceil(iw/2)*2:ceil(ih/2)*2"

@@ -33,6 +33,12 @@ The last four exist only for a run with obstacles or a safety filter; the global
 attribute ``obstacles`` then holds the obstacles (JSON of their scenario form) and
 ``safety`` the filter's parameters.
 
+Storage: every variable is compressed (zlib level :data:`COMPRESSION` with the byte
+shuffle filter, lossless), numbers in chunks of whole saved states of about
+:data:`CHUNK_BYTES` (``(k, robot, axis)`` for ``q``), so that a reader that wants some
+times (an animation's frames) reads and decompresses only those; labels (``edge``,
+``surface``) as compressed character arrays (xarray reads them back as strings).
+
 Coordinates: ``time`` in seconds, ``robot`` = 1..n, ``axis`` = ``"x"``, ``"y"``,
 ``edge`` = labels ``"i-j"``, ``surface`` = labels ``"alpha_ijk"``. Global
 attributes: ``scenario`` (the scenario's TOML text), ``formationlab_version``,
@@ -52,10 +58,23 @@ import numpy as np
 
 from .files import atomic_path, to_jsonable
 
-__all__ = ["ENGINE", "load_trajectory", "trajectory_dataset", "write_trajectory"]
+__all__ = [
+    "CHUNK_BYTES",
+    "COMPRESSION",
+    "ENGINE",
+    "encoding",
+    "load_trajectory",
+    "open_trajectory",
+    "trajectory_dataset",
+    "write_trajectory",
+]
 
 #: The netCDF engine used for reading and writing.
 ENGINE = "h5netcdf"
+#: zlib level of the variables of ``trajectory.nc`` (1 fastest ... 9 smallest)
+COMPRESSION = 1
+#: target bytes of one chunk (HDF5 reads and decompresses whole chunks)
+CHUNK_BYTES = 1 << 20
 
 
 def trajectory_dataset(result: Any, *, attrs: dict[str, Any] | None = None) -> Any:
@@ -70,7 +89,23 @@ def trajectory_dataset(result: Any, *, attrs: dict[str, Any] | None = None) -> A
     """
     import xarray as xr
 
-    from .. import __version__
+    coords, data, series, glob = _layout(result, attrs)
+    for name, (dims, values, meta) in series.items():
+        full = values if isinstance(values, np.ndarray) else values(slice(None))
+        data[name] = (dims, full, meta)
+    return xr.Dataset(data_vars=data, coords=coords, attrs=glob)
+
+
+#: a variable over time: its dimensions, its values (or a function of a slice of the
+#: saved states giving them), and its attributes
+Series = tuple[tuple[str, ...], Any, dict[str, Any]]
+
+
+def _layout(
+    result: Any, attrs: dict[str, Any] | None
+) -> tuple[dict[str, Any], dict[str, Any], dict[str, Series], dict[str, Any]]:
+    """Coordinates, the variables that do not grow with time, the time series, attributes."""
+    from ..analysis import distance_errors
 
     f = result.formation
     n = f.n
@@ -81,15 +116,18 @@ def trajectory_dataset(result: Any, *, attrs: dict[str, Any] | None = None) -> A
         "axis": ("axis", np.array(["x", "y"])),
         "edge": ("edge", np.array(result.edge_labels)),
     }
-    data: dict[str, Any] = {
+    points = result.points
+    series: dict[str, Series] = {
         "q": (("time", "robot", "axis"), result.q, {"long_name": "position q_i"}),
         "u": (("time", "robot", "axis"), result.u, {"long_name": "control u_i = dq_i/dt"}),
-        "V": (("time",), result.V, {"long_name": "Lyapunov function of the law"}),
         "distance_error": (
             ("time", "edge"),
-            result.distance_errors,
+            lambda rows: distance_errors(f, points[rows]),
             {"long_name": "distance error r_ij - d_ij"},
         ),
+    }
+    data: dict[str, Any] = {
+        "V": (("time",), result.V, {"long_name": "Lyapunov function of the law"}),
         "diameter": (("robot",), f.diameters, {"long_name": "robot diameter rho_i"}),
         "edge_robots": (("edge", "end"), f.edges + 1, {"long_name": "robots i, j (1-based)"}),
         "desired_distance": (("edge",), f.distances, {"long_name": "desired distance d_ij"}),
@@ -97,16 +135,16 @@ def trajectory_dataset(result: Any, *, attrs: dict[str, Any] | None = None) -> A
     names = list(type(result.model).state_names)
     if len(names) > 2:
         coords["state"] = ("state", np.array(names))
-        data["x"] = (("time", "robot", "state"), result.x, {"long_name": "full state"})
+        series["x"] = (("time", "robot", "state"), result.x, {"long_name": "full state"})
     if result.headings is not None:
-        data["theta"] = (("time", "robot"), result.headings, {"units": "rad"})
-    if not np.array_equal(result.points, result.q):
-        data["point"] = (
-            ("time", "robot", "axis"), result.points, {"long_name": "point the law acts on"}
+        series["theta"] = (("time", "robot"), result.headings, {"units": "rad"})
+    if not np.array_equal(points, result.q):
+        series["point"] = (
+            ("time", "robot", "axis"), points, {"long_name": "point the law acts on"}
         )  # fmt: skip
     if result.sigma.shape[-1]:
         coords["surface"] = ("surface", np.array(result.restriction_labels))
-        data["sigma"] = (
+        series["sigma"] = (
             ("time", "surface"),
             result.sigma,
             {"long_name": "switching function sigma = beta c_abc + theta (active >= 0)"},
@@ -131,6 +169,13 @@ def trajectory_dataset(result: Any, *, attrs: dict[str, Any] | None = None) -> A
             obs,
             {"long_name": "active obstacle constraint: time index, robot, obstacle (1-based)"},
         )
+    return coords, data, series, _attributes(result, attrs)
+
+
+def _attributes(result: Any, attrs: dict[str, Any] | None) -> dict[str, Any]:
+    """The global attributes (module docstring), with ``attrs`` added."""
+    from .. import __version__
+
     glob: dict[str, Any] = {
         "title": "formationlab trajectory",
         "formationlab_version": __version__,
@@ -153,7 +198,7 @@ def trajectory_dataset(result: Any, *, attrs: dict[str, Any] | None = None) -> A
         glob[key] = (
             value if isinstance(value, str | int | float) else json.dumps(to_jsonable(value))
         )
-    return xr.Dataset(data_vars=data, coords=coords, attrs=glob)
+    return glob
 
 
 def _params(obj: Any) -> dict[str, Any]:
@@ -168,16 +213,87 @@ def write_trajectory(
     """Write ``result`` to the netCDF file ``target`` atomically (see module docstring).
 
     ``attrs`` are added as global attributes, e.g. ``{"scenario": scenario.text}``.
+
+    The coordinates and the small variables go through xarray; the time series (``q``,
+    ``u``, ``distance_error``, ``sigma``, ...) are then added to the same file chunk by
+    chunk from the run's own arrays, the distance errors computed a slice of saved states
+    at a time: no copy of the trajectory is made, so memory stays what the run holds.
     """
-    ds = trajectory_dataset(result, attrs=attrs)
+    import h5netcdf
+    import xarray as xr
+
+    coords, data, series, glob = _layout(result, attrs)
+    ds: Any = xr.Dataset(data_vars=data, coords=coords, attrs=glob)
+    rows = len(result.t)
     with atomic_path(target, suffix=".nc") as tmp:
-        ds.to_netcdf(tmp, engine=ENGINE, invalid_netcdf=False)
+        ds.to_netcdf(tmp, engine=ENGINE, invalid_netcdf=False, encoding=encoding(ds))
+        with h5netcdf.File(tmp, "a") as nc:
+            for name, (dims, values, meta) in series.items():
+                shape = (rows, *(nc.dimensions[d].size for d in dims[1:]))
+                dtype = np.dtype(values.dtype if isinstance(values, np.ndarray) else float)
+                chunks = _chunks(shape, dtype.itemsize)
+                var = nc.create_variable(
+                    name, dims, dtype, chunks=chunks, compression="gzip",
+                    compression_opts=COMPRESSION, shuffle=True,
+                )  # fmt: skip
+                var.attrs.update(meta)
+                step = chunks[0] * max(1, CHUNK_BYTES * 16 // (chunks[0] * _bytes(shape, dtype)))
+                for a in range(0, rows, step):
+                    part = slice(a, min(rows, a + step))
+                    var[part] = values[part] if isinstance(values, np.ndarray) else values(part)
     return Path(target)
+
+
+def _bytes(shape: tuple[int, ...], dtype: np.dtype[Any]) -> int:
+    """Bytes of one saved state of a variable of ``shape`` (time first)."""
+    return dtype.itemsize * int(np.prod(shape[1:]))
+
+
+def _chunks(shape: tuple[int, ...], itemsize: int) -> tuple[int, ...]:
+    """Chunks of whole saved states of about :data:`CHUNK_BYTES` (a larger state split along
+    its first axis after time)."""
+    chunks = list(shape)
+    row = itemsize * int(np.prod(shape[1:]))
+    if row <= CHUNK_BYTES:
+        chunks[0] = min(shape[0], max(1, CHUNK_BYTES // row))
+    else:
+        chunks[0] = 1
+        inner = itemsize * int(np.prod(shape[2:]))
+        chunks[1] = min(shape[1], max(1, CHUNK_BYTES // inner))
+    return tuple(max(1, c) for c in chunks)
+
+
+def encoding(ds: Any) -> dict[str, dict[str, Any]]:
+    """The storage of each numeric variable of ``ds``: compressed, chunked by saved states.
+
+    A chunk holds whole states ``(k, ...)`` of about :data:`CHUNK_BYTES`, at least one
+    (a state larger than that is split along its first axis after time).
+    """
+    out: dict[str, dict[str, Any]] = {}
+    packed = {"zlib": True, "complevel": COMPRESSION, "shuffle": True}
+    for name, var in ds.variables.items():
+        shape = tuple(int(k) for k in var.shape)
+        if not shape or 0 in shape:
+            continue
+        if var.dtype.kind in "OUS":  # labels: compressed characters, not one heap object each
+            out[str(name)] = {"dtype": "S1", **packed}
+            continue
+        if var.dtype.kind not in "fiub":
+            continue
+        chunks = _chunks(shape, var.dtype.itemsize)
+        out[str(name)] = {**packed, "chunksizes": chunks}
+    return out
+
+
+def open_trajectory(path: str | os.PathLike[str]) -> Any:
+    """Open a ``trajectory.nc`` lazily: an ``xarray.Dataset`` whose variables are read when
+    indexed (close it when done, e.g. ``with open_trajectory(p) as ds: ds["q"][-1]``)."""
+    import xarray as xr
+
+    return xr.open_dataset(path, engine=ENGINE)
 
 
 def load_trajectory(path: str | os.PathLike[str]) -> Any:
     """Read a ``trajectory.nc`` into memory and close the file; returns an ``xarray.Dataset``."""
-    import xarray as xr
-
-    with xr.open_dataset(path, engine=ENGINE) as ds:
+    with open_trajectory(path) as ds:
         return ds.load()

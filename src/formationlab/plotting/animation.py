@@ -14,16 +14,26 @@ from typing import Any
 
 import numpy as np
 from matplotlib.animation import FuncAnimation
+from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
+from matplotlib.colors import to_rgba
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 from numpy.typing import ArrayLike, NDArray
 
 from .fonts import displayable, font_context
+from .many import (
+    COLLECTION_LIMIT,
+    LABEL_LIMIT,
+    broken_line,
+    draw_discs,
+    even_indices,
+    segments,
+)
 from .runs import robot_colors
 from .safety import ACTIVE_COLOR, draw_obstacles
 
-__all__ = ["animate_run", "frame_indices"]
+__all__ = ["TRAIL_VERTICES", "animate_run", "frame_indices", "path_indices", "used_indices"]
 
 
 def frame_indices(t: ArrayLike, max_frames: int) -> NDArray[np.int64]:
@@ -31,14 +41,29 @@ def frame_indices(t: ArrayLike, max_frames: int) -> NDArray[np.int64]:
 
     The first and the last saved states are always included.
     """
-    t = np.asarray(t, dtype=float)
     if max_frames < 2:
         raise ValueError(f"an animation needs at least 2 frames, got max_frames={max_frames}")
-    if len(t) <= max_frames:
-        return np.arange(len(t))
-    targets = np.linspace(t[0], t[-1], max_frames)
-    idx = np.searchsorted(t, targets, side="left").clip(0, len(t) - 1)
-    return np.unique(idx)
+    return even_indices(t, max_frames)
+
+
+def path_indices(t: ArrayLike, max_frames: int, n: int) -> NDArray[np.int64]:
+    """Indices of the saved states the trails are drawn through: evenly spaced, at least the
+    frames, at most 2000, and for many robots at most :data:`TRAIL_VERTICES` ``/ n``."""
+    most = max(2000, max_frames) if n <= LABEL_LIMIT else max(TRAIL_VERTICES // n, 2)
+    return even_indices(t, most)
+
+
+def used_indices(t: ArrayLike, max_frames: int, n: int) -> NDArray[np.int64]:
+    """The saved states an animation of ``n`` robots reads: its frames and its trails' states.
+
+    :func:`animate_run` of ``t[rows]``, ``q[rows]`` draws what it draws of ``t``, ``q``
+    (the frames and the trails pick the same states), so a reader loads only these.
+    """
+    return np.union1d(frame_indices(t, max_frames), path_indices(t, max_frames, n))
+
+
+#: most vertices of all the trails of a frame together, beyond LABEL_LIMIT robots
+TRAIL_VERTICES = 200_000
 
 
 def animate_run(
@@ -111,17 +136,19 @@ def animate_run(
     if q.ndim != 3 or q.shape[-1] != 2 or q.shape[0] != t.shape[0]:
         raise ValueError(f"q must have shape (T, n, 2) with T = len(t), got {q.shape}")
     n = q.shape[1]
+    many = n > LABEL_LIMIT
     frames = frame_indices(t, max_frames)
-    # trails are drawn through at most ~2000 states, so long runs stay cheap to render
-    path = frame_indices(t, max(2000, max_frames))
-    colors = robot_colors(n)
+    # trails are drawn through at most ~2000 states (fewer for many robots: the cost of a
+    # frame stays bounded), so long runs stay cheap to render
+    path = path_indices(t, max_frames, n)
+    colors = np.asarray(robot_colors(n)) if many else robot_colors(n)
 
     title = displayable(title)  # the user's scenario name: any script
     with font_context():
         fig = Figure(figsize=(size, size), dpi=dpi, layout="constrained")
         ax = fig.add_subplot()
-    lo = q.reshape(-1, 2).min(axis=0) - diameters.max()
-    hi = q.reshape(-1, 2).max(axis=0) + diameters.max()
+    lo = np.nanmin(q, axis=(0, 1)) - diameters.max()
+    hi = np.nanmax(q, axis=(0, 1)) + diameters.max()
     pad = 0.05 * max(float(np.max(hi - lo)), 1e-9)
     ax.set_xlim(lo[0] - pad, hi[0] + pad)
     ax.set_ylim(lo[1] - pad, hi[1] + pad)
@@ -130,7 +157,7 @@ def animate_run(
     ax.set_ylabel("y")
     if len(obstacles):
         draw_obstacles(ax, obstacles)
-    on = np.zeros((len(t), n), bool) if active is None else np.asarray(active, bool)
+    on = None if active is None else np.asarray(active, bool)
     pairs = np.zeros((0, 3), np.int64) if active_pairs is None else np.asarray(active_pairs)
     pairs = pairs.reshape(-1, 3).astype(np.int64)
     red = ACTIVE_COLOR
@@ -140,42 +167,35 @@ def animate_run(
     theta = None if headings is None else np.asarray(headings, dtype=float)
     hand = None if points is None else np.asarray(points, dtype=float)
     ends = hand if hand is not None else q  # what the edges join
-    noses = LineCollection(list(np.zeros((n, 2, 2))), colors="k", linewidths=1.5, zorder=5)
+    noses = LineCollection(segments(np.zeros((n, 2, 2))), colors="k", linewidths=1.5, zorder=5)
     if theta is not None:
         ax.add_collection(noses)
-    marks = ax.plot([], [], "k+", ms=6, zorder=5)[0] if hand is not None else None
-    graph = LineCollection(
-        list(np.zeros((len(edges), 2, 2))), colors="0.3", linewidths=1.0, zorder=2
-    )
-    ax.add_collection(graph)
-    trails = [ax.plot([], [], color=colors[i], lw=1.0, alpha=0.6, zorder=1)[0] for i in range(n)]
-    discs = [
-        Circle((0.0, 0.0), diameters[i] / 2, color=colors[i], alpha=0.9, zorder=3) for i in range(n)
-    ]
-    for disc in discs:
-        ax.add_patch(disc)
-    labels = [
-        ax.annotate(
-            str(i + 1), (0.0, 0.0), xytext=(4, 4), textcoords="offset points", fontsize=8, zorder=4
-        )
-        for i in range(n)
-    ]
-    clock = ax.set_title("")
+    marks = ax.plot([], [], "k+", ms=3 if many else 6, zorder=5)[0] if hand is not None else None
+    graph = _Lines(ax, len(edges), colors="0.3", linewidth=0.5 if many else 1.0, zorder=2)
     stop_at = np.full(n, np.inf)
     for robot, at in stops:
         stop_at[int(robot)] = float(at)
+    if n > COLLECTION_LIMIT:
+        span = max(float(np.max(hi - lo)) + 2 * pad, 1e-9)
+        points_per_unit = _AXES_SHARE * size * 72.0 / span
+        robots: _Robots = _Points(ax, float(np.mean(diameters)) * points_per_unit, n)
+    elif many:
+        robots = _Collections(ax, diameters, colors)
+    else:
+        robots = _Patches(ax, diameters, colors)
+    clock = ax.set_title("")
 
     def draw(k: int) -> list[Any]:
         idx = frames[k]
         now = q[idx]
         joined = ends[idx]
-        graph.set_segments(list(np.stack([joined[edges[:, 0]], joined[edges[:, 1]]], axis=1)))
+        graph.set(np.stack([joined[edges[:, 0]], joined[edges[:, 1]]], axis=1))
         extra: list[Any] = []
         if theta is not None:
             rim = now + (diameters / 2)[:, None] * np.stack(
                 [np.cos(theta[idx]), np.sin(theta[idx])], axis=-1
             )
-            noses.set_segments(list(np.stack([now, rim], axis=1)))
+            noses.set_segments(segments(np.stack([now, rim], axis=1)))
             extra.append(noses)
         if marks is not None and hand is not None:
             marks.set_data(hand[idx, :, 0], hand[idx, :, 1])
@@ -184,17 +204,147 @@ def animate_run(
         sel = path[(path < idx) & (t[path] >= since)]
         sel = np.append(sel, idx)
         hit = pairs[pairs[:, 0] == idx]
-        constrained.set_segments(list(np.stack([now[hit[:, 1]], now[hit[:, 2]]], axis=1)))
-        for i in range(n):
-            trails[i].set_data(q[sel, i, 0], q[sel, i, 1])
-            discs[i].center = (now[i, 0], now[i, 1])
-            dead = t[idx] >= stop_at[i]
-            discs[i].set_facecolor("0.55" if dead else colors[i])
-            discs[i].set_edgecolor(red if on[idx, i] else "k" if dead else colors[i])
-            discs[i].set_linewidth(2.0 if on[idx, i] or dead else 1.0)
-            labels[i].xy = (now[i, 0], now[i, 1])
+        constrained.set_segments(segments(np.stack([now[hit[:, 1]], now[hit[:, 2]]], axis=1)))
+        dead = t[idx] >= stop_at
+        ring = np.zeros(n, bool) if on is None else on[idx]
+        drawn = robots.draw(q[sel], dead, ring)
         clock.set_text(f"{title + ': ' if title else ''}t = {t[idx]:.2f} s")
-        return [graph, constrained, *trails, *discs, *labels, clock, *extra]
+        return [graph.artist, constrained, *drawn, clock, *extra]
 
     draw(0)
+    # lay the figure out once (the limits are fixed), not at every frame: the constrained
+    # layout measures every tick label each time, about half the cost of a frame
+    fig.draw_without_rendering()
+    fig.set_layout_engine("none")
     return FuncAnimation(fig, draw, frames=len(frames), interval=1000 / fps, blit=False)
+
+
+class _Robots:
+    """How the robots of a frame are drawn: trails, discs (grey once stopped, a red ring
+    with an active safety constraint) and, for few robots, their numbers."""
+
+    def draw(
+        self, trail: NDArray[np.float64], dead: NDArray[np.bool_], ring: NDArray[np.bool_]
+    ) -> list[Any]:
+        """Draw the states ``trail`` ``(k, n, 2)`` (the last one now); returns the artists."""
+        raise NotImplementedError
+
+
+class _Patches(_Robots):
+    """Few robots: a line, a disc patch and a number each."""
+
+    def __init__(self, ax: Axes, diameters: NDArray[np.float64], colors: Any) -> None:
+        n = len(diameters)
+        self.colors = colors
+        self.trails = [
+            ax.plot([], [], color=colors[i], lw=1.0, alpha=0.6, zorder=1)[0] for i in range(n)
+        ]
+        self.discs = [
+            Circle((0.0, 0.0), diameters[i] / 2, color=colors[i], alpha=0.9, zorder=3)
+            for i in range(n)
+        ]
+        for disc in self.discs:
+            ax.add_patch(disc)
+        self.labels = [
+            ax.annotate(
+                str(i + 1), (0.0, 0.0), xytext=(4, 4), textcoords="offset points", fontsize=8,
+                zorder=4,
+            )
+            for i in range(n)
+        ]  # fmt: skip
+
+    def draw(
+        self, trail: NDArray[np.float64], dead: NDArray[np.bool_], ring: NDArray[np.bool_]
+    ) -> list[Any]:
+        now = trail[-1]
+        for i, disc in enumerate(self.discs):
+            self.trails[i].set_data(trail[:, i, 0], trail[:, i, 1])
+            disc.center = (now[i, 0], now[i, 1])
+            disc.set_facecolor("0.55" if dead[i] else self.colors[i])
+            disc.set_edgecolor(ACTIVE_COLOR if ring[i] else "k" if dead[i] else self.colors[i])
+            disc.set_linewidth(2.0 if ring[i] or dead[i] else 1.0)
+            self.labels[i].xy = (now[i, 0], now[i, 1])
+        return [*self.trails, *self.discs, *self.labels]
+
+
+class _Collections(_Robots):
+    """Many robots: one collection of trails, one of discs of their true diameters."""
+
+    def __init__(self, ax: Axes, diameters: NDArray[np.float64], colors: Any) -> None:
+        n = len(diameters)
+        self.colors = np.asarray(colors, dtype=float)
+        self.trails = _Lines(ax, n, colors=self.colors, linewidth=0.5, alpha=0.6, zorder=1)
+        self.discs = draw_discs(
+            ax, np.zeros((n, 2)), diameters, self.colors, alpha=0.9, zorder=3, linewidths=0.0
+        )
+
+    def draw(
+        self, trail: NDArray[np.float64], dead: NDArray[np.bool_], ring: NDArray[np.bool_]
+    ) -> list[Any]:
+        self.trails.set(np.swapaxes(trail, 0, 1))
+        self.discs.set_offsets(trail[-1])
+        if dead.any() or ring.any():
+            face: Any = self.colors.copy()  # (n, 4) RGBA; the stubs say sequence
+            face[dead] = (0.55, 0.55, 0.55, 1.0)
+            edge: Any = self.colors.copy()
+            edge[dead] = (0.0, 0.0, 0.0, 1.0)
+            edge[ring] = to_rgba(ACTIVE_COLOR)
+            self.discs.set_facecolor(face)
+            self.discs.set_edgecolor(edge)
+            widths: Any = np.where(dead | ring, 1.5, 0.0)
+            self.discs.set_linewidth(widths)
+        return [self.trails.artist, self.discs]
+
+
+class _Points(_Robots):
+    """Very many robots: points (markers of about the robots' mean size, at least a point
+    wide) and trails of one colour; stopped robots grey, active constraints red."""
+
+    def __init__(self, ax: Axes, size: float, n: int) -> None:
+        self.trails = _Lines(ax, n, colors=_SWARM, linewidth=0.3, alpha=0.5, zorder=1)
+        style: dict[str, Any] = {"ls": "none", "marker": "o", "ms": max(size, 1.0), "mew": 0.0}
+        style["zorder"] = 3
+        (self.discs,) = ax.plot([], [], color=_SWARM, **style)
+        (self.stopped,) = ax.plot([], [], color="0.55", **style)
+        (self.ringed,) = ax.plot([], [], mfc="none", mec=ACTIVE_COLOR, **{**style, "mew": 1.0})
+
+    def draw(
+        self, trail: NDArray[np.float64], dead: NDArray[np.bool_], ring: NDArray[np.bool_]
+    ) -> list[Any]:
+        now = trail[-1]
+        self.trails.set(np.swapaxes(trail, 0, 1))
+        self.discs.set_data(now[~dead, 0], now[~dead, 1])
+        self.stopped.set_data(now[dead, 0], now[dead, 1])
+        self.ringed.set_data(now[ring, 0], now[ring, 1])
+        return [self.trails.artist, self.discs, self.stopped, self.ringed]
+
+
+#: colour of the robots beyond COLLECTION_LIMIT (one colour: markers draw ~4 times faster)
+_SWARM = "C0"
+#: share of the figure's side the axes take (to size the markers of very many robots)
+_AXES_SHARE = 0.8
+
+
+class _Lines:
+    """``k`` lines updated every frame: a collection (a colour each) up to
+    :data:`~formationlab.plotting.many.COLLECTION_LIMIT`, one broken line beyond."""
+
+    def __init__(self, ax: Axes, k: int, *, colors: Any, **style: Any) -> None:
+        self.broken = k > COLLECTION_LIMIT
+        self.artist: Any
+        if self.broken:
+            first = colors if isinstance(colors, str) else np.asarray(colors).reshape(-1, 4)[0]
+            (self.artist,) = ax.plot([], [], color=first, **style)
+        else:
+            widths = style.pop("linewidth")
+            self.artist = LineCollection(
+                segments(np.zeros((k, 2, 2))), colors=colors, linewidths=widths, **style
+            )
+            ax.add_collection(self.artist)
+
+    def set(self, lines: NDArray[np.float64]) -> None:
+        """Draw the lines ``(k, points, 2)``."""
+        if self.broken:
+            self.artist.set_data(*broken_line(lines))
+        else:
+            self.artist.set_segments(segments(lines))

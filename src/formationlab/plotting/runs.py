@@ -16,7 +16,18 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
+from ..analysis import distance_errors
 from .fonts import displayable, font_context
+from .many import (
+    COLLECTION_LIMIT,
+    LABEL_LIMIT,
+    LINE_LIMIT,
+    draw_bands,
+    draw_discs,
+    draw_lines,
+    draw_paths,
+    segments,
+)
 
 __all__ = [
     "plot_controls",
@@ -28,12 +39,22 @@ __all__ = [
 ]
 
 
-def robot_colors(n: int) -> list[Any]:
-    """One colour per robot (tab10, then a continuous map for larger formations)."""
+#: colour map of robot numbers beyond ten robots
+_CMAP = "viridis"
+
+
+def robot_colors(n: int) -> Any:
+    """One colour per robot (tab10, then a continuous map for larger formations).
+
+    A list of RGBA tuples up to ten robots, an ``(n, 4)`` array beyond (indexable the same
+    way, and what collections take).
+    """
     import matplotlib as mpl
 
-    cmap = mpl.colormaps["tab10" if n <= 10 else "viridis"]
-    return [cmap(i if n <= 10 else i / max(n - 1, 1)) for i in range(n)]
+    if n <= 10:
+        cmap = mpl.colormaps["tab10"]
+        return [cmap(i) for i in range(n)]
+    return mpl.colormaps[_CMAP](np.linspace(0.0, 1.0, n))
 
 
 def _axes(ax: Axes | None, figsize: tuple[float, float] = (6.0, 4.0)) -> Axes:
@@ -45,27 +66,54 @@ def _axes(ax: Axes | None, figsize: tuple[float, float] = (6.0, 4.0)) -> Axes:
     return ax
 
 
-def _draw_graph(ax: Axes, formation: Any, q: np.ndarray, **style: Any) -> LineCollection:
+def _draw_graph(ax: Axes, formation: Any, q: np.ndarray, *, colors: Any, **style: Any) -> Any:
+    """The graph's edges between the points ``q`` ``(n, 2)`` (:func:`draw_lines`)."""
     segs = np.stack([q[formation.edges[:, 0]], q[formation.edges[:, 1]]], axis=1)
-    lc = LineCollection(list(segs), **style)
-    ax.add_collection(lc)
-    return lc
+    return draw_lines(ax, segs, colors, **style)
+
+
+def _legend(ax: Axes) -> None:
+    """The legend: where it hides least of the data, unless the lines have more than
+    :data:`_BEST_LIMIT` points (matplotlib's ``loc="best"`` tests every point: seconds for
+    ten robots over 60,000 saved states), then in the upper right corner."""
+    points = 0
+    for line in ax.get_lines():
+        points += int(np.size(line.get_xdata()))
+    ax.legend(loc="best" if points <= _BEST_LIMIT else "upper right", fontsize="small")
+
+
+#: most points of the lines of a plot for the legend to be placed by matplotlib's "best"
+_BEST_LIMIT = 50_000
 
 
 def _shade_active(ax: Axes, result: Any) -> list[Any]:
-    """Shade the time intervals where some angular restriction is active."""
+    """Shade the time intervals where some angular restriction is active.
+
+    One span per interval up to :data:`_SPANS` intervals; beyond (a run chattering on a
+    surface), one filled area over the samples where a restriction is on.
+    """
     if result.sigma.shape[-1] == 0:
         return []
     on = np.any(result.active, axis=-1)
-    artists = []
     t = result.t
     edges = np.flatnonzero(np.diff(on.astype(int)))
     starts = ([0] if on[0] else []) + [e + 1 for e in edges if not on[e]]
     stops = [e + 1 for e in edges if on[e]] + ([len(t) - 1] if on[-1] else [])
+    if len(starts) > _SPANS:
+        band = ax.fill_between(
+            t, 0, 1, where=on, color="0.85", lw=0, zorder=0, step="post",
+            transform=ax.get_xaxis_transform(), label="restriction active",
+        )  # fmt: skip
+        return [band]
+    artists = []
     for k, (a, b) in enumerate(zip(starts, stops, strict=False)):
         label = "restriction active" if k == 0 else None
         artists.append(ax.axvspan(t[a], t[b], color="0.85", zorder=0, label=label))
     return artists
+
+
+#: most intervals shaded one by one (see _shade_active)
+_SPANS = 50
 
 
 def plot_trajectories(
@@ -76,35 +124,47 @@ def plot_trajectories(
     The graph's edges are drawn dashed at the start and solid at the end, between
     the law's points (the hand points of near-identity unicycles, drawn as
     crosses). Unicycles show their final heading as a line from the centre to the rim.
+    Up to :data:`~formationlab.plotting.many.LABEL_LIMIT` robots each has a legend entry
+    and its number; beyond, the robots are coloured by number with a colour bar, and
+    every kind of mark is one collection (:mod:`formationlab.plotting.many`).
     """
     ax = _axes(ax, (5.5, 5.5))
     f = result.formation
     q = result.q
     p = getattr(result, "points", q)
+    many = f.n > LABEL_LIMIT
     colors = robot_colors(f.n)
+    thin = 0.3 if f.n > COLLECTION_LIMIT else 0.8
     artists: list[Any] = []
     if show_graph:
-        artists.append(_draw_graph(ax, f, p[0], colors="0.6", linestyles="--", linewidths=0.8))
-        artists.append(_draw_graph(ax, f, p[-1], colors="0.2", linewidths=1.2))
-    if p is not q and not np.array_equal(p, q):
-        artists.append(ax.plot(p[-1, :, 0], p[-1, :, 1], "k+", ms=7, zorder=5)[0])
+        artists.append(_draw_graph(ax, f, p[0], colors="0.6", linestyles="--", linewidths=thin))
+        artists.append(_draw_graph(ax, f, p[-1], colors="0.2", linewidths=1.5 * thin))
+    if p is not q and not np.array_equal(p[-1], q[-1]):
+        artists.append(ax.plot(p[-1, :, 0], p[-1, :, 1], "k+", ms=3 if many else 7, zorder=5)[0])
     headings = getattr(result, "headings", None)
     if headings is not None:
         h = np.stack([np.cos(headings[-1]), np.sin(headings[-1])], axis=-1)
         rim = q[-1] + (f.diameters / 2)[:, None] * h
         artists.append(
             ax.add_collection(
-                LineCollection(list(np.stack([q[-1], rim], axis=1)), colors="k", zorder=5)
+                LineCollection(segments(np.stack([q[-1], rim], axis=1)), colors="k", zorder=5)
             )
         )
-    for i in range(f.n):
-        (line,) = ax.plot(q[:, i, 0], q[:, i, 1], color=colors[i], lw=1.4, label=f"robot {i + 1}")
-        artists.append(line)
-        artists.append(ax.plot(q[0, i, 0], q[0, i, 1], "o", mfc="none", mec=colors[i], ms=8)[0])
-        disc = Circle(tuple(q[-1, i]), f.diameters[i] / 2, color=colors[i], alpha=0.8, zorder=3)
-        ax.add_patch(disc)
-        artists.append(disc)
-        artists.append(ax.annotate(str(i + 1), q[0, i], xytext=(5, 5), textcoords="offset points"))
+    if many:
+        artists += _many_robots(ax, result, colors)
+    else:
+        for i in range(f.n):
+            (line,) = ax.plot(
+                q[:, i, 0], q[:, i, 1], color=colors[i], lw=1.4, label=f"robot {i + 1}"
+            )
+            artists.append(line)
+            artists.append(ax.plot(q[0, i, 0], q[0, i, 1], "o", mfc="none", mec=colors[i], ms=8)[0])
+            disc = Circle(tuple(q[-1, i]), f.diameters[i] / 2, color=colors[i], alpha=0.8, zorder=3)
+            ax.add_patch(disc)
+            artists.append(disc)
+            artists.append(
+                ax.annotate(str(i + 1), q[0, i], xytext=(5, 5), textcoords="offset points")
+            )
     if getattr(result, "safety", None) is not None:
         from .safety import draw_safety
 
@@ -124,28 +184,73 @@ def plot_trajectories(
     ax.set_ylabel("y")
     model = getattr(result, "model", None)
     on = "" if model is None or model.name == "single-integrator" else f", {model.name}"
-    ax.set_title(title or f"trajectories ({result.law.name} law{on})")
-    ax.legend(loc="best", fontsize="small")
+    robots = f", {f.n:,} robots" if many else ""
+    ax.set_title(title or f"trajectories ({result.law.name} law{on}{robots})")
+    if not many or ax.get_legend_handles_labels()[0]:
+        _legend(ax)
     ax.autoscale_view()
     return artists
+
+
+def _many_robots(ax: Axes, result: Any, colors: Any) -> list[Any]:
+    """Paths, starts and final positions, one collection each.
+
+    Up to :data:`~formationlab.plotting.many.COLLECTION_LIMIT` robots each has its colour
+    (a colour bar of robot numbers) and its final disc at true size; beyond, paths in grey
+    and the robots as points of one colour (a collection of 100,000 coloured discs takes
+    seconds to draw, and would show no more at this size).
+    """
+    import matplotlib as mpl
+
+    f, q = result.formation, result.q
+    if f.n > COLLECTION_LIMIT:
+        return [
+            draw_paths(ax, result.t, q, "0.5", linewidths=0.3, alpha=0.8, zorder=1),
+            *ax.plot(*q[0].T, ls="none", marker="o", ms=1.5, mfc="none", mec="0.5", mew=0.3,
+                     zorder=2),
+            *ax.plot(*q[-1].T, ls="none", marker="o", ms=1.5, mew=0.0, color="C0", zorder=3),
+        ]  # fmt: skip
+    artists: list[Any] = [
+        draw_paths(ax, result.t, q, colors, linewidths=0.8, alpha=0.8, zorder=1),
+        ax.scatter(q[0, :, 0], q[0, :, 1], s=8.0, facecolors="none", edgecolors=colors,
+                   linewidths=0.5, zorder=2),
+        draw_discs(ax, q[-1], f.diameters, colors, alpha=0.8, zorder=3),
+    ]  # fmt: skip
+    ax.update_datalim(np.concatenate([q[0], q[-1]]))
+    norm = mpl.colors.Normalize(1, f.n)
+    bar = ax.figure.colorbar(  # type: ignore[union-attr]
+        mpl.cm.ScalarMappable(norm=norm, cmap=_CMAP), ax=ax, shrink=0.8, pad=0.02
+    )
+    bar.set_label("robot")
+    return [*artists, bar]
 
 
 def plot_controls(
     result: Any, ax: Axes | None = None, *, axis: int = 0, title: str | None = None
 ) -> list[Any]:
-    """Control actions (robot velocities) along x (``axis=0``) or y (``axis=1``) over time."""
+    """Control actions (robot velocities) along x (``axis=0``) or y (``axis=1``) over time.
+
+    One line per robot up to :data:`~formationlab.plotting.many.LINE_LIMIT` robots (a
+    legend up to ``LABEL_LIMIT``); beyond, bands of their distribution over the robots.
+    """
     ax = _axes(ax)
-    colors = robot_colors(result.formation.n)
+    n = result.formation.n
+    colors = robot_colors(n)
     name = "xy"[axis]
     artists = _shade_active(ax, result)
-    for i in range(result.formation.n):
-        artists += ax.plot(
-            result.t, result.u[:, i, axis], color=colors[i], label=f"$u_{{{i + 1}{name}}}$"
-        )
+    if n > LINE_LIMIT:
+        u = result.u
+        artists += draw_bands(ax, result.t, lambda rows: u[rows, :, axis], width=n, of="robots")
+    else:
+        for i in range(n):
+            artists += ax.plot(
+                result.t, result.u[:, i, axis], color=colors[i], label=f"$u_{{{i + 1}{name}}}$"
+            )
     ax.set_xlabel("time [s]")
     ax.set_ylabel(f"velocity in {name}")
     ax.set_title(title or f"control actions in {name}")
-    ax.legend(loc="best", fontsize="small")
+    if n <= LABEL_LIMIT or n > LINE_LIMIT:
+        _legend(ax)
     return artists
 
 
@@ -163,26 +268,54 @@ def plot_lyapunov(
     ax.set_xlabel("time [s]")
     ax.set_ylabel("Lyapunov function")
     ax.set_title(title or "Lyapunov function")
-    ax.legend(loc="best", fontsize="small")
+    _legend(ax)
     return artists
 
 
 def plot_distance_errors(
     result: Any, ax: Axes | None = None, *, title: str | None = None
 ) -> list[Any]:
-    """Inter-robot distance errors ``r_ij - d_ij`` per edge over time."""
+    """Inter-robot distance errors ``r_ij - d_ij`` per edge over time.
+
+    One line per edge up to :data:`~formationlab.plotting.many.LINE_LIMIT` edges (a
+    legend up to ``LABEL_LIMIT``); beyond, bands of their distribution over the edges,
+    evaluated at the plotted times only.
+    """
     ax = _axes(ax)
     artists = _shade_active(ax, result)
-    err = result.distance_errors
-    for e, lab in enumerate(result.edge_labels):
-        artists += ax.plot(result.t, err[:, e], label=f"$r_{{{lab.replace('-', '')}}} - d$")
+    m = len(result.formation.edges)
+    if m > LINE_LIMIT:
+        f, p = result.formation, getattr(result, "points", result.q)
+        artists += draw_bands(
+            ax,
+            result.t,
+            lambda rows: distance_errors(f, p[rows]),
+            width=m,
+            of="edges",
+            color="C3",
+        )
+    else:
+        err = result.distance_errors
+        for e, lab in enumerate(result.edge_labels):
+            artists += ax.plot(result.t, err[:, e], label=f"$r_{{{lab.replace('-', '')}}} - d$")
     ax.axhline(0.0, color="0.5", lw=0.6)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("distance error")
     ax.set_title(title or "inter-robot distance errors")
-    if len(result.edge_labels) <= 12:
-        ax.legend(loc="best", fontsize="small")
+    if m <= LABEL_LIMIT or m > LINE_LIMIT:
+        _legend(ax)
     return artists
+
+
+def _prefixed(prefix: str, title: str) -> str:
+    """``"name: title"``, on two lines when longer than :data:`_TITLE_CHARACTERS` (the
+    figures are saved at their size, so a longer line would be cut)."""
+    one = f"{prefix}: {title}"
+    return one if len(one) <= _TITLE_CHARACTERS else f"{prefix}:\n{title}"
+
+
+#: most characters of a one-line title of a run's figure (about the width of 5.5 inches)
+_TITLE_CHARACTERS = 55
 
 
 def run_figures(result: Any, *, prefix: str = "") -> dict[str, Figure]:
@@ -206,7 +339,7 @@ def run_figures(result: Any, *, prefix: str = "") -> dict[str, Figure]:
             ax = fig.add_subplot()
             fn(result, ax=ax, **kw)
             if prefix:
-                ax.set_title(f"{displayable(prefix)}: {ax.get_title()}")
+                ax.set_title(_prefixed(displayable(prefix), ax.get_title()), wrap=True)
         out[name] = fig
     if getattr(result, "safety", None) is not None:
         from .safety import plot_filter_activity
@@ -215,6 +348,6 @@ def run_figures(result: Any, *, prefix: str = "") -> dict[str, Figure]:
         top, bottom = fig.subplots(2, 1, sharex=True)
         plot_filter_activity(result, ax=top, ax_distance=bottom)
         if prefix:
-            top.set_title(f"{prefix}: {top.get_title()}")
+            top.set_title(_prefixed(displayable(prefix), top.get_title()), wrap=True)
         out["safety"] = fig
     return out

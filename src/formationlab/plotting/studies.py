@@ -8,14 +8,16 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
+
+if TYPE_CHECKING:  # pandas only names the type of a study's table (importing it costs ~1 s)
+    import pandas as pd
 
 __all__ = [
     "OUTCOME_COLORS",
