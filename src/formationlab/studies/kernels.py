@@ -51,6 +51,7 @@ from numba import njit, prange
 
 from ..controllers.terms import LOG_BARRIER
 from ..status import Status
+from .kernel_trig import SMALL_TURN, atan2_poly, turn_small
 from .model_terms import DOUBLE, HEADING, NEAR_IDENTITY, SINGLE
 
 __all__ = ["run_chunks"]
@@ -226,16 +227,40 @@ def _contact(x, xp, disp, gap, swept, near, nact, terms):
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
 def _headings(x, h, nact):
-    """``h = (cos theta, sin theta)`` of every robot of the first ``nact`` trials.
-
-    Once per step: :func:`_points` and :func:`_rates` read them, and their own loops,
-    free of library calls, are vectorised.
-    """
+    """``h = (cos theta, sin theta)`` of every robot of the first ``nact`` trials (library)."""
     for i in range(x.shape[0]):
         for b in range(nact):
             th = x[i, 2, b]
             h[i, 0, b] = math.cos(th)
             h[i, 1, b] = math.sin(th)
+            h[i, 2, b] = 0.0  # what rounding left out of each (_turn)
+            h[i, 3, b] = 0.0
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def _turn(x, xp, h, wide, nact):
+    """Carry the headings ``h`` of the states stepped from by ``dt f`` to the states ``x``.
+
+    ``h`` turns by each robot's Euler angle ``dt omega`` (:func:`.kernel_trig.turn_small`,
+    no library call, vectorised); the robots of the trials with a wider turn
+    (``wide``, rare) take the library's ``cos`` and ``sin`` of their new heading.
+    """
+    for b in range(nact):
+        wide[b] = 0.0
+    for i in range(x.shape[0]):
+        for b in range(nact):
+            a = x[i, 2, b] - xp[i, 2, b]  # the step's turn: exact (Sterbenz) but near 0
+            h[i, 0, b], h[i, 1, b], h[i, 2, b], h[i, 3, b] = turn_small(
+                h[i, 0, b], h[i, 1, b], h[i, 2, b], h[i, 3, b], a
+            )
+            wide[b] = wide[b] if abs(a) <= SMALL_TURN else 1.0
+    for b in range(nact):
+        if wide[b] != 0.0:
+            for i in range(x.shape[0]):
+                h[i, 0, b] = math.cos(x[i, 2, b])
+                h[i, 1, b] = math.sin(x[i, 2, b])
+                h[i, 2, b] = 0.0
+                h[i, 3, b] = 0.0
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
@@ -315,19 +340,20 @@ def _rates(x, h, u, f, nact, model):
     else:  # the Robotarium's si_to_uni (HeadingTransform)
         kv = model.linear_gain
         kw = model.turn_gain
+        back = model.backwards
         for i in range(n):
             for b in range(nact):
                 c = h[i, 0, b]
                 sn = h[i, 1, b]
                 along = c * u[i, 0, b] + sn * u[i, 1, b]
                 across = -sn * u[i, 0, b] + c * u[i, 1, b]
-                if model.backwards:
-                    if along == 0.0:
-                        turn = math.copysign(0.5 * math.pi, across) if across != 0 else 0.0
-                    else:
-                        turn = math.atan(across / along)
+                if back:  # atan(across / along), +-pi/2 (0 if across is 0) where along is 0
+                    level = along == 0.0
+                    turn = atan2_poly(across / (1.0 if level else along), 1.0)
+                    edge = math.copysign(0.5 * math.pi, across) if across != 0.0 else 0.0
+                    turn = edge if level else turn
                 else:
-                    turn = math.atan2(across, along)
+                    turn = atan2_poly(across, along)
                 v, w = kv * along, kw * turn / (math.pi / 2)
                 if limited:
                     v, w = _limit_unicycle(v, w, vmax, wmax)
@@ -369,7 +395,8 @@ def _run_chunk(
     fp = np.empty((n, k, m))
     u = np.empty((n, 2, m))
     p = np.empty((n, 2, m) if hand else (1, 2, 1))  # hand points
-    h = np.empty((n, 2, m) if turns else (1, 2, 1))  # (cos theta, sin theta) at x
+    h = np.empty((n, 4, m) if turns else (1, 4, 1))  # (cos theta, sin theta) at x, 2 parts
+    wide = np.empty(m)  # 1: a robot turned by more than SMALL_TURN in the last step
     ids = np.arange(start, stop)
     mc = np.full(m, np.inf)  # least clearance over accepted states
     gap = np.empty(m)  # clearance of the current state
@@ -390,9 +417,9 @@ def _run_chunk(
     nact = m
     step = 0
     kc = -1  # step of the previous check (the same for every live trial)
+    if turns:  # then carried from step to step (_turn)
+        _headings(x, h, nact)
     while nact > 0:
-        if turns:
-            _headings(x, h, nact)
         if hand:
             _points(x, h, p, nact, model)
             _controls(p, u, sigma, nact, terms)
@@ -475,6 +502,9 @@ def _run_chunk(
                             f[i, d, b] = f[i, d, last]
                         for d in range(2):
                             qc[i, d, b] = qc[i, d, last]
+                        if turns:
+                            for d in range(4):
+                                h[i, d, b] = h[i, d, last]
                     ids[b] = ids[last]
                     mc[b] = mc[last]
                     ns[b] = ns[last]
@@ -503,6 +533,8 @@ def _run_chunk(
                     fin[b] += z * 0.0
         for b in range(nact):
             disp[b] = math.sqrt(disp[b])
+        if turns:
+            _turn(xp, x, h, wide, nact)
         x, xp = xp, x
         f, fp = fp, f
         step += 1
