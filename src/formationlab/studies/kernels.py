@@ -226,51 +226,57 @@ def _contact(x, xp, disp, gap, swept, near, nact, terms):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _headings(x, h, nact):
-    """``h = (cos theta, sin theta)`` of every robot of the first ``nact`` trials (library)."""
+def _headings(x, hc, hs, hcl, hsl, nact):
+    """``hc, hs = cos theta, sin theta`` ``(n, C)`` of the first ``nact`` trials (library).
+
+    ``hcl``, ``hsl``: what rounding left out of them, taken as 0 here (:func:`_turn`).
+    """
     for i in range(x.shape[0]):
         for b in range(nact):
             th = x[i, 2, b]
-            h[i, 0, b] = math.cos(th)
-            h[i, 1, b] = math.sin(th)
-            h[i, 2, b] = 0.0  # what rounding left out of each (_turn)
-            h[i, 3, b] = 0.0
+            hc[i, b] = math.cos(th)
+            hs[i, b] = math.sin(th)
+            hcl[i, b] = 0.0
+            hsl[i, b] = 0.0
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _turn(x, xp, h, wide, nact):
-    """Carry the headings ``h`` of the states stepped from by ``dt f`` to the states ``x``.
+def _turn(x, xp, hc, hs, hcl, hsl, wide, nact):
+    """Carry the headings of the states ``xp`` to the states ``x`` one Euler step later.
 
-    ``h`` turns by each robot's Euler angle ``dt omega`` (:func:`.kernel_trig.turn_small`,
-    no library call, vectorised); the robots of the trials with a wider turn
-    (``wide``, rare) take the library's ``cos`` and ``sin`` of their new heading.
+    Each heading turns by its step's angle ``x_theta - xp_theta`` (exact: the two are
+    within a factor 2 but near 0, where the error is below 1e-300) with
+    :func:`.kernel_trig.turn_small` (no library call, vectorised); the trials with a robot
+    that turned by more than ``SMALL_TURN`` (``wide``, rare) take the library's ``cos``
+    and ``sin`` of their new headings. The four parts are four arrays: two rows of one
+    array, read and written in one loop, keep the compiler from vectorising it.
     """
     for b in range(nact):
         wide[b] = 0.0
     for i in range(x.shape[0]):
         for b in range(nact):
-            a = x[i, 2, b] - xp[i, 2, b]  # the step's turn: exact (Sterbenz) but near 0
-            h[i, 0, b], h[i, 1, b], h[i, 2, b], h[i, 3, b] = turn_small(
-                h[i, 0, b], h[i, 1, b], h[i, 2, b], h[i, 3, b], a
+            a = x[i, 2, b] - xp[i, 2, b]
+            hc[i, b], hs[i, b], hcl[i, b], hsl[i, b] = turn_small(
+                hc[i, b], hs[i, b], hcl[i, b], hsl[i, b], a
             )
             wide[b] = wide[b] if abs(a) <= SMALL_TURN else 1.0
     for b in range(nact):
         if wide[b] != 0.0:
             for i in range(x.shape[0]):
-                h[i, 0, b] = math.cos(x[i, 2, b])
-                h[i, 1, b] = math.sin(x[i, 2, b])
-                h[i, 2, b] = 0.0
-                h[i, 3, b] = 0.0
+                hc[i, b] = math.cos(x[i, 2, b])
+                hs[i, b] = math.sin(x[i, 2, b])
+                hcl[i, b] = 0.0
+                hsl[i, b] = 0.0
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _points(x, h, p, nact, model):
-    """Near-identity hand points ``p = q + l h`` (``Unicycle.points``); ``h``: :func:`_headings`."""
+def _points(x, hc, hs, p, nact, model):
+    """Near-identity hand points ``p = q + l h`` (``Unicycle.points``); ``h``: :func:`_turn`."""
     ell = model.offset
     for i in range(x.shape[0]):
         for b in range(nact):
-            p[i, 0, b] = x[i, 0, b] + ell * h[i, 0, b]
-            p[i, 1, b] = x[i, 1, b] + ell * h[i, 1, b]
+            p[i, 0, b] = x[i, 0, b] + ell * hc[i, b]
+            p[i, 1, b] = x[i, 1, b] + ell * hs[i, b]
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
@@ -285,10 +291,10 @@ def _limit_unicycle(v, w, vmax, wmax):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _rates(x, h, u, f, nact, model):
+def _rates(x, hc, hs, u, f, nact, model):
     """``f = x_dot`` from the law's controls ``u`` (``RobotModel.derivative``, with limits).
 
-    ``h``: the unicycles' headings ``(cos theta, sin theta)`` (:func:`_headings`).
+    ``hc``, ``hs``: the unicycles' ``cos theta`` and ``sin theta`` ``(n, C)`` (:func:`_turn`).
     """
     n = x.shape[0]
     vmax = model.max_speed
@@ -327,8 +333,8 @@ def _rates(x, h, u, f, nact, model):
         ell = model.offset
         for i in range(n):
             for b in range(nact):
-                c = h[i, 0, b]
-                sn = h[i, 1, b]
+                c = hc[i, b]
+                sn = hs[i, b]
                 along = c * u[i, 0, b] + sn * u[i, 1, b]
                 across = -sn * u[i, 0, b] + c * u[i, 1, b]
                 v, w = along, across / ell
@@ -341,20 +347,27 @@ def _rates(x, h, u, f, nact, model):
         kv = model.linear_gain
         kw = model.turn_gain
         back = model.backwards
+        # two passes: the angle to u in f's third row first (one row stored: the compiler
+        # vectorises the loop, which stores to several rows of one array it does not)
         for i in range(n):
             for b in range(nact):
-                c = h[i, 0, b]
-                sn = h[i, 1, b]
+                c = hc[i, b]
+                sn = hs[i, b]
                 along = c * u[i, 0, b] + sn * u[i, 1, b]
                 across = -sn * u[i, 0, b] + c * u[i, 1, b]
                 if back:  # atan(across / along), +-pi/2 (0 if across is 0) where along is 0
                     level = along == 0.0
                     turn = atan2_poly(across / (1.0 if level else along), 1.0)
                     edge = math.copysign(0.5 * math.pi, across) if across != 0.0 else 0.0
-                    turn = edge if level else turn
+                    f[i, 2, b] = edge if level else turn
                 else:
-                    turn = atan2_poly(across, along)
-                v, w = kv * along, kw * turn / (math.pi / 2)
+                    f[i, 2, b] = atan2_poly(across, along)
+        for i in range(n):
+            for b in range(nact):
+                c = hc[i, b]
+                sn = hs[i, b]
+                along = c * u[i, 0, b] + sn * u[i, 1, b]
+                v, w = kv * along, kw * f[i, 2, b] / (math.pi / 2)
                 if limited:
                     v, w = _limit_unicycle(v, w, vmax, wmax)
                 f[i, 0, b] = v * c
@@ -395,7 +408,12 @@ def _run_chunk(
     fp = np.empty((n, k, m))
     u = np.empty((n, 2, m))
     p = np.empty((n, 2, m) if hand else (1, 2, 1))  # hand points
-    h = np.empty((n, 4, m) if turns else (1, 4, 1))  # (cos theta, sin theta) at x, 2 parts
+    # cos theta, sin theta at x, and what rounding left out of them (_turn)
+    hshape = (n, m) if turns else (1, 1)
+    hc = np.empty(hshape)
+    hs = np.empty(hshape)
+    hcl = np.empty(hshape)
+    hsl = np.empty(hshape)
     wide = np.empty(m)  # 1: a robot turned by more than SMALL_TURN in the last step
     ids = np.arange(start, stop)
     mc = np.full(m, np.inf)  # least clearance over accepted states
@@ -418,15 +436,15 @@ def _run_chunk(
     step = 0
     kc = -1  # step of the previous check (the same for every live trial)
     if turns:  # then carried from step to step (_turn)
-        _headings(x, h, nact)
+        _headings(x, hc, hs, hcl, hsl, nact)
     while nact > 0:
         if hand:
-            _points(x, h, p, nact, model)
+            _points(x, hc, hs, p, nact, model)
             _controls(p, u, sigma, nact, terms)
         else:
             _controls(x, u, sigma, nact, terms)
         _contact(x, xp, disp, gap, swept, near, nact, terms)
-        _rates(x, h, u, f, nact, model)
+        _rates(x, hc, hs, u, f, nact, model)
         stopping = 0
         if step > 0:  # reject the step that led here (System.step_verdict)
             for b in range(nact):
@@ -503,8 +521,10 @@ def _run_chunk(
                         for d in range(2):
                             qc[i, d, b] = qc[i, d, last]
                         if turns:
-                            for d in range(4):
-                                h[i, d, b] = h[i, d, last]
+                            hc[i, b] = hc[i, last]
+                            hs[i, b] = hs[i, last]
+                            hcl[i, b] = hcl[i, last]
+                            hsl[i, b] = hsl[i, last]
                     ids[b] = ids[last]
                     mc[b] = mc[last]
                     ns[b] = ns[last]
@@ -534,7 +554,7 @@ def _run_chunk(
         for b in range(nact):
             disp[b] = math.sqrt(disp[b])
         if turns:
-            _turn(xp, x, h, wide, nact)
+            _turn(xp, x, hc, hs, hcl, hsl, wide, nact)
         x, xp = xp, x
         f, fp = fp, f
         step += 1
