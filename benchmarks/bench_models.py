@@ -6,19 +6,16 @@ triangle (simulation 2's alpha table, k_c = 2, k_a = 3, theta = 0.5) and the squ
 with both diagonals, explicit Euler dt = 1e-3, early stopping switched off (every trial
 runs every step), box starts in [-3, 3]^2 (unicycles: headings uniform on the circle),
 the same starts for every model. The kernel (``kernels.run_chunks``, as ``run_batch``
-calls it) runs on one thread, so that a cost is CPU time per trial-step; the rounds
-interleave the models, each figure is the best of the rounds, and the reference (single
-integrators) is measured in the same rounds. "met" / "NOT met" is each model's ratio
-against the target.
+calls it) runs on one thread and is timed in CPU time of the process
+(``time.process_time``), so that a cost is CPU time per trial-step and waiting for a
+shared core is not counted; the rounds interleave the models, each figure is the best of
+the rounds, and the reference (single integrators) is measured in the same rounds.
+"met" / "NOT met" is each model's ratio against the target.
 
-Where a unicycle's cost goes: it makes one ``sincos`` call of the C library per robot and
-step (``math.cos`` and ``math.sin`` of one heading, merged by the compiler), the heading
-transform also one ``atan2``; a call keeps its loop from being vectorised, the kernel's
-other loops are. Column "bare": the unicycle's ratio in the same kernel with the calls
-replaced by stand-ins of a dozen vectorised operations (:func:`kernel_without_library`);
-"calls": the ratio minus "bare", a lower bound of what the library calls cost (the
-stand-ins' arithmetic is in "bare"). Also printed: one call's cost, in a loop like the
-kernel's over the arguments the model's calls get at its start and at its end (mean).
+A unicycle's step calls no library function in its loops over trials (its headings are
+carried from step to step and the heading transform's ``atan2`` is a rational
+approximation, :mod:`formationlab.studies.kernel_trig`); what it costs beyond a single
+integrator is the third state column, the hand points or the angle, and the limits.
 
 Run ``python benchmarks/bench_models.py`` (``--quick`` for a smaller run, ``--rounds N``).
 The load average is printed: on a shared machine absolute figures drift with it, the

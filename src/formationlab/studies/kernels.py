@@ -21,13 +21,17 @@ The robot model enters as a :class:`~formationlab.studies.model_terms.ModelTerms
 (single integrators, unicycles through either transform, double integrators,
 each with its limits): :func:`_points` gives the points the law acts on,
 :func:`_rates` the state's rate from the law's control (``RobotModel.derivative``),
-:func:`_speed` the stop rule's speed (``RobotModel.speed``). A unicycle's
-``cos theta`` and ``sin theta`` are evaluated once per robot and step
-(:func:`_headings`) and read by the other two, whose loops then call no library function
-(the heading transform's ``atan2`` remains): a library call, or a branch that calls,
-keeps a loop from being vectorised. So the law's loops (:func:`_controls`) compute the
-control only, and contact is decided apart, on the centres, for every model
-(:func:`_contact`; near-identity unicycles' law acts on the hand points).
+:func:`_speed` the stop rule's speed (``RobotModel.speed``). No loop over trials calls
+the C library in a unicycle's step (a call, or a branch that calls, keeps a loop from
+being vectorised; :mod:`.kernel_trig`): each unicycle's ``cos theta`` and ``sin theta``
+are taken from the library once, at the start, and then carried from step to step
+(:func:`_turn`), turned by each Euler step's angle with a short series and an exact sum
+(the library again only for a turn above ``SMALL_TURN`` in one step), and the heading
+transform's ``atan2`` is a branch-free rational approximation; both are within about an
+ulp of the library's values, so the trials still agree with the driver to rounding. So
+the law's loops (:func:`_controls`) compute the control only, and contact is decided
+apart, on the centres, for every model (:func:`_contact`; near-identity unicycles' law
+acts on the hand points).
 
 The step rule is the one of :meth:`formationlab.dynamics.System.step_verdict`:
 a step is rejected when it is not finite, when it ends with a pair in contact
@@ -37,9 +41,10 @@ whose end clearance is below twice the largest displacement of the step
 (farther pairs cannot have met during it).
 
 What a trial-step costs, per model: ``benchmarks/bench_models.py`` and
-docs/robot-models.md. The unicycle's floor is the C library's ``sincos`` (and the
-heading transform's ``atan2``) per robot and step: vectorised versions equal to it bit
-for bit are not to be had here (``benchmarks/bench_trig.py``).
+docs/robot-models.md. A loop that stores to several rows of one array (``f[i, 0, b]``,
+``f[i, 1, b]``, ...) is not vectorised by the compiler, one that stores to one row or to
+separate arrays is: so the unicycle's carried headings are four arrays and the heading
+transform computes its angle in a pass of its own.
 """
 
 from __future__ import annotations
@@ -291,10 +296,11 @@ def _limit_unicycle(v, w, vmax, wmax):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _rates(x, hc, hs, u, f, nact, model):
+def _rates(x, hc, hs, u, f, vel, nact, model):
     """``f = x_dot`` from the law's controls ``u`` (``RobotModel.derivative``, with limits).
 
-    ``hc``, ``hs``: the unicycles' ``cos theta`` and ``sin theta`` ``(n, C)`` (:func:`_turn`).
+    ``hc``, ``hs``: the unicycles' ``cos theta`` and ``sin theta`` ``(n, C)`` (:func:`_turn`);
+    ``vel`` ``(C,)``: room for their speeds.
     """
     n = x.shape[0]
     vmax = model.max_speed
@@ -329,50 +335,48 @@ def _rates(x, hc, hs, u, f, nact, model):
                 f[i, 1, b] = wy * s
                 f[i, 2, b] = ax
                 f[i, 3, b] = ay
-    elif model.kind == NEAR_IDENTITY:  # v = u . h, omega = u . h_perp / l (NearIdentity)
+    else:  # unicycles: per robot the speed (in `vel`) and the turn rate (f's third row),
+        # then the velocity: a loop that stores to one row of f and to another array is
+        # vectorised, one that stores to several rows of f is not
         ell = model.offset
-        for i in range(n):
-            for b in range(nact):
-                c = hc[i, b]
-                sn = hs[i, b]
-                along = c * u[i, 0, b] + sn * u[i, 1, b]
-                across = -sn * u[i, 0, b] + c * u[i, 1, b]
-                v, w = along, across / ell
-                if limited:
-                    v, w = _limit_unicycle(v, w, vmax, wmax)
-                f[i, 0, b] = v * c
-                f[i, 1, b] = v * sn
-                f[i, 2, b] = w
-    else:  # the Robotarium's si_to_uni (HeadingTransform)
         kv = model.linear_gain
         kw = model.turn_gain
         back = model.backwards
-        # two passes: the angle to u in f's third row first (one row stored: the compiler
-        # vectorises the loop, which stores to several rows of one array it does not)
         for i in range(n):
+            if model.kind == NEAR_IDENTITY:  # v = u . h, omega = u . h_perp / l (NearIdentity)
+                for b in range(nact):
+                    c = hc[i, b]
+                    sn = hs[i, b]
+                    along = c * u[i, 0, b] + sn * u[i, 1, b]
+                    across = -sn * u[i, 0, b] + c * u[i, 1, b]
+                    v, w = along, across / ell
+                    if limited:
+                        v, w = _limit_unicycle(v, w, vmax, wmax)
+                    vel[b] = v
+                    f[i, 2, b] = w
+            else:  # the Robotarium's si_to_uni (HeadingTransform): the angle to u first
+                for b in range(nact):
+                    c = hc[i, b]
+                    sn = hs[i, b]
+                    along = c * u[i, 0, b] + sn * u[i, 1, b]
+                    across = -sn * u[i, 0, b] + c * u[i, 1, b]
+                    if back:  # atan(across / along); +-pi/2 (0 if across is 0) where along is 0
+                        level = along == 0.0
+                        turn = atan2_poly(across / (1.0 if level else along), 1.0)
+                        edge = math.copysign(0.5 * math.pi, across) if across != 0.0 else 0.0
+                        f[i, 2, b] = edge if level else turn
+                    else:
+                        f[i, 2, b] = atan2_poly(across, along)
+                for b in range(nact):
+                    along = hc[i, b] * u[i, 0, b] + hs[i, b] * u[i, 1, b]
+                    v, w = kv * along, kw * f[i, 2, b] / (math.pi / 2)
+                    if limited:
+                        v, w = _limit_unicycle(v, w, vmax, wmax)
+                    vel[b] = v
+                    f[i, 2, b] = w
             for b in range(nact):
-                c = hc[i, b]
-                sn = hs[i, b]
-                along = c * u[i, 0, b] + sn * u[i, 1, b]
-                across = -sn * u[i, 0, b] + c * u[i, 1, b]
-                if back:  # atan(across / along), +-pi/2 (0 if across is 0) where along is 0
-                    level = along == 0.0
-                    turn = atan2_poly(across / (1.0 if level else along), 1.0)
-                    edge = math.copysign(0.5 * math.pi, across) if across != 0.0 else 0.0
-                    f[i, 2, b] = edge if level else turn
-                else:
-                    f[i, 2, b] = atan2_poly(across, along)
-        for i in range(n):
-            for b in range(nact):
-                c = hc[i, b]
-                sn = hs[i, b]
-                along = c * u[i, 0, b] + sn * u[i, 1, b]
-                v, w = kv * along, kw * f[i, 2, b] / (math.pi / 2)
-                if limited:
-                    v, w = _limit_unicycle(v, w, vmax, wmax)
-                f[i, 0, b] = v * c
-                f[i, 1, b] = v * sn
-                f[i, 2, b] = w
+                f[i, 0, b] = vel[b] * hc[i, b]
+                f[i, 1, b] = vel[b] * hs[i, b]
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
@@ -421,7 +425,7 @@ def _run_chunk(
     swept = np.empty(m)  # least clearance along the step to the current state
     near = np.empty(m)  # 1: a pair may have met during the step to the current state
     disp = np.zeros(m)  # largest displacement of the step to the current state
-    sigma = np.empty(m)  # switching function of one surface
+    sigma = np.empty(m)  # switching function of one surface (_rates: unicycle speeds)
     fin = np.zeros(m)  # 0 while the last Euler step was finite
     code = np.full(m, -1, dtype=np.int8)  # -1: still running
     qc = np.empty((n, 2, m))  # positions at the previous convergence check
@@ -444,7 +448,7 @@ def _run_chunk(
         else:
             _controls(x, u, sigma, nact, terms)
         _contact(x, xp, disp, gap, swept, near, nact, terms)
-        _rates(x, hc, hs, u, f, nact, model)
+        _rates(x, hc, hs, u, f, sigma, nact, model)
         stopping = 0
         if step > 0:  # reject the step that led here (System.step_verdict)
             for b in range(nact):
