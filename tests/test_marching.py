@@ -50,7 +50,7 @@ def test_the_leader_takes_the_formation_along_at_the_reference(model):
     law = fl.DistanceLaw(k_c=4.0)
     res = fl.simulate(
         TRIANGLE, law, START[:3], duration=40.0, model=model,
-        marching=Marching(velocity=V_REF, leader=2),
+        marching=Marching(velocity=V_REF, leader=2), integrator=fl.Euler(dt=1e-2),
     )  # fmt: skip
     w = res.point_velocity[-1]
     np.testing.assert_allclose(w, np.broadcast_to(V_REF, w.shape), atol=1e-3)

@@ -197,8 +197,11 @@ def test_the_double_integrator_energy_decreases_at_the_derived_rate():
 
 
 def test_from_rest_the_double_integrator_reaches_the_single_integrators_shape():
-    si = fl.simulate(TRIANGLE, DIST, START, duration=20.0)
-    di = fl.simulate(TRIANGLE, DIST, START, duration=20.0, model=DoubleIntegrator(damping=2.0))
+    euler = fl.Euler(dt=5e-3)
+    si = fl.simulate(TRIANGLE, DIST, START, duration=20.0, integrator=euler)
+    di = fl.simulate(
+        TRIANGLE, DIST, START, duration=20.0, model=DoubleIntegrator(damping=2.0), integrator=euler
+    )
     assert si.outcome() == di.outcome() == "desired"
     assert np.max(np.abs(di.distance_errors[-1])) < 1e-4
     assert di.summary()["orientation"] == si.summary()["orientation"]
@@ -242,8 +245,9 @@ def test_saturated_single_integrators_descend_V_within_the_speed():
 def test_saturated_unicycles_keep_their_limits_and_V_falls_for_near_identity():
     model = Unicycle(offset=0.1, max_speed=0.4, max_turn_rate=1.0)
     res = fl.simulate(
-        TRIANGLE, fl.DistanceLaw(k_c=4.0), START, duration=15.0, model=model, headings=HEADINGS
-    )
+        TRIANGLE, fl.DistanceLaw(k_c=4.0), START, duration=15.0, model=model, headings=HEADINGS,
+        integrator=fl.Euler(dt=4e-3),
+    )  # fmt: skip
     v = np.linalg.norm(res.xdot[..., :2], axis=-1)
     w = np.abs(res.xdot[..., 2])
     assert v.max() <= 0.4 + 1e-12 and w.max() <= 1.0 + 1e-12
