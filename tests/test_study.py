@@ -459,7 +459,6 @@ def test_settling_labels_the_square_sliding_equilibrium_incorrect():
         "trials": SLIDING_TRIAL + 1,
         "laws": ["distance", "angle-restricted"],
         "sweep": {"k_a": [1.0]},
-        "backend": "numpy",
     }
     on = {"enabled": True, "duration": 5.0, "dt": 0.01}
     run = {"seed": 1, "dt": 1e-3, "duration": 5.0}
