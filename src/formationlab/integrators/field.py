@@ -1,0 +1,213 @@
+"""The field ``u = f(q)`` of a law over its lists, compiled, in two passes: items, then robots.
+
+The compiled single run (``integrators/compiled.py``) evaluates the law from its
+:class:`~formationlab.integrators.layout.RunLayout` and a close-pair list
+(:mod:`formationlab.verlet`) in two passes per step:
+
+1. **items** (:func:`items_chunk`): each edge's force ``k_c phi'(r)/r r_ij`` (eqs. 7,
+   8; or Krick et al.'s), each close pair's Khatib repulsion, each switching
+   surface's decision (eq. 14) and each area triangle's error, computed once, with
+   the least clearance and the least swept clearance of the step;
+2. **robots** (:func:`robots_chunk`): each robot gathers its edges' and pairs'
+   forces (with the sign of its end), its active restricted terms (eqs. 11, 13) and
+   its area terms, in the fixed order of its rows, then takes the explicit Euler step.
+
+Each pass is split into chunks of consecutive items or robots; a chunk's numbers
+do not depend on the others (and the least clearances are minima, which do not
+depend on order), so one thread or several give the same bits. :func:`items` and
+:func:`robots` run the chunks on one thread, :func:`items_parallel` and
+:func:`robots_parallel` with numba's ``prange``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from ..controllers.terms import LOG_BARRIER
+
+__all__ = ["items", "items_chunk", "items_parallel", "robots", "robots_chunk", "robots_parallel"]
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _swept(q, qp, i, j, a):
+    """Least ``r_ij - a`` along the straight step ``qp -> q`` (``System.swept_clearance``)."""
+    x0 = qp[j, 0] - qp[i, 0]
+    y0 = qp[j, 1] - qp[i, 1]
+    ex = (q[j, 0] - q[i, 0]) - x0
+    ey = (q[j, 1] - q[i, 1]) - y0
+    dd = ex * ex + ey * ey
+    s = min(max(-(x0 * ex + y0 * ey) / (dd if dd > 0 else 1.0), 0.0), 1.0)
+    mx = x0 + s * ex
+    my = y0 + s * ey
+    return math.sqrt(mx * mx + my * my) - a
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _part(c, chunks, size):
+    return c * size // chunks, (c + 1) * size // chunks
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def items_chunk(c, chunks, q, qp, sweep, L, pairs, n_pairs, fe, fp, on, area_g, least):
+    """Chunk ``c`` of ``chunks`` of every kind of item at positions ``q`` ``(n, 2)``.
+
+    ``qp`` is the state the step came from and ``sweep`` twice its largest move
+    (with a margin): pairs closer than that are tested along the step. Writes the
+    forces ``fe`` ``(m, 2)`` and ``fp`` ``(p, 2)`` (on robot ``i`` of each pair ``i < j``;
+    robot ``j`` takes the opposite), the surfaces' decisions ``on`` ``(s,)`` and the
+    area errors ``area_g``; ``least[c]`` gets the least clearance and the least
+    swept clearance of the chunk's edges and pairs.
+    """
+    g_min = np.inf
+    w_min = np.inf
+    lo, hi = _part(c, chunks, L.edge_i.shape[0])
+    log_barrier = L.kind == LOG_BARRIER
+    for e in range(lo, hi):
+        i = L.edge_i[e]
+        j = L.edge_j[e]
+        a = L.edge_a[e]
+        dx = q[j, 0] - q[i, 0]
+        dy = q[j, 1] - q[i, 1]
+        r2 = dx * dx + dy * dy
+        r = math.sqrt(r2)
+        clr = r - a
+        g_min = min(g_min, clr)
+        if clr <= sweep:
+            w_min = min(w_min, _swept(q, qp, i, j, a))
+        if log_barrier:  # k_c phi'(r) / r, eqs. (7), (8)
+            g = L.edge_gain * (clr / (L.edge_d[e] - a) - 1.0) / (clr * r)
+        else:  # Krick et al. 2009
+            g = L.edge_gain * (r2 - L.edge_d[e] * L.edge_d[e])
+        fe[e, 0] = g * dx
+        fe[e, 1] = g * dy
+    s0 = L.influence
+    lo, hi = _part(c, chunks, n_pairs)
+    for p in range(lo, hi):
+        i = pairs[p, 0]
+        j = pairs[p, 1]
+        a = L.radius[i] + L.radius[j]
+        dx = q[j, 0] - q[i, 0]
+        dy = q[j, 1] - q[i, 1]
+        r = math.sqrt(dx * dx + dy * dy)
+        clr = r - a
+        g_min = min(g_min, clr)
+        if clr <= sweep:
+            w_min = min(w_min, _swept(q, qp, i, j, a))
+        g = 0.0
+        if clr < s0:  # k_r gamma'(s) / r, Khatib
+            g = L.repulsion * (s0 - clr) / (clr * clr * clr * r)
+        fp[p, 0] = g * dx
+        fp[p, 1] = g * dy
+    lo, hi = _part(c, chunks, L.surf_a.shape[0])
+    for s in range(lo, hi):  # eq. (14), decided as triangle_products does
+        ia, ib, ic = L.surf_a[s], L.surf_b[s], L.surf_c[s]
+        cab = (q[ib, 0] - q[ia, 0]) * (q[ic, 1] - q[ia, 1]) - (q[ib, 1] - q[ia, 1]) * (
+            q[ic, 0] - q[ia, 0]
+        )
+        on[s] = L.surf_beta[s] * cab + L.theta >= 0.0  # Upsilon(0) = 1
+    lo, hi = _part(c, chunks, L.area_a.shape[0])
+    for mm in range(lo, hi):
+        ia, ib, ic = L.area_a[mm], L.area_b[mm], L.area_c[mm]
+        area = 0.5 * (
+            (q[ib, 0] - q[ia, 0]) * (q[ic, 1] - q[ia, 1])
+            - (q[ib, 1] - q[ia, 1]) * (q[ic, 0] - q[ia, 0])
+        )
+        area_g[mm] = L.area_gain * 0.5 * (area - L.area_target[mm])
+    least[c, 0] = g_min
+    least[c, 1] = w_min
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def robots_chunk(c, chunks, q, qn, qb, dt, L, p_ptr, p_rows, fe, fp, on, area_g, u, moves):
+    """Chunk ``c`` of the robots: ``u = f(q)`` gathered, and the Euler step ``qn = q + dt u``.
+
+    ``moves[c]`` gets the largest squared move of the step and the largest squared
+    distance of ``qn`` from ``qb`` (the state the close list was built at).
+    """
+    big = 0.0
+    far = 0.0
+    bad = False
+    lo, hi = _part(c, chunks, q.shape[0])
+    for i in range(lo, hi):
+        ux = 0.0
+        uy = 0.0
+        for p in range(L.nbr_ptr[i], L.nbr_ptr[i + 1]):  # edges, eq. (8)
+            e = L.nbr_edge[p]
+            if e >= 0:
+                ux += fe[e, 0]
+                uy += fe[e, 1]
+            else:
+                ux -= fe[~e, 0]
+                uy -= fe[~e, 1]
+        for p in range(p_ptr[i], p_ptr[i + 1]):  # Khatib's repulsion
+            e = p_rows[p]
+            if e >= 0:
+                ux += fp[e, 0]
+                uy += fp[e, 1]
+            else:
+                ux -= fp[~e, 0]
+                uy -= fp[~e, 1]
+        for p in range(L.term_ptr[i], L.term_ptr[i + 1]):  # eqs. (11), (13), (23)
+            if on[L.term_s[p]]:
+                w = L.term_w[p * L.term_stride]
+                j, k = L.term_j[p], L.term_k[p]
+                ux += w * (q[k, 1] - q[j, 1])
+                uy -= w * (q[k, 0] - q[j, 0])
+        for p in range(L.area_ptr[i], L.area_ptr[i + 1]):  # signed-area penalty
+            mm = L.area_rows[p] // 3
+            corner = L.area_rows[p] - 3 * mm
+            ia, ib, ic = L.area_a[mm], L.area_b[mm], L.area_c[mm]
+            if corner == 0:
+                ux += area_g[mm] * (q[ic, 1] - q[ib, 1])
+                uy -= area_g[mm] * (q[ic, 0] - q[ib, 0])
+            elif corner == 1:
+                ux += area_g[mm] * (q[ia, 1] - q[ic, 1])
+                uy -= area_g[mm] * (q[ia, 0] - q[ic, 0])
+            else:
+                ux += area_g[mm] * (q[ib, 1] - q[ia, 1])
+                uy -= area_g[mm] * (q[ib, 0] - q[ia, 0])
+        u[i, 0] = ux
+        u[i, 1] = uy
+        x = q[i, 0] + dt * ux  # explicit Euler
+        y = q[i, 1] + dt * uy
+        qn[i, 0] = x
+        qn[i, 1] = y
+        if not (math.isfinite(x) and math.isfinite(y)):
+            bad = True  # judged before anything else sees it
+        ex = x - q[i, 0]
+        ey = y - q[i, 1]
+        big = max(big, ex * ex + ey * ey)
+        ex = x - qb[i, 0]
+        ey = y - qb[i, 1]
+        far = max(far, ex * ex + ey * ey)
+    moves[c, 0] = np.inf if bad else big
+    moves[c, 1] = far
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def items(q, qp, sweep, L, pairs, n_pairs, fe, fp, on, area_g, least):
+    """:func:`items_chunk` over everything, on one thread (into ``least[0]``)."""
+    items_chunk(0, 1, q, qp, sweep, L, pairs, n_pairs, fe, fp, on, area_g, least)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", parallel=True)
+def items_parallel(q, qp, sweep, L, pairs, n_pairs, fe, fp, on, area_g, least, chunks):
+    """:func:`items_chunk` in ``chunks`` chunks on numba's threads."""
+    for c in prange(chunks):
+        items_chunk(c, chunks, q, qp, sweep, L, pairs, n_pairs, fe, fp, on, area_g, least)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
+def robots(q, qn, qb, dt, L, p_ptr, p_rows, fe, fp, on, area_g, u, moves):
+    """:func:`robots_chunk` over every robot, on one thread (into ``moves[0]``)."""
+    robots_chunk(0, 1, q, qn, qb, dt, L, p_ptr, p_rows, fe, fp, on, area_g, u, moves)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", parallel=True)
+def robots_parallel(q, qn, qb, dt, L, p_ptr, p_rows, fe, fp, on, area_g, u, moves, chunks):
+    """:func:`robots_chunk` in ``chunks`` chunks on numba's threads."""
+    for c in prange(chunks):
+        robots_chunk(c, chunks, q, qn, qb, dt, L, p_ptr, p_rows, fe, fp, on, area_g, u, moves)
