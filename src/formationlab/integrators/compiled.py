@@ -64,11 +64,13 @@ _CHUNKS_PER_THREAD = 4
 
 
 class CompiledRun:
-    """Saved steps ``k``, states ``x`` ``(T, n, 2)``, velocities ``v``, status, steps, clearance."""
+    """Saved steps ``k``, states ``x`` ``(T, n, 2)``, velocities ``v``, status, steps,
+    least clearance, wall time and the threads the run ended on."""
 
-    def __init__(self, k, x, v, status, steps, min_clearance, wall):
+    def __init__(self, k, x, v, status, steps, min_clearance, wall, threads=1):
         self.k, self.x, self.v = k, x, v
         self.status, self.steps, self.min_clearance, self.wall = status, steps, min_clearance, wall
+        self.threads = threads
 
 
 class _Work(NamedTuple):
@@ -139,9 +141,11 @@ def run_compiled(
     layout = terms if isinstance(terms, RunLayout) else run_layout(terms)
     n = q0.shape[0]
     threads = numba.get_num_threads()
-    if parallel is None:
-        parallel = threads > 1 and n >= PARALLEL_FROM
-    chunks = threads * _CHUNKS_PER_THREAD if parallel else 1
+    # None: one thread, or (large formations) the faster of one thread and the threads
+    # as measured on the second and third segments (the first builds the close list)
+    probe = parallel is None and threads > 1 and n >= PARALLEL_FROM
+    use = bool(parallel) and threads > 1
+    chunks = threads * _CHUNKS_PER_THREAD
     work = _work(layout, n, chunks)
     lists = [np.zeros((16, 2), np.int32), np.zeros((16, 2)), np.zeros(32, np.int32)]
     rows = saved_rows(n_steps, save_every)
@@ -159,23 +163,29 @@ def run_compiled(
         pairs, fp, p_rows = lists
         lists[:] = _run(
             q, layout, work, pairs, fp, p_rows, dt, k_begin, k_end, n_steps, save_every,
-            k_out, x_out, v_out, info, clear, kept, parallel, chunks,
+            k_out, x_out, v_out, info, clear, kept, use, chunks if use else 1,
         )  # fmt: skip
 
     chunk = min(256, step_cap)
+    segments = 0
+    per_step: dict[bool, float] = {}  # seconds per step of the probed segments, by threads
     start = time.perf_counter()
     try:
         while True:
             k_end = min(n_steps, k0 + chunk)
             began = time.perf_counter()
             segment(k0, k_end)
+            spent = time.perf_counter() - began
             status = Status.from_code(int(info[0]))
+            segments += 1
+            if probe and segments > 1 and len(per_step) < 2 and int(info[1]) > k0:
+                per_step[use] = spent / (int(info[1]) - k0)  # one thread, then the threads
+                use = len(per_step) == 1 or per_step[True] < per_step[False]
             k0 = int(info[1])
             if status is not Status.SUCCESS or k0 >= n_steps:
                 break
             if progress is not None:
                 progress(k0 * dt)
-            spent = time.perf_counter() - began
             chunk = int(min(max(chunk * 0.25 / max(spent, 1e-6), 16), 1 << 20, step_cap))
     except KeyboardInterrupt:
         if not interruptible:
@@ -189,8 +199,9 @@ def run_compiled(
     wall = time.perf_counter() - start
     saved = int(info[2])
     return CompiledRun(
-        k_out[:saved], x_out[:saved], v_out[:saved], status, k0, float(clear[0]), wall
-    )
+        k_out[:saved], x_out[:saved], v_out[:saved], status, k0, float(clear[0]), wall,
+        threads if use else 1,
+    )  # fmt: skip
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -295,8 +306,9 @@ def _run(
     return pairs, fp, p_rows
 
 
-def compiled_terms(system: System, integrator: object) -> KernelTerms | None:
-    """The law's kernel data when ``system`` under ``integrator`` can run compiled, else None.
+def compiled_terms(system: System, integrator: object) -> RunLayout | None:
+    """The law's kernel data laid out for the compiled run (:func:`.layout.run_layout`) when
+    ``system`` under ``integrator`` can run compiled, else None.
 
     Explicit Euler (exactly, not a subclass) on the paper's single integrators
     (no speed limit) without marching, with a law whose ``kernel_terms`` describe
@@ -312,13 +324,14 @@ def compiled_terms(system: System, integrator: object) -> KernelTerms | None:
     if system.sensed or (system.faults is not None and system.faults.any):
         return None
     try:
-        return system.law.compiled_terms(system.formation)
+        terms = system.law.compiled_terms(system.formation)
     except ParameterError:
         return None
+    return run_layout(terms)
 
 
 def run_euler_compiled(
-    terms: KernelTerms,
+    terms: KernelTerms | RunLayout,
     system: System,
     x0: NDArray[np.float64],
     *,
@@ -357,5 +370,6 @@ def run_euler_compiled(
         **switching_diagnostics(t, sigma),
         "diagnostics_from": "every step" if save_every == 1 else f"every {save_every} steps",
         "backend": "numba",
+        "threads": out.threads,
     }
     return RawSolution(t=t, x=out.x, v=out.v, status=out.status, message=message, stats=stats)
