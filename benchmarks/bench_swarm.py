@@ -28,6 +28,7 @@ the end (the machine is shared: wall times grow with the load, CPU times much le
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 import time
 import tracemalloc
@@ -152,7 +153,7 @@ def main() -> None:
           "(1 = linear)")  # fmt: skip
     exps = {}
     for name in LAWS:
-        pairs = list(zip(sizes, sizes[1:], strict=False))
+        pairs = list(itertools.pairwise(sizes))
         e = [np.log(best[b, name] / best[a, name]) / np.log(b / a) for a, b in pairs]
         exps[name] = [x for (a, _), x in zip(pairs, e, strict=True) if a >= 1_000]
         print(f"  {name:>16}: " + ", ".join(

@@ -113,18 +113,20 @@ class Law:
             "implement Law.obstacle_repulsion or run it without obstacles"
         )
 
-    def kernel_terms(self, formation: Formation) -> KernelTerms:
+    def kernel_terms(self, formation: Formation, *, pairs: bool = True) -> KernelTerms:
         """The law as the arrays the compiled kernels step (:mod:`.terms`).
 
-        Laws the kernels cannot evaluate keep this default, which says so; they
-        run on the numpy path (``run_batch(..., backend="numpy")``).
+        ``pairs=False`` leaves out the batch kernel's all-pairs arrays (the compiled
+        single run lists its pairs itself). Laws the kernels cannot evaluate keep this
+        default, which says so; they run on the numpy path (``run_batch(...,
+        backend="numpy")``).
         """
         raise ParameterError(
             f"the compiled kernel cannot run the law {self.name!r} ({type(self).__name__}); "
             'use backend="numpy"'
         )
 
-    def compiled_terms(self, formation: Formation) -> KernelTerms:
+    def compiled_terms(self, formation: Formation, *, pairs: bool = True) -> KernelTerms:
         """:meth:`kernel_terms`, refused when they cannot describe this law's control.
 
         A subclass that overrides :meth:`control` without overriding
@@ -139,7 +141,7 @@ class Law:
                 f"the law {self.name!r} ({type(self).__name__}) overrides control() but not "
                 'kernel_terms(), so the compiled kernel cannot run it; use backend="numpy"'
             )
-        return self.kernel_terms(formation)
+        return self.kernel_terms(formation, pairs=pairs)
 
     def with_params(self, **params: float) -> Law:
         """A copy with some parameters changed (validated again)."""

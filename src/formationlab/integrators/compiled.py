@@ -324,10 +324,10 @@ def compiled_terms(system: System, integrator: object) -> RunLayout | None:
     if system.sensed or (system.faults is not None and system.faults.any):
         return None
     try:
-        terms = system.law.compiled_terms(system.formation)
+        terms = system.law.compiled_terms(system.formation, pairs=False)._asdict()
     except ParameterError:
         return None
-    return run_layout(terms)
+    return run_layout(terms)  # emptied as it is laid out
 
 
 def run_euler_compiled(

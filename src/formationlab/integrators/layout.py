@@ -23,7 +23,7 @@ Row pointers are int32: at most 2**31 - 1 items of a kind.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -92,66 +92,76 @@ def _i32(a: NDArray[np.integer]) -> NDArray[np.int32]:
     return np.ascontiguousarray(a, dtype=_I32)
 
 
-def run_layout(terms: KernelTerms) -> RunLayout:
+def run_layout(terms: KernelTerms | dict[str, Any]) -> RunLayout:
     """The compiled run's layout of ``terms`` (module docstring); the same sums as
-    the terms, robot by robot, in the order of :func:`run_compiled` before (edges as
-    robot ``i`` then robot ``j``, terms as listed by surface)."""
-    n = terms.radius.shape[0]
-    ei, ej = terms.edge_i, terms.edge_j
+    the terms, robot by robot, in the order of the kernel before (edges as robot
+    ``i`` then robot ``j``, terms as listed by surface).
+
+    ``terms`` may be given as the dict of :meth:`KernelTerms._asdict`, which is then
+    emptied as it is read: each array is let go once laid out, so that the law's
+    int64 arrays and their int32 layout are not held in full at the same time.
+    """
+    t = dict(terms._asdict()) if isinstance(terms, KernelTerms) else terms
+    radius = np.ascontiguousarray(t.pop("radius"), dtype=float)
+    n = radius.shape[0]
+    surf = [_i32(t.pop(f"surface_{c}")) for c in "abc"]
+    ei, ej = _i32(t.pop("edge_i")), _i32(t.pop("edge_j"))
     m = ei.size
     nbr_ptr, order = _rows(np.concatenate([ei, ej]), n)
     nbr = _i32(np.concatenate([ej, ei])[order])
     signed = np.concatenate([np.arange(m, dtype=_I32), ~np.arange(m, dtype=_I32)])
     nbr_edge = _i32(signed[order])
     del order, signed
-    term_ptr, torder = _rows(terms.term_i, n)
-    w = terms.term_weight[torder]
-    flip = w < 0
-    tj, tk = terms.term_j[torder], terms.term_k[torder]
-    term_j = _i32(np.where(flip, tk, tj))
-    term_k = _i32(np.where(flip, tj, tk))
-    del tj, tk
-    term_s = _i32(terms.term_surface[torder])
-    w = np.abs(w)
+    term_ptr, torder = _rows(t.pop("term_i"), n)
+    term_s = _i32(t.pop("term_surface")[torder])
+    term_j = _i32(t.pop("term_j")[torder])
+    term_k = _i32(t.pop("term_k")[torder])
+    w = t.pop("term_weight")[torder]
+    del torder
+    flip = np.flatnonzero(w < 0)
+    term_j[flip], term_k[flip] = term_k[flip], term_j[flip]
+    np.abs(w, out=w)
+    del flip
     uniform = w.size > 0 and bool(np.all(w == w[0]))
-    term_w = w[:1].copy() if uniform else np.ascontiguousarray(w)
-    del w, torder, flip
-    r = terms.area_a.size
-    area_ptr, aorder = _rows(np.concatenate([terms.area_a, terms.area_b, terms.area_c]), n)
+    term_w = w[:1].copy() if uniform else w
+    del w
+    area = [_i32(t.pop(f"area_{c}")) for c in "abc"]
+    r = area[0].size
+    area_ptr, aorder = _rows(np.concatenate(area), n)
     corner = np.arange(3 * r, dtype=np.int64)  # corner c of item k is 3 k + c
     area_rows = _i32((3 * (corner % r) + corner // r)[aorder])
-    s0 = float(terms.repulsion_influence)
-    a_max = 2.0 * float(terms.radius.max()) if n else 0.0
+    s0 = float(t["repulsion_influence"])
+    a_max = 2.0 * float(radius.max()) if n else 0.0
     return RunLayout(
-        kind=int(terms.kind),
-        edge_gain=float(terms.edge_gain),
-        repulsion=-float(terms.repulsion_gain) * float(terms.repulsion_eta) / s0,
+        kind=int(t["kind"]),
+        edge_gain=float(t["edge_gain"]),
+        repulsion=-float(t["repulsion_gain"]) * float(t["repulsion_eta"]) / s0,
         influence=s0,
         skin=0.5 * (s0 + a_max),
-        theta=float(terms.theta),
-        area_gain=float(terms.area_gain),
-        radius=np.ascontiguousarray(terms.radius, dtype=float),
-        edge_i=_i32(ei),
-        edge_j=_i32(ej),
-        edge_d=np.ascontiguousarray(terms.edge_distance, dtype=float),
-        edge_a=np.ascontiguousarray(terms.edge_contact, dtype=float),
+        theta=float(t["theta"]),
+        area_gain=float(t["area_gain"]),
+        radius=radius,
+        edge_i=ei,
+        edge_j=ej,
+        edge_d=np.ascontiguousarray(t.pop("edge_distance"), dtype=float),
+        edge_a=np.ascontiguousarray(t.pop("edge_contact"), dtype=float),
         nbr_ptr=nbr_ptr,
         nbr=nbr,
         nbr_edge=nbr_edge,
-        surf_a=_i32(terms.surface_a),
-        surf_b=_i32(terms.surface_b),
-        surf_c=_i32(terms.surface_c),
-        surf_beta=np.ascontiguousarray(terms.surface_beta, dtype=float),
+        surf_a=surf[0],
+        surf_b=surf[1],
+        surf_c=surf[2],
+        surf_beta=np.ascontiguousarray(t.pop("surface_beta"), dtype=float),
         term_ptr=term_ptr,
         term_j=term_j,
         term_k=term_k,
         term_s=term_s,
         term_w=term_w if term_w.size else np.zeros(1),
         term_stride=0 if uniform or term_w.size == 0 else 1,
-        area_a=_i32(terms.area_a),
-        area_b=_i32(terms.area_b),
-        area_c=_i32(terms.area_c),
-        area_target=np.ascontiguousarray(terms.area_target, dtype=float),
+        area_a=area[0],
+        area_b=area[1],
+        area_c=area[2],
+        area_target=np.ascontiguousarray(t.pop("area_target"), dtype=float),
         area_ptr=area_ptr,
         area_rows=area_rows,
     )
