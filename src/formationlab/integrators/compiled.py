@@ -18,8 +18,9 @@ per step:
   holds the pairs below that plus a skin of ``(s0 + max a_ij) / 2`` and is rebuilt
   (on a cell grid) only when some robot has moved more than half the skin since
   the last build;
-* on two or more threads for large formations (:data:`PARALLEL_FROM` robots, or
-  as asked): the same numbers bit for bit as on one thread.
+* on numba's threads or on one, with the same numbers bit for bit: from
+  :data:`PARALLEL_FROM` robots the run measures a segment on each and keeps the faster
+  (on a busy machine the threads can be the slower), or as asked.
 
 Memory is ``O(n + edges + restricted triples + close pairs)`` plus the saved states
 (the states to be saved, exactly). The numpy driver
@@ -55,8 +56,8 @@ _COLLISION = Status.COLLISION.code
 _TOO_LARGE = Status.STEP_TOO_LARGE.code
 _NON_FINITE = Status.NON_FINITE.code
 
-#: Formations of at least this many robots run on numba's threads (when there are two
-#: or more); below, one thread is faster (a parallel pass costs microseconds to start).
+#: From this many robots a run measures numba's threads against one thread and keeps the
+#: faster; below, one thread (a parallel pass costs microseconds to start).
 PARALLEL_FROM = 20_000
 
 #: chunks per thread of a parallel pass (balance between threads)
@@ -76,8 +77,10 @@ class CompiledRun:
 class _Work(NamedTuple):
     """The run's scratch space, allocated once (the close list's grows when it must)."""
 
-    qp: NDArray[np.float64]  #: (n, 2) the other state buffer
-    u: NDArray[np.float64]  #: (n, 2)
+    qp: NDArray[np.float64]  #: (n, 2) the other state buffers
+    qn: NDArray[np.float64]
+    u: NDArray[np.float64]  #: (n, 2) the velocity buffers
+    un: NDArray[np.float64]
     qb: NDArray[np.float64]  #: (n, 2) the state the close list was built at
     fe: NDArray[np.float64]  #: (m, 2) edge forces
     on: NDArray[np.uint8]  #: (s,) surfaces switched on
@@ -95,7 +98,9 @@ class _Work(NamedTuple):
 def _work(layout: RunLayout, n: int, chunks: int) -> _Work:
     return _Work(
         qp=np.zeros((n, 2)),
+        qn=np.zeros((n, 2)),
         u=np.zeros((n, 2)),
+        un=np.zeros((n, 2)),
         qb=np.zeros((n, 2)),
         fe=np.zeros((layout.edge_i.size, 2)),
         on=np.zeros(layout.surf_a.size, np.uint8),
@@ -135,8 +140,9 @@ def run_compiled(
     The loop runs in compiled segments of about a quarter of a second, between which
     ``progress`` is called with the simulated time and Ctrl-C is seen: with
     ``interruptible`` the run so far is returned with status ``"interrupted"``.
-    ``parallel``: on numba's threads or on one; by default on the threads from
-    :data:`PARALLEL_FROM` robots (the same numbers either way).
+    ``parallel``: on numba's threads or on one; by default one thread, and from
+    :data:`PARALLEL_FROM` robots the faster of the two as measured on the second and
+    third segments (the same numbers either way).
     """
     layout = terms if isinstance(terms, RunLayout) else run_layout(terms)
     n = q0.shape[0]
@@ -155,9 +161,12 @@ def run_compiled(
     info = np.zeros(3)  # status, last accepted step, saved rows
     clear = np.full(1, np.inf)
     kept = np.array([0.0, np.inf, 0.0])  # the close list's reach, drift since, pairs
-    q = np.ascontiguousarray(q0, dtype=float).copy()
+    q = np.ascontiguousarray(q0, dtype=float)  # the run's own copy, in the layout's numbers
+    q = q[layout.perm] if layout.perm.size else q.copy()
     k0, status = 0, Status.SUCCESS
-    step_cap = max(1, n_steps // 100)  # progress at least every 1 % of the run, as the driver
+    # progress at least every 1 % of the run, as the driver (without progress, segments of
+    # a quarter of a second: each costs a call and a copy of the state)
+    step_cap = max(1, n_steps // 100) if progress is not None else n_steps
 
     def segment(k_begin: int, k_end: int) -> None:
         pairs, fp, p_rows = lists
@@ -205,6 +214,20 @@ def run_compiled(
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
+def _keep(x_out, v_out, row, q, u, perm):
+    """Save state ``q`` and velocity ``u`` as row ``row``, in the robots' own numbers."""
+    if perm.size == 0:
+        x_out[row] = q
+        v_out[row] = u
+        return
+    for r in range(q.shape[0]):
+        x_out[row, perm[r], 0] = q[r, 0]
+        x_out[row, perm[r], 1] = q[r, 1]
+        v_out[row, perm[r], 0] = u[r, 0]
+        v_out[row, perm[r], 1] = u[r, 1]
+
+
+@njit(cache=True, fastmath=False, error_model="numpy")
 def _run(
     q0, L, W, pairs, fp, p_rows, dt, k0, k_end, n_steps, save_every, k_out, x_out, v_out,
     info, clear, kept, parallel, chunks,
@@ -216,15 +239,17 @@ def _run(
     and Euler step, saving (every ``save_every`` steps, the last step, and a trial's
     last state). ``info`` returns status, last accepted step and rows saved (appended
     after ``info[2]`` rows); ``clear`` the least clearance so far (over the edges and
-    the close pairs); ``q0`` the state of step ``info[1]``. The close list lasts from
+    the close pairs); ``q0`` the state of step ``info[1]`` (in the layout's numbers; the
+    saved states in the robots' own). The close list lasts from
     segment to segment: its buffers (``pairs``, ``fp``, ``p_rows``) are returned,
     ``kept`` holds its reach, the drift since it was built and its length.
     """
     n = q0.shape[0]
-    q = q0
-    qp = W.qp  # the two state buffers take turns: q_k and q_{k-1}, then q_{k+1} over q_{k-1}
+    # three state buffers take turns (q_k, q_{k-1}, q_{k+1}) and two velocity buffers
+    # (u_{k-1}, u_k): a rejected step ends at q_{k-1} with the velocity it was left with
+    q, qp, qn = q0, W.qp, W.qn
     qp[:] = q0
-    u = W.u
+    u, un = W.u, W.un
     disp = 0.0
     reach, drift, n_pairs = kept[0], kept[1], int(kept[2])
     saved = int(info[2])
@@ -259,8 +284,7 @@ def _run(
             if status:  # end at the last accepted state, with the velocity it was left with
                 if saved == 0 or k_out[saved - 1] != k - 1:
                     k_out[saved] = k - 1
-                    x_out[saved] = qp
-                    v_out[saved] = u
+                    _keep(x_out, v_out, saved, qp, u, L.perm)
                     saved += 1
                 q = qp
                 k -= 1
@@ -270,27 +294,26 @@ def _run(
             least = g
         if parallel:
             robots_parallel(
-                q, qp, W.qb, dt, L, W.p_ptr, p_rows, W.fe, fp, W.on, W.area_g, u, W.moves,
+                q, qn, W.qb, dt, L, W.p_ptr, p_rows, W.fe, fp, W.on, W.area_g, un, W.moves,
                 chunks,
             )  # fmt: skip
         else:
-            robots(q, qp, W.qb, dt, L, W.p_ptr, p_rows, W.fe, fp, W.on, W.area_g, u, W.moves)
+            robots(q, qn, W.qb, dt, L, W.p_ptr, p_rows, W.fe, fp, W.on, W.area_g, un, W.moves)
+        u, un = un, u  # u_k
         if (k % save_every == 0 or k == n_steps) and (k > k0 or k == 0):
             k_out[saved] = k
-            x_out[saved] = q
-            v_out[saved] = u
+            _keep(x_out, v_out, saved, q, u, L.perm)
             saved += 1
         if k == n_steps or k == k_end:
             break
-        q, qp = qp, q  # qp held x_{k+1}
+        qp, q, qn = q, qn, qp  # x_{k+1} is in qn
         k += 1
         largest = W.moves[:chunks, 0].max()
         if not math.isfinite(largest):  # not finite: judged before the list sees it
             status = _NON_FINITE
             if saved == 0 or k_out[saved - 1] != k - 1:
                 k_out[saved] = k - 1
-                x_out[saved] = qp
-                v_out[saved] = u
+                _keep(x_out, v_out, saved, qp, u, L.perm)
                 saved += 1
             q = qp
             k -= 1

@@ -22,13 +22,28 @@ depend on order), so one thread or several give the same bits. :func:`items` and
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 from numba import njit, prange
 
 from ..controllers.terms import LOG_BARRIER
 
-__all__ = ["items", "items_chunk", "items_parallel", "robots", "robots_chunk", "robots_parallel"]
+# numba's OpenMP threads wait for work asleep rather than spinning (unless the user says
+# otherwise). A step launches two parallel passes; on a machine shared with other work a
+# spinning thread holds a core the other thread needs, and the passes of a 10,000-robot
+# step took 115 ms instead of 1 ms (load average 7 on 2 cores). Read by the OpenMP
+# runtime when numba first starts its threads, so it is set on import.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+__all__ = [
+    "items",
+    "items_chunk",
+    "items_parallel",
+    "robots",
+    "robots_chunk",
+    "robots_parallel",
+]
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
@@ -50,6 +65,133 @@ def _part(c, chunks, size):
     return c * size // chunks, (c + 1) * size // chunks
 
 
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _edge(e, q, kind, gain, edge_i, edge_j, edge_a, edge_d, fe):
+    """Edge ``e``'s force on its first robot into ``fe[e]``; returns its clearance."""
+    i = edge_i[e]
+    j = edge_j[e]
+    a = edge_a[e]
+    dx = q[j, 0] - q[i, 0]
+    dy = q[j, 1] - q[i, 1]
+    r2 = dx * dx + dy * dy
+    r = math.sqrt(r2)
+    clr = r - a
+    if kind == LOG_BARRIER:  # k_c phi'(r) / r, eqs. (7), (8)
+        g = gain * (clr / (edge_d[e] - a) - 1.0) / (clr * r)
+    else:  # Krick et al. 2009
+        g = gain * (r2 - edge_d[e] * edge_d[e])
+    fe[e, 0] = g * dx
+    fe[e, 1] = g * dy
+    return clr
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _pair(p, q, radius, s0, repulsion, pairs, fp):
+    """Close pair ``p``'s Khatib repulsion on its first robot into ``fp[p]`` (zero beyond
+    ``s0``); returns its clearance."""
+    i = pairs[p, 0]
+    j = pairs[p, 1]
+    a = radius[i] + radius[j]
+    dx = q[j, 0] - q[i, 0]
+    dy = q[j, 1] - q[i, 1]
+    r = math.sqrt(dx * dx + dy * dy)
+    clr = r - a
+    g = 0.0
+    if clr < s0:  # k_r gamma'(s) / r, Khatib
+        g = repulsion * (s0 - clr) / (clr * clr * clr * r)
+    fp[p, 0] = g * dx
+    fp[p, 1] = g * dy
+    return clr
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _pair_swept(p, q, qp, radius, pairs):
+    """Least clearance of close pair ``p`` along the step."""
+    i = pairs[p, 0]
+    j = pairs[p, 1]
+    return _swept(q, qp, i, j, radius[i] + radius[j])
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _surface(s, q, surf_a, surf_b, surf_c, surf_beta, theta, on):
+    """Whether surface ``s`` switches its restrictions on: eq. (14), as triangle_products."""
+    ia, ib, ic = surf_a[s], surf_b[s], surf_c[s]
+    cab = (q[ib, 0] - q[ia, 0]) * (q[ic, 1] - q[ia, 1]) - (q[ib, 1] - q[ia, 1]) * (
+        q[ic, 0] - q[ia, 0]
+    )
+    on[s] = surf_beta[s] * cab + theta >= 0.0  # Upsilon(0) = 1
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _area(mm, q, area_a, area_b, area_c, area_target, gain, area_g):
+    """Area triangle ``mm``'s error term of the signed-area penalty."""
+    ia, ib, ic = area_a[mm], area_b[mm], area_c[mm]
+    area = 0.5 * (
+        (q[ib, 0] - q[ia, 0]) * (q[ic, 1] - q[ia, 1])
+        - (q[ib, 1] - q[ia, 1]) * (q[ic, 0] - q[ia, 0])
+    )
+    area_g[mm] = gain * 0.5 * (area - area_target[mm])
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _robot(i, q, qn, qb, dt, R, p_ptr, p_rows, fe, fp, on, area_g, u):
+    """Robot ``i``'s ``u_i`` gathered from its rows, and its Euler step into ``qn``.
+
+    Returns its squared move, its squared distance from ``qb`` and whether ``qn_i`` is
+    finite.
+    """
+    nbr_ptr, nbr_edge, term_ptr, term_s, term_w, stride, term_j, term_k = R[:8]
+    area_ptr, area_rows, area_a, area_b, area_c = R[8:]
+    ux = 0.0
+    uy = 0.0
+    for p in range(nbr_ptr[i], nbr_ptr[i + 1]):  # edges, eq. (8)
+        e = nbr_edge[p]
+        if e >= 0:
+            ux += fe[e, 0]
+            uy += fe[e, 1]
+        else:
+            ux -= fe[~e, 0]
+            uy -= fe[~e, 1]
+    for p in range(p_ptr[i], p_ptr[i + 1]):  # Khatib's repulsion
+        e = p_rows[p]
+        if e >= 0:
+            ux += fp[e, 0]
+            uy += fp[e, 1]
+        else:
+            ux -= fp[~e, 0]
+            uy -= fp[~e, 1]
+    for p in range(term_ptr[i], term_ptr[i + 1]):  # eqs. (11), (13), (23)
+        if on[term_s[p]]:
+            w = term_w[p * stride]
+            j, k = term_j[p], term_k[p]
+            ux += w * (q[k, 1] - q[j, 1])
+            uy -= w * (q[k, 0] - q[j, 0])
+    for p in range(area_ptr[i], area_ptr[i + 1]):  # signed-area penalty
+        mm = area_rows[p] // 3
+        corner = area_rows[p] - 3 * mm
+        ia, ib, ic = area_a[mm], area_b[mm], area_c[mm]
+        if corner == 0:
+            ux += area_g[mm] * (q[ic, 1] - q[ib, 1])
+            uy -= area_g[mm] * (q[ic, 0] - q[ib, 0])
+        elif corner == 1:
+            ux += area_g[mm] * (q[ia, 1] - q[ic, 1])
+            uy -= area_g[mm] * (q[ia, 0] - q[ic, 0])
+        else:
+            ux += area_g[mm] * (q[ib, 1] - q[ia, 1])
+            uy -= area_g[mm] * (q[ib, 0] - q[ia, 0])
+    u[i, 0] = ux
+    u[i, 1] = uy
+    x = q[i, 0] + dt * ux  # explicit Euler
+    y = q[i, 1] + dt * uy
+    qn[i, 0] = x
+    qn[i, 1] = y
+    ex = x - q[i, 0]
+    ey = y - q[i, 1]
+    bx = x - qb[i, 0]
+    by = y - qb[i, 1]
+    return ex * ex + ey * ey, bx * bx + by * by, math.isfinite(x) and math.isfinite(y)
+
+
 @njit(cache=True, fastmath=False, error_model="numpy")
 def items_chunk(c, chunks, q, qp, sweep, L, pairs, n_pairs, fe, fp, on, area_g, least):
     """Chunk ``c`` of ``chunks`` of every kind of item at positions ``q`` ``(n, 2)``.
@@ -61,61 +203,30 @@ def items_chunk(c, chunks, q, qp, sweep, L, pairs, n_pairs, fe, fp, on, area_g, 
     area errors ``area_g``; ``least[c]`` gets the least clearance and the least
     swept clearance of the chunk's edges and pairs.
     """
+    kind, gain, ei, ej, ea, ed = L.kind, L.edge_gain, L.edge_i, L.edge_j, L.edge_a, L.edge_d
+    radius, s0, rep = L.radius, L.influence, L.repulsion
+    sa, sb, sc, beta, theta = L.surf_a, L.surf_b, L.surf_c, L.surf_beta, L.theta
+    aa, ab, ac, target, a_gain = L.area_a, L.area_b, L.area_c, L.area_target, L.area_gain
     g_min = np.inf
     w_min = np.inf
     lo, hi = _part(c, chunks, L.edge_i.shape[0])
-    log_barrier = L.kind == LOG_BARRIER
     for e in range(lo, hi):
-        i = L.edge_i[e]
-        j = L.edge_j[e]
-        a = L.edge_a[e]
-        dx = q[j, 0] - q[i, 0]
-        dy = q[j, 1] - q[i, 1]
-        r2 = dx * dx + dy * dy
-        r = math.sqrt(r2)
-        clr = r - a
+        clr = _edge(e, q, kind, gain, ei, ej, ea, ed, fe)
         g_min = min(g_min, clr)
-        if clr <= sweep:
-            w_min = min(w_min, _swept(q, qp, i, j, a))
-        if log_barrier:  # k_c phi'(r) / r, eqs. (7), (8)
-            g = L.edge_gain * (clr / (L.edge_d[e] - a) - 1.0) / (clr * r)
-        else:  # Krick et al. 2009
-            g = L.edge_gain * (r2 - L.edge_d[e] * L.edge_d[e])
-        fe[e, 0] = g * dx
-        fe[e, 1] = g * dy
-    s0 = L.influence
+        if clr <= sweep:  # tested along the step
+            w_min = min(w_min, _swept(q, qp, ei[e], ej[e], ea[e]))
     lo, hi = _part(c, chunks, n_pairs)
     for p in range(lo, hi):
-        i = pairs[p, 0]
-        j = pairs[p, 1]
-        a = L.radius[i] + L.radius[j]
-        dx = q[j, 0] - q[i, 0]
-        dy = q[j, 1] - q[i, 1]
-        r = math.sqrt(dx * dx + dy * dy)
-        clr = r - a
+        clr = _pair(p, q, radius, s0, rep, pairs, fp)
         g_min = min(g_min, clr)
         if clr <= sweep:
-            w_min = min(w_min, _swept(q, qp, i, j, a))
-        g = 0.0
-        if clr < s0:  # k_r gamma'(s) / r, Khatib
-            g = L.repulsion * (s0 - clr) / (clr * clr * clr * r)
-        fp[p, 0] = g * dx
-        fp[p, 1] = g * dy
+            w_min = min(w_min, _pair_swept(p, q, qp, radius, pairs))
     lo, hi = _part(c, chunks, L.surf_a.shape[0])
-    for s in range(lo, hi):  # eq. (14), decided as triangle_products does
-        ia, ib, ic = L.surf_a[s], L.surf_b[s], L.surf_c[s]
-        cab = (q[ib, 0] - q[ia, 0]) * (q[ic, 1] - q[ia, 1]) - (q[ib, 1] - q[ia, 1]) * (
-            q[ic, 0] - q[ia, 0]
-        )
-        on[s] = L.surf_beta[s] * cab + L.theta >= 0.0  # Upsilon(0) = 1
+    for s in range(lo, hi):
+        _surface(s, q, sa, sb, sc, beta, theta, on)
     lo, hi = _part(c, chunks, L.area_a.shape[0])
     for mm in range(lo, hi):
-        ia, ib, ic = L.area_a[mm], L.area_b[mm], L.area_c[mm]
-        area = 0.5 * (
-            (q[ib, 0] - q[ia, 0]) * (q[ic, 1] - q[ia, 1])
-            - (q[ib, 1] - q[ia, 1]) * (q[ic, 0] - q[ia, 0])
-        )
-        area_g[mm] = L.area_gain * 0.5 * (area - L.area_target[mm])
+        _area(mm, q, aa, ab, ac, target, a_gain, area_g)
     least[c, 0] = g_min
     least[c, 1] = w_min
 
@@ -124,65 +235,23 @@ def items_chunk(c, chunks, q, qp, sweep, L, pairs, n_pairs, fe, fp, on, area_g, 
 def robots_chunk(c, chunks, q, qn, qb, dt, L, p_ptr, p_rows, fe, fp, on, area_g, u, moves):
     """Chunk ``c`` of the robots: ``u = f(q)`` gathered, and the Euler step ``qn = q + dt u``.
 
-    ``moves[c]`` gets the largest squared move of the step and the largest squared
-    distance of ``qn`` from ``qb`` (the state the close list was built at).
+    ``moves[c]`` gets the largest squared move of the step (infinite if a robot's
+    next position is not finite) and the largest squared distance of ``qn`` from ``qb``
+    (the state the close list was built at).
     """
+    R = (
+        L.nbr_ptr, L.nbr_edge, L.term_ptr, L.term_s, L.term_w, L.term_stride, L.term_j, L.term_k,
+        L.area_ptr, L.area_rows, L.area_a, L.area_b, L.area_c,
+    )  # fmt: skip
     big = 0.0
     far = 0.0
     bad = False
     lo, hi = _part(c, chunks, q.shape[0])
     for i in range(lo, hi):
-        ux = 0.0
-        uy = 0.0
-        for p in range(L.nbr_ptr[i], L.nbr_ptr[i + 1]):  # edges, eq. (8)
-            e = L.nbr_edge[p]
-            if e >= 0:
-                ux += fe[e, 0]
-                uy += fe[e, 1]
-            else:
-                ux -= fe[~e, 0]
-                uy -= fe[~e, 1]
-        for p in range(p_ptr[i], p_ptr[i + 1]):  # Khatib's repulsion
-            e = p_rows[p]
-            if e >= 0:
-                ux += fp[e, 0]
-                uy += fp[e, 1]
-            else:
-                ux -= fp[~e, 0]
-                uy -= fp[~e, 1]
-        for p in range(L.term_ptr[i], L.term_ptr[i + 1]):  # eqs. (11), (13), (23)
-            if on[L.term_s[p]]:
-                w = L.term_w[p * L.term_stride]
-                j, k = L.term_j[p], L.term_k[p]
-                ux += w * (q[k, 1] - q[j, 1])
-                uy -= w * (q[k, 0] - q[j, 0])
-        for p in range(L.area_ptr[i], L.area_ptr[i + 1]):  # signed-area penalty
-            mm = L.area_rows[p] // 3
-            corner = L.area_rows[p] - 3 * mm
-            ia, ib, ic = L.area_a[mm], L.area_b[mm], L.area_c[mm]
-            if corner == 0:
-                ux += area_g[mm] * (q[ic, 1] - q[ib, 1])
-                uy -= area_g[mm] * (q[ic, 0] - q[ib, 0])
-            elif corner == 1:
-                ux += area_g[mm] * (q[ia, 1] - q[ic, 1])
-                uy -= area_g[mm] * (q[ia, 0] - q[ic, 0])
-            else:
-                ux += area_g[mm] * (q[ib, 1] - q[ia, 1])
-                uy -= area_g[mm] * (q[ib, 0] - q[ia, 0])
-        u[i, 0] = ux
-        u[i, 1] = uy
-        x = q[i, 0] + dt * ux  # explicit Euler
-        y = q[i, 1] + dt * uy
-        qn[i, 0] = x
-        qn[i, 1] = y
-        if not (math.isfinite(x) and math.isfinite(y)):
-            bad = True  # judged before anything else sees it
-        ex = x - q[i, 0]
-        ey = y - q[i, 1]
-        big = max(big, ex * ex + ey * ey)
-        ex = x - qb[i, 0]
-        ey = y - qb[i, 1]
-        far = max(far, ex * ex + ey * ey)
+        move, drift, ok = _robot(i, q, qn, qb, dt, R, p_ptr, p_rows, fe, fp, on, area_g, u)
+        big = max(big, move)
+        far = max(far, drift)
+        bad = bad or not ok  # judged before anything else sees it
     moves[c, 0] = np.inf if bad else big
     moves[c, 1] = far
 
