@@ -48,7 +48,7 @@ from ..verlet import build_close_list, list_holds, pair_rows
 from .base import RawSolution, steps_for
 from .diagnostics import switching_diagnostics
 from .field import items, items_parallel, robots, robots_parallel
-from .layout import RunLayout, run_layout
+from .layout import REORDER_FROM, RunLayout, robot_order, run_layout
 
 __all__ = ["PARALLEL_FROM", "CompiledRun", "compiled_terms", "run_compiled", "run_euler_compiled"]
 
@@ -346,11 +346,14 @@ def compiled_terms(system: System, integrator: object) -> RunLayout | None:
         return None
     if system.sensed or (system.faults is not None and system.faults.any):
         return None
+    f = system.formation
+    # the robots' order first: its scratch is gone before the law's arrays are made
+    order = robot_order(f.edges[:, 0], f.edges[:, 1], f.n) if f.n >= REORDER_FROM else False
     try:
-        terms = system.law.compiled_terms(system.formation, pairs=False)._asdict()
+        terms = system.law.compiled_terms(f, pairs=False)._asdict()
     except ParameterError:
         return None
-    return run_layout(terms)  # emptied as it is laid out
+    return run_layout(terms, reorder=order)  # emptied as it is laid out
 
 
 def run_euler_compiled(

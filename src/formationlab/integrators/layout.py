@@ -26,6 +26,7 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from ..controllers.terms import KernelTerms
@@ -83,14 +84,28 @@ class RunLayout(NamedTuple):
         return sum(v.nbytes for v in self if isinstance(v, np.ndarray))
 
 
-def _rows(owner: NDArray[np.integer], n: int) -> tuple[NDArray[np.int32], NDArray[np.int64]]:
+def _rows(owner: NDArray[np.integer], n: int) -> tuple[NDArray[np.int32], NDArray[np.int32]]:
     """Row pointers ``(n + 1,)`` and the stable order that groups items by ``owner``."""
     if owner.size > _LIMIT:
         raise ParameterError(f"{owner.size} list items exceed the compiled run's int32 rows")
-    order = np.argsort(owner, kind="stable")
     ptr = np.zeros(n + 1, _I32)
-    np.cumsum(np.bincount(owner, minlength=n), out=ptr[1:])
+    order = np.empty(owner.size, _I32)
+    _group(owner, ptr, order)
     return ptr, order
+
+
+@njit(cache=True)
+def _group(owner, ptr, order):
+    """Counting sort: ``ptr`` the rows' starts, ``order`` the items row by row, in order."""
+    n = ptr.size - 1
+    for k in range(owner.size):
+        ptr[owner[k] + 1] += 1
+    for i in range(n):
+        ptr[i + 1] += ptr[i]
+    fill = ptr[:n].copy()
+    for k in range(owner.size):
+        order[fill[owner[k]]] = k
+        fill[owner[k]] += 1
 
 
 def _i32(a: NDArray[np.integer]) -> NDArray[np.int32]:
@@ -108,7 +123,9 @@ def robot_order(edge_i: NDArray[np.integer], edge_j: NDArray[np.integer], n: int
     return _i32(reverse_cuthill_mckee(graph + graph.T, symmetric_mode=True))
 
 
-def run_layout(terms: KernelTerms | dict[str, Any], *, reorder: bool | None = None) -> RunLayout:
+def run_layout(
+    terms: KernelTerms | dict[str, Any], *, reorder: bool | NDArray[np.int32] | None = None
+) -> RunLayout:
     """The compiled run's layout of ``terms`` (module docstring); the same sums as
     the terms, robot by robot, in the order of the kernel before (edges as robot
     ``i`` then robot ``j``, terms as listed by surface).
@@ -117,13 +134,13 @@ def run_layout(terms: KernelTerms | dict[str, Any], *, reorder: bool | None = No
     emptied as it is read: each array is let go once laid out, so that the law's
     int64 arrays and their int32 layout are not held in full at the same time.
 
-    ``reorder`` (default: from :data:`REORDER_FROM` robots) numbers the robots inside
-    the run by :func:`robot_order`, so that a robot's neighbours, its edges and its
-    terms lie near it in memory (a lattice numbered ring by ring from its centre, as
-    ``formationlab.lattice`` does, costs twice as much per robot-step at 100,000 robots
-    otherwise). Every edge keeps its ends and every surface its corners, and each robot
-    its rows in their order, so the field is the same, bit for bit, but for the order of
-    a robot's close pairs (by partner number).
+    ``reorder`` (default: from :data:`REORDER_FROM` robots; or the order itself, new to
+    old) numbers the robots inside the run by :func:`robot_order`, so that a robot's
+    neighbours, its edges and its terms lie near it in memory (a 100,000-robot lattice
+    numbered at random took twice the CPU time per step without it). Every edge keeps
+    its ends and every surface its corners, and each robot its rows in their order, so
+    the field is the same, bit for bit, but for the order of a robot's close pairs (by
+    partner number). Edges, surfaces and area triangles are stored by their least robot.
     """
     t = dict(terms._asdict()) if isinstance(terms, KernelTerms) else terms
     radius = np.ascontiguousarray(t.pop("radius"), dtype=float)
@@ -132,8 +149,8 @@ def run_layout(terms: KernelTerms | dict[str, Any], *, reorder: bool | None = No
     m = ei.size
     if reorder is None:
         reorder = n >= REORDER_FROM
-    if reorder:
-        perm = robot_order(ei, ej, n)
+    if isinstance(reorder, np.ndarray) or reorder:
+        perm = _i32(reorder) if isinstance(reorder, np.ndarray) else robot_order(ei, ej, n)
         new = np.empty(n, _I32)  # old number -> new number
         new[perm] = np.arange(n, dtype=_I32)
         radius = radius[perm]
@@ -145,6 +162,31 @@ def run_layout(terms: KernelTerms | dict[str, Any], *, reorder: bool | None = No
     def relabel(a: NDArray[np.integer]) -> NDArray[np.int32]:
         return _i32(a) if new is None else new[a]
 
+    # the restricted terms first: the largest arrays, let go soonest
+    term_ptr, torder = _rows(relabel(t.pop("term_i")), n)
+    # (each int64 array is made int32 before it is gathered)
+    term_s = _i32(t.pop("term_surface"))[torder]  # renumbered with the surfaces below
+    term_j = relabel(_i32(t.pop("term_j"))[torder])
+    term_k = relabel(_i32(t.pop("term_k"))[torder])
+    w = t.pop("term_weight")[torder]
+    del torder
+    flip = np.flatnonzero(w < 0)
+    term_j[flip], term_k[flip] = term_k[flip], term_j[flip]
+    np.abs(w, out=w)
+    del flip
+    uniform = w.size > 0 and bool(np.all(w == w[0]))
+    term_w = w[:1].copy() if uniform else w
+    del w
+    # surfaces stored by their least robot (new numbers), each keeping its corners' roles
+    surf = [relabel(t.pop(f"surface_{c}")) for c in "abc"]
+    s_order = np.argsort(np.minimum(np.minimum(surf[0], surf[1]), surf[2]), kind="stable")
+    s_pos = np.empty(s_order.size, _I32)
+    s_pos[s_order] = np.arange(s_order.size, dtype=_I32)
+    surf = [c[s_order] for c in surf]
+    surf_beta = np.ascontiguousarray(t.pop("surface_beta")[s_order], dtype=float)
+    del s_order
+    term_s = s_pos[term_s]
+    del s_pos
     # edges stored by their least robot (new numbers), each keeping its ends' roles; each
     # robot's row as before
     e_order = np.argsort(np.minimum(ei, ej), kind="stable")
@@ -158,28 +200,6 @@ def run_layout(terms: KernelTerms | dict[str, Any], *, reorder: bool | None = No
     edge_d = np.ascontiguousarray(t.pop("edge_distance")[e_order], dtype=float)
     edge_a = np.ascontiguousarray(t.pop("edge_contact")[e_order], dtype=float)
     del e_order, e_pos
-    # surfaces stored by their least robot (new numbers), each keeping its corners' roles
-    surf = [relabel(t.pop(f"surface_{c}")) for c in "abc"]
-    s_order = np.argsort(np.minimum(np.minimum(surf[0], surf[1]), surf[2]), kind="stable")
-    s_pos = np.empty(s_order.size, _I32)
-    s_pos[s_order] = np.arange(s_order.size, dtype=_I32)
-    surf = [c[s_order] for c in surf]
-    surf_beta = np.ascontiguousarray(t.pop("surface_beta")[s_order], dtype=float)
-    del s_order
-    term_ptr, torder = _rows(relabel(t.pop("term_i")), n)
-    term_s = s_pos[t.pop("term_surface")[torder]]
-    del s_pos
-    term_j = relabel(t.pop("term_j")[torder])
-    term_k = relabel(t.pop("term_k")[torder])
-    w = t.pop("term_weight")[torder]
-    del torder
-    flip = np.flatnonzero(w < 0)
-    term_j[flip], term_k[flip] = term_k[flip], term_j[flip]
-    np.abs(w, out=w)
-    del flip
-    uniform = w.size > 0 and bool(np.all(w == w[0]))
-    term_w = w[:1].copy() if uniform else w
-    del w
     # area triangles stored by their least robot, in rows by corner: 3 item + corner
     area = [relabel(t.pop(f"area_{c}")) for c in "abc"]
     a_order = np.argsort(np.minimum(np.minimum(area[0], area[1]), area[2]), kind="stable")
