@@ -109,13 +109,34 @@ def grad_psi(
     return scatter_rows(terms, i, formation.n)
 
 
+#: restricted triples summed at once by :func:`psi_sum` (more are summed in parts of this
+#: many, so that its scratch memory does not grow with the formation)
+PSI_PART = 1 << 16
+
+
 def psi_sum(formation: Formation, q: NDArray[np.float64], theta: float) -> NDArray[np.float64]:
-    """``sum_i psi_i`` over ordered pairs (eq. 13); shape ``(...)``."""
+    """``sum_i psi_i`` over ordered pairs (eq. 13); shape ``(...)``.
+
+    Beyond :data:`PSI_PART` restricted triples, summed part by part (the same terms;
+    the sum's rounding may differ in the last bits).
+    """
     q = np.asarray(q, dtype=float)
-    i, j, k = formation.restricted_triples.T
-    c = cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :])  # c_ijk
-    ac = formation.restricted_alpha * c
-    return np.sum(ac * _steps(formation, q, theta), axis=-1)  # eq. (14): alpha c Upsilon(.)
+    t = formation.restricted_triples
+    alpha = formation.restricted_alpha
+    if len(t) <= PSI_PART:
+        i, j, k = t.T
+        c = cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :])  # c_ijk
+        ac = alpha * c
+        return np.sum(ac * _steps(formation, q, theta), axis=-1)  # eq. (14): alpha c Upsilon(.)
+    on = upsilon(switching_functions(formation, q, theta))  # (..., s)
+    _, _, surface = formation.surfaces
+    total = np.zeros(q.shape[:-2])
+    for a in range(0, len(t), PSI_PART):
+        i, j, k = t[a : a + PSI_PART].T
+        c = cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :])  # c_ijk
+        steps = np.take(on, surface[a : a + PSI_PART], axis=-1)
+        total = total + np.sum(alpha[a : a + PSI_PART] * c * steps, axis=-1)  # eq. (14)
+    return total
 
 
 @register

@@ -366,12 +366,15 @@ def run_euler_compiled(
     save_every: int,
     progress: Callable[[float], None] | None = None,
     interruptible: bool = False,
+    diagnostics: bool = True,
 ) -> RawSolution:
     """:meth:`Euler.run` on the compiled path: the same :class:`RawSolution`.
 
-    The switching diagnostics are computed from the saved states (exact with
-    ``save_every = 1``, as the driver records them; from the saved states only
-    otherwise, which ``stats["diagnostics_from"]`` says).
+    The switching diagnostics are computed from the switching functions at the saved
+    states (exact with ``save_every = 1``, as the driver records them; from the saved
+    states only otherwise, which ``stats["diagnostics_from"]`` says): ``sigma(t)``
+    gives them (``simulate`` computes them once, after the run's lists are let go),
+    by default ``system.sigma`` of the saved states.
     """
     n_steps = steps_for(duration, dt)
     out = run_compiled(
@@ -387,13 +390,12 @@ def run_euler_compiled(
         x_last = out.x[-1]
         x_next = x_last + dt * out.v[-1]
         message = system.step_message(x_last, x_next, out.status, (out.steps + 1) * dt, dt)
-    sigma = system.sigma(out.x)
     stats: dict[str, Any] = {
         "steps": int(out.steps),
         "rhs_evaluations": int(out.steps) + 1,
         "wall_time_s": out.wall,
         "step_cost_s": out.wall / max(out.steps, 1),
-        **switching_diagnostics(t, sigma),
+        **(switching_diagnostics(t, system.sigma(out.x)) if diagnostics else {}),
         "diagnostics_from": "every step" if save_every == 1 else f"every {save_every} steps",
         "backend": "numba",
         "threads": out.threads,
