@@ -215,3 +215,21 @@ def test_numbering_the_robots_by_the_graph_changes_only_the_order_of_close_pairs
     b = run_compiled(lay, spread, **kw)
     np.testing.assert_array_equal(a.x, b.x)
     np.testing.assert_array_equal(a.v, b.v)
+
+
+def test_the_faster_of_one_thread_and_the_threads_gives_the_same_run(monkeypatch):
+    # from PARALLEL_FROM robots the run times one thread and the threads on its second and
+    # third segments (here every 1 % of the run: a progress callback) and keeps the faster
+    import formationlab.integrators.compiled as compiled
+
+    monkeypatch.setattr(compiled, "PARALLEL_FROM", 10)
+    f, lw, q0 = swarm(120, "distance", seed=6, spread=0.02)
+    terms = lw.compiled_terms(f)
+    seen = []
+    kw = {"dt": 1e-3, "n_steps": 400, "save_every": 10}
+    probed = run_compiled(terms, q0, progress=seen.append, **kw)
+    one = run_compiled(terms, q0, parallel=False, **kw)
+    assert len(seen) > 3
+    assert probed.threads in (1, compiled.numba.get_num_threads())
+    np.testing.assert_array_equal(probed.x, one.x)
+    np.testing.assert_array_equal(probed.v, one.v)
