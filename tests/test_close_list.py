@@ -233,3 +233,30 @@ def test_the_faster_of_one_thread_and_the_threads_gives_the_same_run(monkeypatch
     assert probed.threads in (1, compiled.numba.get_num_threads())
     np.testing.assert_array_equal(probed.x, one.x)
     np.testing.assert_array_equal(probed.v, one.v)
+
+
+def test_a_law_whose_kernel_terms_take_no_pairs_keyword_still_runs_compiled():
+    from dataclasses import dataclass
+
+    from formationlab.controllers.terms import LOG_BARRIER, build_terms
+
+    @dataclass(frozen=True, kw_only=True)
+    class Older(fl.DistanceLaw):  # kernel_terms(formation), as laws were written before
+        name = "older-distance"
+
+        def control(self, formation, q):
+            return super().control(formation, q)
+
+        def kernel_terms(self, formation):
+            rep = self.repulsion
+            return build_terms(
+                formation, kind=LOG_BARRIER, edge_gain=self.k_c, repulsion_gain=self.k_c,
+                eta=rep.eta, influence=rep.influence,
+            )  # fmt: skip
+
+    q0 = [[-1.2, -0.9], [1.4, -0.7], [0.1, 1.3]]
+    f = fl.Formation.from_distances(3, distances=1.0, diameters=0.2)
+    a = fl.simulate(f, Older(), q0, duration=0.5)
+    b = fl.simulate(f, fl.DistanceLaw(), q0, duration=0.5)
+    assert a.stats["backend"] == "numba"
+    np.testing.assert_array_equal(a.q, b.q)

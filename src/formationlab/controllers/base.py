@@ -19,6 +19,7 @@ compiled kernels can evaluate returns its data from :meth:`Law.kernel_terms`.
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 from typing import ClassVar, NamedTuple, TypeVar
 
@@ -141,6 +142,8 @@ class Law:
                 f"the law {self.name!r} ({type(self).__name__}) overrides control() but not "
                 'kernel_terms(), so the compiled kernel cannot run it; use backend="numpy"'
             )
+        if "pairs" not in inspect.signature(type(self).kernel_terms).parameters:
+            return self.kernel_terms(formation)  # a law written before the keyword
         return self.kernel_terms(formation, pairs=pairs)
 
     def with_params(self, **params: float) -> Law:
