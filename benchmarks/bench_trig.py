@@ -1,10 +1,13 @@
 """Can a vectorised sine and cosine equal the C library's bit for bit, and cost less?
 
-The unicycle's floor in the batch kernel is one ``sincos`` of the C library per robot and
-step (``benchmarks/bench_models.py``): a call keeps its loop from being vectorised, and
-numba's vectorised transcendental functions (Intel SVML) are gone since numba 0.62. The
-kernel must give the numpy driver's results, which call the same C library, so an
-approximation will not do. This script measures the best exact alternative found:
+A record of an alternative that was not taken. The batch kernel's unicycles used to call
+the C library's ``sincos`` once per robot and step (a call keeps its loop from being
+vectorised, and numba's vectorised transcendental functions, Intel SVML, are gone since
+numba 0.62); the kernel now carries the headings from step to step without calls and
+approximates ``atan2`` to about an ulp (``studies/kernel_trig.py``, docs/robot-models.md),
+which the kernel's agreement with the driver to rounding tolerates. Before that, exact
+equality with the library was the aim; this script measures the best exact alternative
+found:
 
 * a branch-free sine and cosine that the compiler vectorises: Cody-Waite reduction by
   pi/2 (two 33-bit parts and a third, exact products), a table of sin and cos of

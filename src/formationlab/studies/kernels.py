@@ -21,13 +21,17 @@ The robot model enters as a :class:`~formationlab.studies.model_terms.ModelTerms
 (single integrators, unicycles through either transform, double integrators,
 each with its limits): :func:`_points` gives the points the law acts on,
 :func:`_rates` the state's rate from the law's control (``RobotModel.derivative``),
-:func:`_speed` the stop rule's speed (``RobotModel.speed``). A unicycle's
-``cos theta`` and ``sin theta`` are evaluated once per robot and step
-(:func:`_headings`) and read by the other two, whose loops then call no library function
-(the heading transform's ``atan2`` remains): a library call, or a branch that calls,
-keeps a loop from being vectorised. So the law's loops (:func:`_controls`) compute the
-control only, and contact is decided apart, on the centres, for every model
-(:func:`_contact`; near-identity unicycles' law acts on the hand points).
+:func:`_speed` the stop rule's speed (``RobotModel.speed``). No loop over trials calls
+the C library in a unicycle's step (a call, or a branch that calls, keeps a loop from
+being vectorised; :mod:`.kernel_trig`): each unicycle's ``cos theta`` and ``sin theta``
+are taken from the library once, at the start, and then carried from step to step
+(:func:`_turn`), turned by each Euler step's angle with a short series and an exact sum
+(the library again only for a turn above ``SMALL_TURN`` in one step), and the heading
+transform's ``atan2`` is a branch-free rational approximation; both are within about an
+ulp of the library's values, so the trials still agree with the driver to rounding. So
+the law's loops (:func:`_controls`) compute the control only, and contact is decided
+apart, on the centres, for every model (:func:`_contact`; near-identity unicycles' law
+acts on the hand points).
 
 The step rule is the one of :meth:`formationlab.dynamics.System.step_verdict`:
 a step is rejected when it is not finite, when it ends with a pair in contact
@@ -37,9 +41,10 @@ whose end clearance is below twice the largest displacement of the step
 (farther pairs cannot have met during it).
 
 What a trial-step costs, per model: ``benchmarks/bench_models.py`` and
-docs/robot-models.md. The unicycle's floor is the C library's ``sincos`` (and the
-heading transform's ``atan2``) per robot and step: vectorised versions equal to it bit
-for bit are not to be had here (``benchmarks/bench_trig.py``).
+docs/robot-models.md. Whether the compiler vectorises a loop is measured, not assumed:
+the unicycle's loops were not vectorised while they read and wrote the rows of one
+``(n, 4, C)`` array or stored a heavy computation into three rows of ``f``; so the
+carried headings are four arrays and a unicycle's rates take three short passes.
 """
 
 from __future__ import annotations
@@ -51,6 +56,7 @@ from numba import njit, prange
 
 from ..controllers.terms import LOG_BARRIER
 from ..status import Status
+from .kernel_trig import SMALL_TURN, atan2_poly, turn_small
 from .model_terms import DOUBLE, HEADING, NEAR_IDENTITY, SINGLE
 
 __all__ = ["run_chunks"]
@@ -225,27 +231,58 @@ def _contact(x, xp, disp, gap, swept, near, nact, terms):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _headings(x, h, nact):
-    """``h = (cos theta, sin theta)`` of every robot of the first ``nact`` trials.
+def _headings(x, hc, hs, hcl, hsl, nact):
+    """``hc, hs = cos theta, sin theta`` ``(n, C)`` of the first ``nact`` trials (library).
 
-    Once per step: :func:`_points` and :func:`_rates` read them, and their own loops,
-    free of library calls, are vectorised.
+    ``hcl``, ``hsl``: what rounding left out of them, taken as 0 here (:func:`_turn`).
     """
     for i in range(x.shape[0]):
         for b in range(nact):
             th = x[i, 2, b]
-            h[i, 0, b] = math.cos(th)
-            h[i, 1, b] = math.sin(th)
+            hc[i, b] = math.cos(th)
+            hs[i, b] = math.sin(th)
+            hcl[i, b] = 0.0
+            hsl[i, b] = 0.0
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _points(x, h, p, nact, model):
-    """Near-identity hand points ``p = q + l h`` (``Unicycle.points``); ``h``: :func:`_headings`."""
+def _turn(x, xp, hc, hs, hcl, hsl, wide, nact):
+    """Carry the headings of the states ``xp`` to the states ``x`` one Euler step later.
+
+    Each heading turns by its step's angle ``x_theta - xp_theta`` (exact when the two are
+    within a factor 2, Sterbenz; across 0 it may round by half an ulp of the angle) with
+    :func:`.kernel_trig.turn_small` (no library call, vectorised); the trials with a robot
+    that turned by more than ``SMALL_TURN`` (``wide``, rare) take the library's ``cos``
+    and ``sin`` of their new headings. The four parts are four arrays: as four rows of
+    one array, read and written in this loop, the compiler did not vectorise it (measured:
+    9-10 ns per robot against 3-4).
+    """
+    for b in range(nact):
+        wide[b] = 0.0
+    for i in range(x.shape[0]):
+        for b in range(nact):
+            a = x[i, 2, b] - xp[i, 2, b]
+            hc[i, b], hs[i, b], hcl[i, b], hsl[i, b] = turn_small(
+                hc[i, b], hs[i, b], hcl[i, b], hsl[i, b], a
+            )
+            wide[b] = wide[b] if abs(a) <= SMALL_TURN else 1.0
+    for b in range(nact):
+        if wide[b] != 0.0:
+            for i in range(x.shape[0]):
+                hc[i, b] = math.cos(x[i, 2, b])
+                hs[i, b] = math.sin(x[i, 2, b])
+                hcl[i, b] = 0.0
+                hsl[i, b] = 0.0
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def _points(x, hc, hs, p, nact, model):
+    """Near-identity hand points ``p = q + l h`` (``Unicycle.points``); ``h``: :func:`_turn`."""
     ell = model.offset
     for i in range(x.shape[0]):
         for b in range(nact):
-            p[i, 0, b] = x[i, 0, b] + ell * h[i, 0, b]
-            p[i, 1, b] = x[i, 1, b] + ell * h[i, 1, b]
+            p[i, 0, b] = x[i, 0, b] + ell * hc[i, b]
+            p[i, 1, b] = x[i, 1, b] + ell * hs[i, b]
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
@@ -260,10 +297,11 @@ def _limit_unicycle(v, w, vmax, wmax):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def _rates(x, h, u, f, nact, model):
+def _rates(x, hc, hs, u, f, vel, nact, model):
     """``f = x_dot`` from the law's controls ``u`` (``RobotModel.derivative``, with limits).
 
-    ``h``: the unicycles' headings ``(cos theta, sin theta)`` (:func:`_headings`).
+    ``hc``, ``hs``: the unicycles' ``cos theta`` and ``sin theta`` ``(n, C)`` (:func:`_turn`);
+    ``vel`` ``(C,)``: room for their speeds.
     """
     n = x.shape[0]
     vmax = model.max_speed
@@ -298,42 +336,48 @@ def _rates(x, h, u, f, nact, model):
                 f[i, 1, b] = wy * s
                 f[i, 2, b] = ax
                 f[i, 3, b] = ay
-    elif model.kind == NEAR_IDENTITY:  # v = u . h, omega = u . h_perp / l (NearIdentity)
+    else:  # unicycles: per robot the speed (in `vel`) and the turn rate (f's third row),
+        # then the velocity (measured: the heading transform's rates in one loop that
+        # stores the three rows of f cost twice as much, 15 against 7 ns per robot)
         ell = model.offset
-        for i in range(n):
-            for b in range(nact):
-                c = h[i, 0, b]
-                sn = h[i, 1, b]
-                along = c * u[i, 0, b] + sn * u[i, 1, b]
-                across = -sn * u[i, 0, b] + c * u[i, 1, b]
-                v, w = along, across / ell
-                if limited:
-                    v, w = _limit_unicycle(v, w, vmax, wmax)
-                f[i, 0, b] = v * c
-                f[i, 1, b] = v * sn
-                f[i, 2, b] = w
-    else:  # the Robotarium's si_to_uni (HeadingTransform)
         kv = model.linear_gain
         kw = model.turn_gain
+        back = model.backwards
         for i in range(n):
-            for b in range(nact):
-                c = h[i, 0, b]
-                sn = h[i, 1, b]
-                along = c * u[i, 0, b] + sn * u[i, 1, b]
-                across = -sn * u[i, 0, b] + c * u[i, 1, b]
-                if model.backwards:
-                    if along == 0.0:
-                        turn = math.copysign(0.5 * math.pi, across) if across != 0 else 0.0
+            if model.kind == NEAR_IDENTITY:  # v = u . h, omega = u . h_perp / l (NearIdentity)
+                for b in range(nact):
+                    c = hc[i, b]
+                    sn = hs[i, b]
+                    along = c * u[i, 0, b] + sn * u[i, 1, b]
+                    across = -sn * u[i, 0, b] + c * u[i, 1, b]
+                    v, w = along, across / ell
+                    if limited:
+                        v, w = _limit_unicycle(v, w, vmax, wmax)
+                    vel[b] = v
+                    f[i, 2, b] = w
+            else:  # the Robotarium's si_to_uni (HeadingTransform): the angle to u first
+                for b in range(nact):
+                    c = hc[i, b]
+                    sn = hs[i, b]
+                    along = c * u[i, 0, b] + sn * u[i, 1, b]
+                    across = -sn * u[i, 0, b] + c * u[i, 1, b]
+                    if back:  # atan(across / along); +-pi/2 (0 if across is 0) where along is 0
+                        level = along == 0.0
+                        turn = atan2_poly(across / (1.0 if level else along), 1.0)
+                        edge = math.copysign(0.5 * math.pi, across) if across != 0.0 else 0.0
+                        f[i, 2, b] = edge if level else turn
                     else:
-                        turn = math.atan(across / along)
-                else:
-                    turn = math.atan2(across, along)
-                v, w = kv * along, kw * turn / (math.pi / 2)
-                if limited:
-                    v, w = _limit_unicycle(v, w, vmax, wmax)
-                f[i, 0, b] = v * c
-                f[i, 1, b] = v * sn
-                f[i, 2, b] = w
+                        f[i, 2, b] = atan2_poly(across, along)
+                for b in range(nact):
+                    along = hc[i, b] * u[i, 0, b] + hs[i, b] * u[i, 1, b]
+                    v, w = kv * along, kw * f[i, 2, b] / (math.pi / 2)
+                    if limited:
+                        v, w = _limit_unicycle(v, w, vmax, wmax)
+                    vel[b] = v
+                    f[i, 2, b] = w
+            for b in range(nact):
+                f[i, 0, b] = vel[b] * hc[i, b]
+                f[i, 1, b] = vel[b] * hs[i, b]
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
@@ -369,14 +413,20 @@ def _run_chunk(
     fp = np.empty((n, k, m))
     u = np.empty((n, 2, m))
     p = np.empty((n, 2, m) if hand else (1, 2, 1))  # hand points
-    h = np.empty((n, 2, m) if turns else (1, 2, 1))  # (cos theta, sin theta) at x
+    # cos theta, sin theta at x, and what rounding left out of them (_turn)
+    hshape = (n, m) if turns else (1, 1)
+    hc = np.empty(hshape)
+    hs = np.empty(hshape)
+    hcl = np.empty(hshape)
+    hsl = np.empty(hshape)
+    wide = np.empty(m)  # 1: a robot turned by more than SMALL_TURN in the last step
     ids = np.arange(start, stop)
     mc = np.full(m, np.inf)  # least clearance over accepted states
     gap = np.empty(m)  # clearance of the current state
     swept = np.empty(m)  # least clearance along the step to the current state
     near = np.empty(m)  # 1: a pair may have met during the step to the current state
     disp = np.zeros(m)  # largest displacement of the step to the current state
-    sigma = np.empty(m)  # switching function of one surface
+    sigma = np.empty(m)  # switching function of one surface (_rates: unicycle speeds)
     fin = np.zeros(m)  # 0 while the last Euler step was finite
     code = np.full(m, -1, dtype=np.int8)  # -1: still running
     qc = np.empty((n, 2, m))  # positions at the previous convergence check
@@ -390,16 +440,16 @@ def _run_chunk(
     nact = m
     step = 0
     kc = -1  # step of the previous check (the same for every live trial)
+    if turns:  # then carried from step to step (_turn)
+        _headings(x, hc, hs, hcl, hsl, nact)
     while nact > 0:
-        if turns:
-            _headings(x, h, nact)
         if hand:
-            _points(x, h, p, nact, model)
+            _points(x, hc, hs, p, nact, model)
             _controls(p, u, sigma, nact, terms)
         else:
             _controls(x, u, sigma, nact, terms)
         _contact(x, xp, disp, gap, swept, near, nact, terms)
-        _rates(x, h, u, f, nact, model)
+        _rates(x, hc, hs, u, f, sigma, nact, model)
         stopping = 0
         if step > 0:  # reject the step that led here (System.step_verdict)
             for b in range(nact):
@@ -475,6 +525,11 @@ def _run_chunk(
                             f[i, d, b] = f[i, d, last]
                         for d in range(2):
                             qc[i, d, b] = qc[i, d, last]
+                        if turns:
+                            hc[i, b] = hc[i, last]
+                            hs[i, b] = hs[i, last]
+                            hcl[i, b] = hcl[i, last]
+                            hsl[i, b] = hsl[i, last]
                     ids[b] = ids[last]
                     mc[b] = mc[last]
                     ns[b] = ns[last]
@@ -503,6 +558,8 @@ def _run_chunk(
                     fin[b] += z * 0.0
         for b in range(nact):
             disp[b] = math.sqrt(disp[b])
+        if turns:
+            _turn(xp, x, hc, hs, hcl, hsl, wide, nact)
         x, xp = xp, x
         f, fp = fp, f
         step += 1

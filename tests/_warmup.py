@@ -1,0 +1,58 @@
+"""Fill the numba cache before the test workers start (see ``conftest.pytest_configure``).
+
+Each of the two parts compiles some of the package's kernels through the public API, on a
+tiny problem; ``python tests/_warmup.py PART`` runs one part. Run in parallel by the
+controlling process, they compile each kernel once instead of once per test worker.
+"""
+
+from __future__ import annotations
+
+import sys
+import warnings
+
+import numpy as np
+
+
+def _triangle():
+    import formationlab as fl
+
+    f = fl.Formation.from_template([[0, 0], [1, 0], [0.5, 0.8]], diameters=0.2)
+    q0 = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, 0.8]])
+    q0 = q0 + 0.05 * np.random.default_rng(0).normal(size=(2, 3, 2))
+    return fl, f, q0
+
+
+def part0() -> None:
+    """The study kernel for every robot model, and the sensed kernel."""
+    fl, f, q0 = _triangle()
+    from formationlab.models import DoubleIntegrator, Unicycle
+    from formationlab.sensing import Sensing
+    from formationlab.studies.batch import run_batch
+
+    law = fl.get_law("angle-restricted")
+    run_batch(f, law, q0, dt=1e-2, duration=0.05)
+    for model in (Unicycle(), Unicycle(mapping="heading"), DoubleIntegrator()):
+        x0 = np.stack([model.initial_state(q) for q in q0])
+        run_batch(f, law, x0, dt=1e-2, duration=0.05, model=model)
+    seeds = [(1, t) for t in range(len(q0))]
+    run_batch(f, law, q0, dt=1e-2, duration=0.05, sensing=Sensing(noise=0.01), seeds=seeds)
+
+
+def part1() -> None:
+    """Compiled single runs of both kinds of law, the safety kernels, the pebble game."""
+    fl, f, q0 = _triangle()
+    from formationlab.safety import SafetyFilter
+
+    for name in ("distance", "angle-restricted"):
+        fl.simulate(f, fl.get_law(name), q0[0], duration=0.05)
+    cfg = SafetyFilter(filter="barrier-decentralized", distance=0.25)
+    fl.simulate(f, fl.get_law("distance"), q0[0], duration=0.05, safety=cfg)
+    from formationlab.rigidity import is_generically_rigid
+
+    is_generically_rigid(f.edges, f.n)
+
+
+if __name__ == "__main__":
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        (part0, part1)[int(sys.argv[1])]()
