@@ -82,7 +82,7 @@ class _Work(NamedTuple):
     u: NDArray[np.float64]  #: (n, 2) the velocity buffers
     un: NDArray[np.float64]
     qb: NDArray[np.float64]  #: (n, 2) the state the close list was built at
-    fe: NDArray[np.float64]  #: (m, 2) edge forces
+    fe: NDArray[np.float64]  #: (3, m) edge forces (x, y) and clearances
     on: NDArray[np.uint8]  #: (s,) surfaces switched on
     area_g: NDArray[np.float64]  #: (r,)
     least: NDArray[np.float64]  #: (chunks, 2)
@@ -102,7 +102,7 @@ def _work(layout: RunLayout, n: int, chunks: int) -> _Work:
         u=np.zeros((n, 2)),
         un=np.zeros((n, 2)),
         qb=np.zeros((n, 2)),
-        fe=np.zeros((layout.edge_i.size, 2)),
+        fe=np.zeros((3, layout.edge_i.size)),
         on=np.zeros(layout.surf_a.size, np.uint8),
         area_g=np.zeros(layout.area_a.size),
         least=np.zeros((chunks, 2)),

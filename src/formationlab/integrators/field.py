@@ -65,24 +65,50 @@ def _part(c, chunks, size):
     return c * size // chunks, (c + 1) * size // chunks
 
 
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
-def _edge(e, q, kind, gain, edge_i, edge_j, edge_a, edge_d, fe):
-    """Edge ``e``'s force on its first robot into ``fe[e]``; returns its clearance."""
-    i = edge_i[e]
-    j = edge_j[e]
-    a = edge_a[e]
-    dx = q[j, 0] - q[i, 0]
-    dy = q[j, 1] - q[i, 1]
-    r2 = dx * dx + dy * dy
-    r = math.sqrt(r2)
-    clr = r - a
-    if kind == LOG_BARRIER:  # k_c phi'(r) / r, eqs. (7), (8)
-        g = gain * (clr / (edge_d[e] - a) - 1.0) / (clr * r)
-    else:  # Krick et al. 2009
-        g = gain * (r2 - edge_d[e] * edge_d[e])
-    fe[e, 0] = g * dx
-    fe[e, 1] = g * dy
-    return clr
+@njit(cache=True, fastmath=False, error_model="numpy")
+def _edges(lo, hi, q, qp, sweep, kind, gain, edge_i, edge_j, edge_a, edge_d, fe):
+    """Edges ``lo:hi``: each force on its first robot into ``fe[0], fe[1]``, its clearance
+    into ``fe[2]``; returns the least clearance and the least swept one.
+
+    The differences are gathered first, so that the arithmetic runs over contiguous
+    slices counted from 0 (which the compiler vectorises: the same operations, in about
+    half the time).
+    """
+    ei, ej, ea, ed = edge_i[lo:hi], edge_j[lo:hi], edge_a[lo:hi], edge_d[lo:hi]
+    fx, fy, clr = fe[0, lo:hi], fe[1, lo:hi], fe[2, lo:hi]
+    for e in range(hi - lo):
+        i = ei[e]
+        j = ej[e]
+        fx[e] = q[j, 0] - q[i, 0]
+        fy[e] = q[j, 1] - q[i, 1]
+    if kind == LOG_BARRIER:
+        for e in range(hi - lo):
+            dx = fx[e]
+            dy = fy[e]
+            a = ea[e]
+            r = math.sqrt(dx * dx + dy * dy)
+            c = r - a
+            g = gain * (c / (ed[e] - a) - 1.0) / (c * r)  # k_c phi'(r) / r, eqs. (7), (8)
+            fx[e] = g * dx
+            fy[e] = g * dy
+            clr[e] = c
+    else:
+        for e in range(hi - lo):
+            dx = fx[e]
+            dy = fy[e]
+            r2 = dx * dx + dy * dy
+            c = math.sqrt(r2) - ea[e]
+            g = gain * (r2 - ed[e] * ed[e])  # Krick et al. 2009
+            fx[e] = g * dx
+            fy[e] = g * dy
+            clr[e] = c
+    g_min = np.inf
+    w_min = np.inf
+    for e in range(hi - lo):
+        g_min = min(g_min, clr[e])
+        if clr[e] <= sweep:  # tested along the step
+            w_min = min(w_min, _swept(q, qp, ei[e], ej[e], ea[e]))
+    return g_min, w_min
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
@@ -147,11 +173,11 @@ def _robot(i, q, qn, qb, dt, R, p_ptr, p_rows, fe, fp, on, area_g, u):
     for p in range(nbr_ptr[i], nbr_ptr[i + 1]):  # edges, eq. (8)
         e = nbr_edge[p]
         if e >= 0:
-            ux += fe[e, 0]
-            uy += fe[e, 1]
+            ux += fe[0, e]
+            uy += fe[1, e]
         else:
-            ux -= fe[~e, 0]
-            uy -= fe[~e, 1]
+            ux -= fe[0, ~e]
+            uy -= fe[1, ~e]
     for p in range(p_ptr[i], p_ptr[i + 1]):  # Khatib's repulsion
         e = p_rows[p]
         if e >= 0:
@@ -198,23 +224,17 @@ def items_chunk(c, chunks, q, qp, sweep, L, pairs, n_pairs, fe, fp, on, area_g, 
 
     ``qp`` is the state the step came from and ``sweep`` twice its largest move
     (with a margin): pairs closer than that are tested along the step. Writes the
-    forces ``fe`` ``(m, 2)`` and ``fp`` ``(p, 2)`` (on robot ``i`` of each pair ``i < j``;
-    robot ``j`` takes the opposite), the surfaces' decisions ``on`` ``(s,)`` and the
-    area errors ``area_g``; ``least[c]`` gets the least clearance and the least
-    swept clearance of the chunk's edges and pairs.
+    forces ``fe`` ``(3, m)`` (x, y, and the clearance) and ``fp`` ``(p, 2)`` (on robot
+    ``i`` of each pair ``i < j``; robot ``j`` takes the opposite), the surfaces'
+    decisions ``on`` ``(s,)`` and the area errors ``area_g``; ``least[c]`` gets the least
+    clearance and the least swept clearance of the chunk's edges and pairs.
     """
     kind, gain, ei, ej, ea, ed = L.kind, L.edge_gain, L.edge_i, L.edge_j, L.edge_a, L.edge_d
     radius, s0, rep = L.radius, L.influence, L.repulsion
     sa, sb, sc, beta, theta = L.surf_a, L.surf_b, L.surf_c, L.surf_beta, L.theta
     aa, ab, ac, target, a_gain = L.area_a, L.area_b, L.area_c, L.area_target, L.area_gain
-    g_min = np.inf
-    w_min = np.inf
     lo, hi = _part(c, chunks, L.edge_i.shape[0])
-    for e in range(lo, hi):
-        clr = _edge(e, q, kind, gain, ei, ej, ea, ed, fe)
-        g_min = min(g_min, clr)
-        if clr <= sweep:  # tested along the step
-            w_min = min(w_min, _swept(q, qp, ei[e], ej[e], ea[e]))
+    g_min, w_min = _edges(lo, hi, q, qp, sweep, kind, gain, ei, ej, ea, ed, fe)
     lo, hi = _part(c, chunks, n_pairs)
     for p in range(lo, hi):
         clr = _pair(p, q, radius, s0, rep, pairs, fp)
