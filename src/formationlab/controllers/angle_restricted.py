@@ -32,6 +32,12 @@ __all__ = [
 ]
 
 
+#: surfaces or restricted triples evaluated at once by :func:`switching_functions` and
+#: :func:`psi_sum` (more are taken in parts of this many, so that their scratch memory does
+#: not grow with the formation)
+PSI_PART = 1 << 16
+
+
 def switching_functions(
     formation: Formation, q: NDArray[np.float64], theta: float
 ) -> NDArray[np.float64]:
@@ -44,7 +50,14 @@ def switching_functions(
     switching diagnostics and the compiled kernels all use these numbers.
     """
     tris, beta, _ = formation.surfaces
-    return beta * triangle_products(q, tris) + theta  # eq. (14)
+    if len(tris) <= PSI_PART:
+        return beta * triangle_products(q, tris) + theta  # eq. (14)
+    q = np.asarray(q, dtype=float)
+    out = np.empty((*q.shape[:-2], len(tris)))
+    for a in range(0, len(tris), PSI_PART):  # in parts (the same numbers: element by element)
+        part = slice(a, a + PSI_PART)
+        out[..., part] = beta[part] * triangle_products(q, tris[part]) + theta  # eq. (14)
+    return out
 
 
 def triple_steps(formation: Formation, weights: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -107,11 +120,6 @@ def grad_psi(
     i, j, k = formation.restricted_triples.T
     terms = w[..., None] * perp(q[..., k, :] - q[..., j, :])  # eq. (23), summed as eq. (13)
     return scatter_rows(terms, i, formation.n)
-
-
-#: restricted triples summed at once by :func:`psi_sum` (more are summed in parts of this
-#: many, so that its scratch memory does not grow with the formation)
-PSI_PART = 1 << 16
 
 
 def psi_sum(formation: Formation, q: NDArray[np.float64], theta: float) -> NDArray[np.float64]:
