@@ -2,88 +2,187 @@
 
 A triangular lattice of N robots (spacing 1, diameter 0.2), Delaunay edges with their
 template distances, a start perturbed by 0.05 (seed 1) so that Khatib's repulsion and the
-switching surfaces are active; ``formationlab.simulate`` with ``Euler(dt=1e-3)`` for a few
-steps on the compiled path (``integrators/compiled.py``), for the distance law and the
-angle-restricted law (orientation from the lattice, collinear triples skipped). Prints ms
-per step, ns per robot-step (flat when the cost grows linearly in N), the memory per robot
-of the run's own arrays, and the 3-robot step against the numpy driver measured in the same
-run. Run ``python benchmarks/bench_swarm.py [--max 100000]``; the load average is printed.
+switching surfaces are active; explicit Euler (dt = 1e-3) on the compiled path
+(``integrators/compiled.py``), for the distance law and the angle-restricted law
+(orientation from the lattice, collinear triples skipped). For each N it prints:
+
+* ms per step inside the compiled loop on one thread and on numba's threads (the same
+  numbers bit for bit), the CPU ms per step of the one-thread run (what a quiet machine
+  would take), and what ``simulate`` chose by default (it measures both above
+  ``PARALLEL_FROM`` robots);
+* ns per robot-step (flat when the cost grows linearly in N) and the growth exponent
+  between consecutive sizes;
+* memory per robot: "run" is the peak that building the law's data and the compiled run
+  add (kernel data, layout, close list, scratch, saved states: here 3 states); "simulate"
+  the peak of the whole ``simulate`` call, post-processing (V, sigma) included;
+  "formation" what the formation given to it holds (not counted above);
+* one numpy evaluation of the law's field at the same N (the numpy driver's cost per step,
+  measured in the same run), and the 3-robot step through ``simulate`` against the numpy
+  driver.
+
+Then PASS/FAIL against the targets of the swarm issue. ``python
+benchmarks/bench_swarm.py [--max 100000]``; the load average is printed at the start and
+the end (the machine is shared: wall times grow with the load, CPU times much less).
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 import time
 import tracemalloc
 
+import numba
 import numpy as np
-from scipy.spatial import Delaunay
 
 import formationlab as fl
+from formationlab.dynamics import System
+from formationlab.integrators.compiled import compiled_terms, run_compiled
 from formationlab.paper import PAPER_Q0, paper_formation, paper_law
 
-
-def lattice(count: int) -> np.ndarray:
-    """``count`` points of a triangular lattice of spacing 1, row by row (a brick of rows)."""
-    side = int(np.ceil(np.sqrt(count)))
-    j, i = np.divmod(np.arange(count), side)
-    return np.stack([i + 0.5 * (j % 2), j * np.sqrt(3) / 2], axis=-1).astype(float)
+DT = 1e-3
+LAWS = ("distance", "angle-restricted")
 
 
-def delaunay_edges(points: np.ndarray) -> np.ndarray:
-    """Delaunay edges of the lattice, without the long edges of boundary slivers."""
-    tri = Delaunay(points).simplices
-    e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [0, 2]]])
-    e = np.unique(np.sort(e, axis=1), axis=0)
-    length = np.linalg.norm(points[e[:, 1]] - points[e[:, 0]], axis=1)
-    return e[length < 1.5]
+def load() -> str:
+    one, five, _ = os.getloadavg()
+    return f"load average {one:.2f} (5 min {five:.2f}) on {os.cpu_count()} cores"
 
 
-def per_step(formation, law, q0, steps: int, backend: str) -> tuple[float, float, str]:
-    """Seconds per step inside the time loop, per step of the whole call, and the status."""
-    t0 = time.perf_counter()
-    res = fl.simulate(formation, law, q0, duration=steps * 1e-3, save_every=steps, backend=backend)
-    whole = (time.perf_counter() - t0) / steps
-    return res.stats.get("step_cost_s", whole), whole, str(res.status)
+def swarm(n: int, law: str) -> tuple[fl.Formation, fl.Law, np.ndarray]:
+    tpl = fl.lattice("triangular", n, 1.0)
+    edges = fl.build_edges("delaunay", tpl)
+    orient = "template" if law == "angle-restricted" else "free"
+    f = fl.Formation.from_template(
+        tpl, edges=edges, diameters=0.2, orientation=orient, one_based=False
+    )
+    _ = f.surfaces  # the formation's own lists, built before anything is measured
+    q0 = tpl + np.random.default_rng(1).normal(0.0, 0.05, tpl.shape)
+    return f, fl.get_law(law), q0
+
+
+def formation_bytes(f: fl.Formation) -> int:
+    arrays = [f.diameters, f.edges, f.distances, f.restricted_triples, f.restricted_alpha]
+    arrays += list(f.surfaces) + ([f.template] if f.template is not None else [])
+    return sum(a.nbytes for a in arrays)
+
+
+def loop_cost(layout, q0, steps: int, parallel: bool) -> tuple[float, float, str]:
+    """Wall and CPU seconds per step inside the compiled loop."""
+    run_compiled(layout, q0, dt=DT, n_steps=2, save_every=2, parallel=parallel)  # warm
+    c0 = time.process_time()
+    out = run_compiled(layout, q0, dt=DT, n_steps=steps, save_every=steps, parallel=parallel)
+    return out.wall / steps, (time.process_time() - c0) / steps, str(out.status)
+
+
+def peak_bytes(fn) -> int:
+    tracemalloc.start()
+    fn()
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return peak
+
+
+def three_robots() -> tuple[float, float]:
+    """Seconds per step of ``simulate`` (whole call) for the paper's triangle: compiled, numpy."""
+    f, law = paper_formation(2), paper_law()
+
+    def per_step(steps: int, backend: str) -> float:
+        t0 = time.perf_counter()
+        fl.simulate(f, law, PAPER_Q0, duration=steps * DT, save_every=steps, backend=backend)
+        return (time.perf_counter() - t0) / steps
+
+    per_step(100, "numba")  # compiled and cached once
+    return min(per_step(20_000, "numba") for _ in range(3)), per_step(2_000, "numpy")
+
+
+def verdict(ok: bool) -> str:
+    return "PASS" if ok else "FAIL"
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--max", type=int, default=100_000)
     args = parser.parse_args()
-    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
-    f3, law3 = paper_formation(2), paper_law()
-    per_step(f3, law3, PAPER_Q0, 100, "numba")  # compile once
-    fast = per_step(f3, law3, PAPER_Q0, 20000, "numba")[1]
-    slow = per_step(f3, law3, PAPER_Q0, 2000, "numpy")[1]
-    print(f"3 robots: {fast * 1e6:.2f} us per step compiled, {slow * 1e6:.1f} us numpy "
-          f"({slow / fast:.0f}x); target <= 5 us")  # fmt: skip
-    rng = np.random.default_rng(1)
+    threads = numba.get_num_threads()
+    print(f"start: {load()}; numba threads {threads} ({numba.threading_layer()})")
+    fast, slow = three_robots()
+    print(f"3 robots (simulate, whole call per step): {fast * 1e6:.2f} us compiled, "
+          f"{slow * 1e6:.1f} us numpy driver ({slow / fast:.0f}x)")  # fmt: skip
     sizes = [n for n in (100, 1_000, 10_000, 100_000) if n <= args.max]
-    print(f"{'N':>7} {'law':>17} {'ms/step':>9} {'ns/robot-step':>14} {'with setup':>11} "
-          f"{'KB/robot':>9}  status")  # fmt: skip
+    head = (f"{'N':>7} {'law':>16} {'1 thread':>9} {'cpu':>7} {f'{threads} thr':>8} "
+            f"{'default':>8} {'ns/robot':>9} {'run':>6} {'simul.':>7} {'formn.':>7} "
+            f"{'numpy':>9}  status")  # fmt: skip
+    print(
+        "ms per step (1 thread, its CPU, threads, simulate's default); KB per robot "
+        "(run, simulate, formation); numpy: one field evaluation, ms"
+    )
+    print(head)
+    best: dict[tuple[int, str], float] = {}
+    cpu_cost: dict[tuple[int, str], float] = {}
+    memory: dict[tuple[int, str], tuple[float, float]] = {}
     for n in sizes:
-        tpl = lattice(n)
-        edges = delaunay_edges(tpl)
-        q0 = tpl + rng.normal(0.0, 0.05, tpl.shape)
-        for name in ("distance", "angle-restricted"):
-            orient = "template" if name == "angle-restricted" else "free"
-            f = fl.Formation.from_template(
-                tpl, edges=edges, diameters=0.2, orientation=orient, one_based=False
-            )
-            law = fl.get_law(name)
-            steps = max(5, min(200, 2_000_000 // n))
-            per_step(f, law, q0, 2, "numba")
-            tracemalloc.start()
-            t, whole, status = per_step(f, law, q0, steps, "numba")
-            peak = tracemalloc.get_traced_memory()[1]
-            tracemalloc.stop()
-            print(f"{n:>7} {name:>17} {t * 1e3:9.3f} {t / n * 1e9:14.1f} {whole * 1e3:9.2f}ms "
-                  f"{peak / n / 1e3:9.2f}  {status}")  # fmt: skip
-    print("targets at 1e5: distance <= 5 ms/step, angle-restricted <= 3x that, <= 1 KB/robot "
-          "(ms/step: inside the compiled loop; 'with setup': the whole simulate call per step, "
-          "building the kernel data and the post-processing included)")  # fmt: skip
+        steps = max(100, min(2000, 20_000_000 // n))
+        for name in LAWS:
+            f, law, q0 = swarm(n, name)
+            layout = compiled_terms(System(formation=f, law=law), fl.Euler(dt=DT))
+            one, cpu, status = loop_cost(layout, q0, steps, parallel=False)
+            many = loop_cost(layout, q0, steps, parallel=True)[0] if threads > 1 else one
+            res = fl.simulate(f, law, q0, duration=steps * DT, save_every=steps)
+            default = res.stats["step_cost_s"]
+
+            def run_part(f=f, law=law, q0=q0, steps=steps) -> None:
+                lay = compiled_terms(System(formation=f, law=law), fl.Euler(dt=DT))
+                run_compiled(lay, q0, dt=DT, n_steps=steps, save_every=steps // 2)
+
+            def whole(f=f, law=law, q0=q0, steps=steps) -> None:
+                fl.simulate(f, law, q0, duration=steps * DT, save_every=steps // 2)
+
+            run_kb = peak_bytes(run_part) / n / 1e3
+            sim_kb = peak_bytes(whole) / n / 1e3
+            t0 = time.perf_counter()
+            law.control(f, q0)
+            ref = time.perf_counter() - t0
+            best[n, name] = default
+            cpu_cost[n, name] = cpu
+            memory[n, name] = (run_kb, sim_kb)
+            print(f"{n:>7} {name:>16} {one * 1e3:9.3f} {cpu * 1e3:7.3f} {many * 1e3:8.3f} "
+                  f"{default * 1e3:8.3f} {default / n * 1e9:9.1f} {run_kb:6.2f} {sim_kb:7.2f} "
+                  f"{formation_bytes(f) / n / 1e3:7.2f} {ref * 1e3:9.2f}  {status}, "
+                  f"{res.stats['threads']} thr")  # fmt: skip
+    print("linearity: growth exponent of the cost per step between consecutive sizes "
+          "(1 = linear); CPU of the one-thread run, and wall of the default")  # fmt: skip
+    exps = {}
+    for name in LAWS:
+        steps_ = list(itertools.pairwise(sizes))
+        for label, table in (("cpu", cpu_cost), ("wall", best)):
+            e = [np.log(table[b, name] / table[a, name]) / np.log(b / a) for a, b in steps_]
+            if label == "cpu":
+                exps[name] = [x for (a, _), x in zip(steps_, e, strict=True) if a >= 1_000]
+            print(f"  {name:>16} {label:>4}: " + ", ".join(
+                f"{a:.0e}->{b:.0e} {x:.2f}" for (a, b), x in zip(steps_, e, strict=True)
+            ))  # fmt: skip
+    print(f"end: {load()}")
+    print("targets:")
+    big = max(sizes)
+    dist, ang = best[big, "distance"], best[big, "angle-restricted"]
+    print(
+        f"  {verdict(dist <= 5e-3)} {big:.0e} robots, distance law with repulsion: "
+        f"{dist * 1e3:.2f} ms per step (target <= 5 ms{'' if big == 100_000 else ', at 1e5'})"
+    )
+    print(f"  {verdict(ang <= 15e-3)} {big:.0e} robots, angle-restricted: {ang * 1e3:.2f} ms "
+          f"per step, {ang / dist:.1f}x the distance law (target <= 3 x 5 ms)")  # fmt: skip
+    for name in LAWS:
+        run_kb, sim_kb = memory[big, name]
+        print(f"  {verdict(run_kb <= 1.0)} memory of the run, {name}: {run_kb:.2f} KB per "
+              f"robot (target <= 1 KB); whole simulate call: {sim_kb:.2f} KB "
+              f"({verdict(sim_kb <= 1.0)})")  # fmt: skip
+    print(f"  {verdict(fast <= 5e-6)} 3 robots through simulate: {fast * 1e6:.2f} us per step "
+          "(target <= 5 us)")  # fmt: skip
+    worst = max(max(v, default=0.0) for v in exps.values())
+    print(f"  {verdict(worst <= 1.15)} cost linear in N: largest growth exponent of the CPU "
+          f"time per step from 1e3 on {worst:.2f} (PASS if <= 1.15)")  # fmt: skip
 
 
 if __name__ == "__main__":

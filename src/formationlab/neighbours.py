@@ -36,7 +36,16 @@ def close_pairs(q: NDArray[np.float64], cutoff: float) -> NDArray[np.int64]:
 
 
 def non_edges(pairs: NDArray[np.int64], edges: NDArray[np.int64], n: int) -> NDArray[np.int64]:
-    """The ``pairs`` ``(p, 2)``, ``i < j``, that are not ``edges`` ``(m, 2)``, ``i < j``."""
+    """The ``pairs`` ``(p, 2)``, ``i < j``, that are not ``edges`` ``(m, 2)``, ``i < j``.
+
+    Each pair is the key ``i n + j``, looked up in the sorted keys of the edges
+    (``O((p + m) log m)``; ``np.isin`` sorted both lists together).
+    """
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    if len(e) == 0 or len(pairs) == 0:
+        return pairs
     key = pairs[:, 0] * n + pairs[:, 1]
-    edge_key = np.asarray(edges, dtype=np.int64)[:, 0] * n + np.asarray(edges)[:, 1]
-    return pairs[~np.isin(key, edge_key)]
+    edge_key = np.sort(e[:, 0] * n + e[:, 1])
+    at = np.minimum(np.searchsorted(edge_key, key), len(edge_key) - 1)
+    return pairs[edge_key[at] != key]

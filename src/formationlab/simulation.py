@@ -37,6 +37,7 @@ from .dynamics import System
 from .errors import FormationError, ParameterError
 from .integrators import INTEGRATORS, Euler, Integrator
 from .integrators.compiled import compiled_terms, run_euler_compiled
+from .integrators.diagnostics import switching_diagnostics
 from .marching import March, centroid_velocity, heading_spread
 from .models import MODELS, RobotModel, SingleIntegrator
 from .registry import resolve
@@ -517,7 +518,9 @@ def simulate(
         raw = run_euler_compiled(
             terms, system, x0, dt=integrator.dt, duration=float(duration),  # type: ignore[attr-defined]
             save_every=int(save_every), progress=progress, interruptible=interruptible,
+            diagnostics=False,
         )  # fmt: skip
+        terms = None  # the run's lists are let go before the post-processing
     else:
         raw = integrator.run(
             system, x0, float(duration), save_every=int(save_every), progress=progress,
@@ -540,6 +543,8 @@ def simulate(
     try:
         with np.errstate(over="ignore", invalid="ignore"):  # a diverged run: V is inf
             V, sigma = system.potential(raw.x), system.sigma(raw.x)
+        if raw.stats.get("backend") == "numba":  # the compiled run's switching diagnostics
+            raw.stats.update(switching_diagnostics(raw.t, sigma))
     except KeyboardInterrupt:  # while reading the run: keep the states, not V and sigma
         if not interruptible:
             raise

@@ -32,6 +32,12 @@ __all__ = [
 ]
 
 
+#: surfaces or restricted triples evaluated at once by :func:`switching_functions` and
+#: :func:`psi_sum` (more are taken in parts of this many, so that their scratch memory does
+#: not grow with the formation)
+PSI_PART = 1 << 16
+
+
 def switching_functions(
     formation: Formation, q: NDArray[np.float64], theta: float
 ) -> NDArray[np.float64]:
@@ -44,7 +50,14 @@ def switching_functions(
     switching diagnostics and the compiled kernels all use these numbers.
     """
     tris, beta, _ = formation.surfaces
-    return beta * triangle_products(q, tris) + theta  # eq. (14)
+    if len(tris) <= PSI_PART:
+        return beta * triangle_products(q, tris) + theta  # eq. (14)
+    q = np.asarray(q, dtype=float)
+    out = np.empty((*q.shape[:-2], len(tris)))
+    for a in range(0, len(tris), PSI_PART):  # in parts (the same numbers: element by element)
+        part = slice(a, a + PSI_PART)
+        out[..., part] = beta[part] * triangle_products(q, tris[part]) + theta  # eq. (14)
+    return out
 
 
 def triple_steps(formation: Formation, weights: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -110,12 +123,28 @@ def grad_psi(
 
 
 def psi_sum(formation: Formation, q: NDArray[np.float64], theta: float) -> NDArray[np.float64]:
-    """``sum_i psi_i`` over ordered pairs (eq. 13); shape ``(...)``."""
+    """``sum_i psi_i`` over ordered pairs (eq. 13); shape ``(...)``.
+
+    Beyond :data:`PSI_PART` restricted triples, summed part by part (the same terms;
+    the sum's rounding may differ in the last bits).
+    """
     q = np.asarray(q, dtype=float)
-    i, j, k = formation.restricted_triples.T
-    c = cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :])  # c_ijk
-    ac = formation.restricted_alpha * c
-    return np.sum(ac * _steps(formation, q, theta), axis=-1)  # eq. (14): alpha c Upsilon(.)
+    t = formation.restricted_triples
+    alpha = formation.restricted_alpha
+    if len(t) <= PSI_PART:
+        i, j, k = t.T
+        c = cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :])  # c_ijk
+        ac = alpha * c
+        return np.sum(ac * _steps(formation, q, theta), axis=-1)  # eq. (14): alpha c Upsilon(.)
+    on = upsilon(switching_functions(formation, q, theta))  # (..., s)
+    _, _, surface = formation.surfaces
+    total = np.zeros(q.shape[:-2])
+    for a in range(0, len(t), PSI_PART):
+        i, j, k = t[a : a + PSI_PART].T
+        c = cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :])  # c_ijk
+        steps = np.take(on, surface[a : a + PSI_PART], axis=-1)
+        total = total + np.sum(alpha[a : a + PSI_PART] * c * steps, axis=-1)  # eq. (14)
+    return total
 
 
 @register
@@ -185,9 +214,9 @@ class AngleRestrictedLaw(Law):
         """``-k_c grad Gamma_o``; ``u = -(k_c / 2) grad V``, so ``V`` gains ``2 Gamma_o``."""
         return ObstacleRepulsion(gain=self.k_c, weight=2.0, repulsion=self.repulsion)
 
-    def kernel_terms(self, formation: Formation) -> KernelTerms:
+    def kernel_terms(self, formation: Formation, *, pairs: bool = True) -> KernelTerms:
         rep = self.repulsion
         return build_terms(
-            formation, kind=LOG_BARRIER, edge_gain=self.k_c, repulsion_gain=self.k_c,
+            formation, pairs=pairs, kind=LOG_BARRIER, edge_gain=self.k_c, repulsion_gain=self.k_c,
             eta=rep.eta, influence=rep.influence, k_a=self.k_a, theta=self.theta,
         )  # fmt: skip

@@ -19,6 +19,7 @@ compiled kernels can evaluate returns its data from :meth:`Law.kernel_terms`.
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 from typing import ClassVar, NamedTuple, TypeVar
 
@@ -113,18 +114,20 @@ class Law:
             "implement Law.obstacle_repulsion or run it without obstacles"
         )
 
-    def kernel_terms(self, formation: Formation) -> KernelTerms:
+    def kernel_terms(self, formation: Formation, *, pairs: bool = True) -> KernelTerms:
         """The law as the arrays the compiled kernels step (:mod:`.terms`).
 
-        Laws the kernels cannot evaluate keep this default, which says so; they
-        run on the numpy path (``run_batch(..., backend="numpy")``).
+        ``pairs=False`` leaves out the batch kernel's all-pairs arrays (the compiled
+        single run lists its pairs itself). Laws the kernels cannot evaluate keep this
+        default, which says so; they run on the numpy path (``run_batch(...,
+        backend="numpy")``).
         """
         raise ParameterError(
             f"the compiled kernel cannot run the law {self.name!r} ({type(self).__name__}); "
             'use backend="numpy"'
         )
 
-    def compiled_terms(self, formation: Formation) -> KernelTerms:
+    def compiled_terms(self, formation: Formation, *, pairs: bool = True) -> KernelTerms:
         """:meth:`kernel_terms`, refused when they cannot describe this law's control.
 
         A subclass that overrides :meth:`control` without overriding
@@ -139,7 +142,9 @@ class Law:
                 f"the law {self.name!r} ({type(self).__name__}) overrides control() but not "
                 'kernel_terms(), so the compiled kernel cannot run it; use backend="numpy"'
             )
-        return self.kernel_terms(formation)
+        if "pairs" not in inspect.signature(type(self).kernel_terms).parameters:
+            return self.kernel_terms(formation)  # a law written before the keyword
+        return self.kernel_terms(formation, pairs=pairs)
 
     def with_params(self, **params: float) -> Law:
         """A copy with some parameters changed (validated again)."""

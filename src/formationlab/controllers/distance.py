@@ -174,9 +174,9 @@ class DistanceLaw(Law):
         """``-k_c grad Gamma_o``; ``u = -(k_c / 2) grad V``, so ``V`` gains ``2 Gamma_o``."""
         return ObstacleRepulsion(gain=self.k_c, weight=2.0, repulsion=self.repulsion)
 
-    def kernel_terms(self, formation: Formation) -> KernelTerms:
+    def kernel_terms(self, formation: Formation, *, pairs: bool = True) -> KernelTerms:
         rep = self.repulsion
         return build_terms(
-            formation, kind=LOG_BARRIER, edge_gain=self.k_c, repulsion_gain=self.k_c,
+            formation, pairs=pairs, kind=LOG_BARRIER, edge_gain=self.k_c, repulsion_gain=self.k_c,
             eta=rep.eta, influence=rep.influence,
         )  # fmt: skip

@@ -206,10 +206,10 @@ class SignedAreaLaw(Law):
         """``-k_r grad Gamma_o``; ``u = -k grad W``, so ``W`` gains ``(k_r / k) Gamma_o``."""
         return ObstacleRepulsion(gain=self.k_r, weight=self.k_r / self.k, repulsion=self.repulsion)
 
-    def kernel_terms(self, formation: Formation) -> KernelTerms:
+    def kernel_terms(self, formation: Formation, *, pairs: bool = True) -> KernelTerms:
         rep = self.repulsion
         areas = desired_areas(formation) if self.k_s > 0 else None
         return build_terms(
-            formation, kind=SQUARED, edge_gain=self.k, repulsion_gain=self.k_r,
+            formation, pairs=pairs, kind=SQUARED, edge_gain=self.k, repulsion_gain=self.k_r,
             eta=rep.eta, influence=rep.influence, areas=areas, area_gain=self.k * self.k_s,
         )  # fmt: skip

@@ -102,15 +102,17 @@ def build_terms(
     theta: float = 0.0,
     areas: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None,
     area_gain: float = 0.0,
+    pairs: bool = True,
 ) -> KernelTerms:
-    """Assemble :class:`KernelTerms`; the angular terms when ``k_a > 0`` and alpha is set."""
+    """Assemble :class:`KernelTerms`; the angular terms when ``k_a > 0`` and alpha is set;
+    the all-pairs arrays up to ``PAIR_LIMIT`` robots when ``pairs``."""
     n = formation.n
-    if n <= PAIR_LIMIT:
+    if n <= PAIR_LIMIT and pairs:
         pi, pj = (np.ascontiguousarray(x, dtype=np.int64) for x in np.triu_indices(n, k=1))
         is_edge = formation.adjacency[pi, pj].copy()
         dist = np.where(is_edge, np.nan_to_num(formation.distance_matrix[pi, pj]), 0.0)
         contact = formation.contact_matrix[pi, pj].copy()
-    else:  # the batch kernel's all-pairs arrays are not built for large formations
+    else:  # the batch kernel's all-pairs arrays: not for large formations, or not asked
         pi = pj = np.zeros(0, np.int64)
         is_edge, dist, contact = np.zeros(0, bool), np.zeros(0), np.zeros(0)
     e = formation.edges
@@ -119,12 +121,15 @@ def build_terms(
     if not formation.has_orientation or k_a <= 0:
         tris, beta = np.zeros((0, 3), np.int64), np.zeros(0)
         terms, alpha, surface = np.zeros((0, 3), np.int64), np.zeros(0), np.zeros(0, np.int64)
-    half = terms[:, 1] < terms[:, 2]  # (i, k, j) is the same term as (i, j, k)
-    terms, alpha, surface = terms[half], alpha[half], surface[half]
-    order = np.argsort(surface, kind="stable")
-    terms, alpha, surface = terms[order], alpha[order], surface[order]
+    # (i, k, j) is the same term as (i, j, k): the halves with j < k, grouped by surface
+    # (one gather of each column, so that no copy of the (t, 3) triples is made)
+    idx = np.flatnonzero(terms[:, 1] < terms[:, 2])
+    idx = idx[np.argsort(surface[idx], kind="stable")]
+    surface, alpha = surface[idx], alpha[idx]
+    i, j, k = (terms[idx, m] for m in range(3))
+    del idx
+    alpha *= 2.0 * float(k_a)  # the weights 2 k_a alpha_ijk, in place
     start = np.searchsorted(surface, np.arange(len(tris) + 1)).astype(np.int64)
-    i, j, k = (np.ascontiguousarray(terms[:, m]) for m in range(3))
     area_tris, target = areas if areas is not None else (np.zeros((0, 3), np.int64), np.zeros(0))
     return KernelTerms(
         kind=int(kind),
@@ -146,7 +151,7 @@ def build_terms(
         term_i=i,
         term_j=j,
         term_k=k,
-        term_weight=2.0 * float(k_a) * np.asarray(alpha, dtype=float),
+        term_weight=alpha,
         area_a=np.ascontiguousarray(area_tris[:, 0], dtype=np.int64),
         area_b=np.ascontiguousarray(area_tris[:, 1], dtype=np.int64),
         area_c=np.ascontiguousarray(area_tris[:, 2], dtype=np.int64),

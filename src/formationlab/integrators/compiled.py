@@ -4,22 +4,28 @@
 single integrators with a law that gives its data (``Law.kernel_terms``): the
 whole time loop in numba, with the stepping driver's semantics (the same step
 rule, saving every ``save_every`` steps and the last state, the velocity each
-saved state was left with). Nothing in it is ``n x n``:
+saved state was left with). Nothing in it is ``n x n``, and nothing is allocated
+per step:
 
-* **edges** as a neighbour list (CSR), each robot gathering its own terms, so
-  the loop over robots runs in parallel without write conflicts;
-* **non-neighbour repulsion and contact** through a cell grid rebuilt at every
-  step, with cells of the largest interaction range: Khatib's ``gamma_ij`` acts
-  only within clearance ``s0`` (pairs closer than ``a_ij + s0``), contact needs
-  pairs closer than ``a_ij``, and a step can only have carried two robots
-  through each other if they end closer than ``a_ij`` plus twice the step's
-  largest move, so the grid's cells are at least that wide;
-* **switching surfaces** decided once per step with the arithmetic of
-  :func:`formationlab.potentials.triangle_products`, then gathered per robot.
+* the law's data as lists by robot (:mod:`.layout`), evaluated in two passes
+  (:mod:`.field`): each edge force, close pair's repulsion, switching surface and
+  area term once per step, then each robot gathers its own in a fixed order;
+* **non-neighbour repulsion and contact** through a close-pair list
+  (:mod:`formationlab.verlet`): Khatib's ``gamma_ij`` acts only within clearance
+  ``s0``, contact needs clearance 0, and a step can only have carried two robots
+  through each other if they end closer than twice the step's largest move, so
+  every step needs the pairs of clearance below ``max(s0, 2.01 move)``. The list
+  holds the pairs below that plus a skin of ``(s0 + max a_ij) / 2`` and is rebuilt
+  (on a cell grid) only when some robot has moved more than half the skin since
+  the last build;
+* on numba's threads or on one, with the same numbers bit for bit: from
+  :data:`PARALLEL_FROM` robots the run measures a segment on each and keeps the faster
+  (on a busy machine the threads can be the slower), or as asked.
 
-Memory is ``O(n + edges + restricted triples)`` plus the saved states. The
-numpy driver (:func:`formationlab.integrators.drive`) is the specification it
-is tested against, to rounding.
+Memory is ``O(n + edges + restricted triples + close pairs)`` plus the saved states
+(the states to be saved, exactly). The numpy driver
+(:func:`formationlab.integrators.drive`) is the specification it is tested
+against, to rounding.
 """
 
 from __future__ import annotations
@@ -27,43 +33,99 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, NamedTuple
 
+import numba
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from ..controllers.terms import LOG_BARRIER, KernelTerms
+from ..controllers.terms import KernelTerms
 from ..dynamics import System
 from ..errors import ParameterError
 from ..status import Status
+from ..verlet import build_close_list, list_holds, pair_rows
 from .base import RawSolution, steps_for
 from .diagnostics import switching_diagnostics
+from .field import items, items_parallel, robots, robots_parallel
+from .layout import REORDER_FROM, RunLayout, robot_order, run_layout
 
-__all__ = ["CompiledRun", "compiled_terms", "run_compiled", "run_euler_compiled"]
+__all__ = ["PARALLEL_FROM", "CompiledRun", "compiled_terms", "run_compiled", "run_euler_compiled"]
 
 _COLLISION = Status.COLLISION.code
 _TOO_LARGE = Status.STEP_TOO_LARGE.code
 _NON_FINITE = Status.NON_FINITE.code
 
+#: From this many robots a run measures numba's threads against one thread and keeps the
+#: faster; below, one thread (a parallel pass costs microseconds to start).
+PARALLEL_FROM = 20_000
+
+#: chunks per thread of a parallel pass (balance between threads)
+_CHUNKS_PER_THREAD = 4
+
 
 class CompiledRun:
-    """Saved steps ``k``, states ``x`` ``(T, n, 2)``, velocities ``v``, status, steps, clearance."""
+    """Saved steps ``k``, states ``x`` ``(T, n, 2)``, velocities ``v``, status, steps,
+    least clearance, wall time and the threads the run ended on."""
 
-    def __init__(self, k, x, v, status, steps, min_clearance, wall):
+    def __init__(self, k, x, v, status, steps, min_clearance, wall, threads=1):
         self.k, self.x, self.v = k, x, v
         self.status, self.steps, self.min_clearance, self.wall = status, steps, min_clearance, wall
+        self.threads = threads
 
 
-def _csr(owner: NDArray[np.int64], n: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """Row pointers and the order that groups items by ``owner``."""
-    order = np.argsort(owner, kind="stable").astype(np.int64)
-    ptr = np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=n))]).astype(np.int64)
-    return ptr, order
+class _Work(NamedTuple):
+    """The run's scratch space, allocated once (the close list's grows when it must)."""
+
+    qp: NDArray[np.float64]  #: (n, 2) the other state buffers
+    qn: NDArray[np.float64]
+    u: NDArray[np.float64]  #: (n, 2) the velocity buffers
+    un: NDArray[np.float64]
+    qb: NDArray[np.float64]  #: (n, 2) the state the close list was built at
+    fe: NDArray[np.float64]  #: (3, m) edge forces (x, y) and clearances
+    on: NDArray[np.uint8]  #: (s,) surfaces switched on
+    area_g: NDArray[np.float64]  #: (r,)
+    least: NDArray[np.float64]  #: (chunks, 2)
+    moves: NDArray[np.float64]  #: (chunks, 2)
+    p_ptr: NDArray[np.int32]  #: (n + 1,) rows of the close list
+    cell_of: NDArray[np.int32]  #: (n,) cell grid scratch
+    items: NDArray[np.int32]
+    start: NDArray[np.int32]  #: (4 n + 17,)
+    stamp: NDArray[np.int32]
+    cand: NDArray[np.int32]
+
+
+def _work(layout: RunLayout, n: int, chunks: int) -> _Work:
+    return _Work(
+        qp=np.zeros((n, 2)),
+        qn=np.zeros((n, 2)),
+        u=np.zeros((n, 2)),
+        un=np.zeros((n, 2)),
+        qb=np.zeros((n, 2)),
+        fe=np.zeros((3, layout.edge_i.size)),
+        on=np.zeros(layout.surf_a.size, np.uint8),
+        area_g=np.zeros(layout.area_a.size),
+        least=np.zeros((chunks, 2)),
+        moves=np.zeros((chunks, 2)),
+        p_ptr=np.zeros(n + 1, np.int32),
+        cell_of=np.zeros(n, np.int32),
+        items=np.zeros(n, np.int32),
+        start=np.zeros(4 * n + 17, np.int32),
+        stamp=np.zeros(n, np.int32),
+        cand=np.zeros(n, np.int32),
+    )
+
+
+def saved_rows(n_steps: int, save_every: int) -> int:
+    """States a run of ``n_steps`` keeps: every ``save_every``-th step and the last one.
+
+    A run that ends early keeps its last accepted state in the room of the final one.
+    """
+    return n_steps // save_every + 1 + (1 if n_steps % save_every else 0)
 
 
 def run_compiled(
-    terms: KernelTerms,
+    terms: KernelTerms | RunLayout,
     q0: NDArray[np.float64],
     *,
     dt: float,
@@ -71,53 +133,68 @@ def run_compiled(
     save_every: int,
     progress: Callable[[float], None] | None = None,
     interruptible: bool = False,
+    parallel: bool | None = None,
 ) -> CompiledRun:
     """Step one state ``q0`` ``(n, 2)`` with explicit Euler (module docstring).
 
     The loop runs in compiled segments of about a quarter of a second, between which
     ``progress`` is called with the simulated time and Ctrl-C is seen: with
     ``interruptible`` the run so far is returned with status ``"interrupted"``.
+    ``parallel``: on numba's threads or on one; by default one thread, and from
+    :data:`PARALLEL_FROM` robots the faster of the two as measured on the second and
+    third segments (the same numbers either way).
     """
+    layout = terms if isinstance(terms, RunLayout) else run_layout(terms)
     n = q0.shape[0]
-    ei, ej = terms.edge_i, terms.edge_j
-    # each edge seen from both ends, grouped by the robot that gathers it
-    nbr_ptr, order = _csr(np.concatenate([ei, ej]), n)
-    nbr = np.concatenate([ej, ei])[order]
-    nbr_d = np.concatenate([terms.edge_distance] * 2)[order]
-    nbr_a = np.concatenate([terms.edge_contact] * 2)[order]
-    term_ptr, torder = _csr(terms.term_i, n)
-    m = terms.area_a.size
-    area_ptr, aorder = _csr(np.concatenate([terms.area_a, terms.area_b, terms.area_c]), n)
-    area_item = np.concatenate([np.arange(m)] * 3)[aorder]
-    area_role = np.repeat(np.arange(3), m)[aorder]
-    reach = 2.0 * float(terms.radius.max()) + terms.repulsion_influence
-    rows = n_steps // save_every + 3
+    threads = numba.get_num_threads()
+    # None: one thread, or (large formations) the faster of one thread and the threads
+    # as measured on the second and third segments (the first builds the close list)
+    probe = parallel is None and threads > 1 and n >= PARALLEL_FROM
+    use = bool(parallel) and threads > 1
+    chunks = threads * _CHUNKS_PER_THREAD
+    work = _work(layout, n, chunks)
+    lists = [np.zeros((16, 2), np.int32), np.zeros((16, 2)), np.zeros(32, np.int32)]
+    rows = saved_rows(n_steps, save_every)
     k_out = np.zeros(rows, np.int64)
     x_out = np.zeros((rows, n, 2))
     v_out = np.zeros((rows, n, 2))
     info = np.zeros(3)  # status, last accepted step, saved rows
     clear = np.full(1, np.inf)
-    q = np.ascontiguousarray(q0, dtype=float).copy()
+    kept = np.array([0.0, np.inf, 0.0])  # the close list's reach, drift since, pairs
+    q = np.ascontiguousarray(q0, dtype=float)  # the run's own copy, in the layout's numbers
+    q = q[layout.perm] if layout.perm.size else q.copy()
     k0, status = 0, Status.SUCCESS
-    step_cap = max(1, n_steps // 100)  # progress at least every 1 % of the run, as the driver
+    # progress at least every 1 % of the run, as the driver (without progress, segments of
+    # a quarter of a second: each costs a call and a copy of the state)
+    step_cap = max(1, n_steps // 100) if progress is not None else n_steps
+
+    def segment(k_begin: int, k_end: int) -> None:
+        pairs, fp, p_rows = lists
+        lists[:] = _run(
+            q, layout, work, pairs, fp, p_rows, dt, k_begin, k_end, n_steps, save_every,
+            k_out, x_out, v_out, info, clear, kept, use, chunks if use else 1,
+        )  # fmt: skip
+
     chunk = min(256, step_cap)
+    segments = 0
+    per_step: dict[bool, float] = {}  # seconds per step of the probed segments, by threads
     start = time.perf_counter()
     try:
         while True:
             k_end = min(n_steps, k0 + chunk)
             began = time.perf_counter()
-            _run(
-                q, terms, nbr_ptr, nbr, nbr_d, nbr_a, term_ptr, torder, area_ptr, area_item,
-                area_role, reach, dt, k0, k_end, n_steps, save_every, k_out, x_out, v_out,
-                info, clear,
-            )  # fmt: skip
+            segment(k0, k_end)
+            spent = time.perf_counter() - began
             status = Status.from_code(int(info[0]))
+            segments += 1
+            if probe and segments > 1 and len(per_step) < 2 and int(info[1]) > k0:
+                per_step[use] = spent / (int(info[1]) - k0)  # one thread, then the threads
+                use = len(per_step) == 1 or per_step[True] < per_step[False]
             k0 = int(info[1])
             if status is not Status.SUCCESS or k0 >= n_steps:
                 break
             if progress is not None:
                 progress(k0 * dt)
-            spent = time.perf_counter() - began
             chunk = int(min(max(chunk * 0.25 / max(spent, 1e-6), 16), 1 << 20, step_cap))
     except KeyboardInterrupt:
         if not interruptible:
@@ -126,253 +203,135 @@ def run_compiled(
         k0 = int(info[1])  # the loop's own count (it may have returned just before Ctrl-C)
         if int(info[2]) == 0:  # stopped before the first state was kept: keep it
             info[:] = 0
-            _run(
-                q, terms, nbr_ptr, nbr, nbr_d, nbr_a, term_ptr, torder, area_ptr, area_item,
-                area_role, reach, dt, 0, 0, n_steps, save_every, k_out, x_out, v_out,
-                info, clear,
-            )  # fmt: skip
+            segment(0, 0)
             k0 = 0
     wall = time.perf_counter() - start
     saved = int(info[2])
     return CompiledRun(
-        k_out[:saved], x_out[:saved], v_out[:saved], status, k0, float(clear[0]), wall
-    )
+        k_out[:saved], x_out[:saved], v_out[:saved], status, k0, float(clear[0]), wall,
+        threads if use else 1,
+    )  # fmt: skip
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def _grid(q, h, cell_of, cell_ptr_buf):
-    """Counting sort of the robots into square cells of side ``h`` (doubled while there
-    would be more than ``4 n`` cells); returns the shape, the side, the origin and the
-    cell pointers into ``cell_ptr_buf``."""
-    n = q.shape[0]
-    xmin, ymin, xmax, ymax = np.inf, np.inf, -np.inf, -np.inf
-    for i in range(n):
-        xmin, xmax = min(xmin, q[i, 0]), max(xmax, q[i, 0])
-        ymin, ymax = min(ymin, q[i, 1]), max(ymax, q[i, 1])
-    # at most 4 n cells: wider cells still hold every pair within h
-    while (int((xmax - xmin) / h) + 1) * (int((ymax - ymin) / h) + 1) > 4 * n + 16:
-        h *= 2.0
-    nx = int((xmax - xmin) / h) + 1
-    ny = int((ymax - ymin) / h) + 1
-    count = np.zeros(nx * ny + 1, np.int64)
-    for i in range(n):
-        cell_of[i] = int((q[i, 0] - xmin) / h) * ny + int((q[i, 1] - ymin) / h)
-    for i in range(n):
-        count[cell_of[i] + 1] += 1
-    for c in range(nx * ny):
-        count[c + 1] += count[c]
-    fill = count.copy()
-    for i in range(n):
-        c = cell_of[i]
-        cell_ptr_buf[fill[c]] = i
-        fill[c] += 1
-    return nx, ny, h, xmin, ymin, count
-
-
-@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
-def _swept(q, qp, i, j, a):
-    """Least ``r_ij - a`` along the straight step ``qp -> q`` (``System.swept_clearance``)."""
-    x0 = qp[j, 0] - qp[i, 0]
-    y0 = qp[j, 1] - qp[i, 1]
-    ex = (q[j, 0] - q[i, 0]) - x0
-    ey = (q[j, 1] - q[i, 1]) - y0
-    dd = ex * ex + ey * ey
-    s = min(max(-(x0 * ex + y0 * ey) / (dd if dd > 0 else 1.0), 0.0), 1.0)
-    mx = x0 + s * ex
-    my = y0 + s * ey
-    return math.sqrt(mx * mx + my * my) - a
-
-
-@njit(cache=True, fastmath=False, error_model="numpy")
-def _field(
-    q, qp, disp, t, nbr_ptr, nbr, nbr_d, nbr_a, term_ptr, torder, area_ptr, area_item,
-    area_role, reach, u, gap, swept, sigma, area_g, cell_of, items,
-):  # fmt: skip
-    """``u = f(q)``; per robot: least clearance ``gap`` and least swept clearance ``swept``."""
-    n = q.shape[0]
-    for s in range(t.surface_a.shape[0]):  # eq. (14), decided as triangle_products does
-        ia, ib, ic = t.surface_a[s], t.surface_b[s], t.surface_c[s]
-        cab = (q[ib, 0] - q[ia, 0]) * (q[ic, 1] - q[ia, 1]) - (q[ib, 1] - q[ia, 1]) * (
-            q[ic, 0] - q[ia, 0]
-        )
-        sigma[s] = t.surface_beta[s] * cab + t.theta
-    for mm in range(t.area_a.shape[0]):
-        ia, ib, ic = t.area_a[mm], t.area_b[mm], t.area_c[mm]
-        area = 0.5 * (
-            (q[ib, 0] - q[ia, 0]) * (q[ic, 1] - q[ia, 1])
-            - (q[ib, 1] - q[ia, 1]) * (q[ic, 0] - q[ia, 0])
-        )
-        area_g[mm] = t.area_gain * 0.5 * (area - t.area_target[mm])
-    h = max(reach, 2.0 * t.radius.max() + 2.01 * disp)
-    nx, ny, side, xmin, ymin, cell_ptr = _grid(q, h, cell_of, items)
-    s0 = t.repulsion_influence
-    rep = -t.repulsion_gain * t.repulsion_eta / s0
-    log_barrier = t.kind == LOG_BARRIER
-    for i in range(n):
-        ux = 0.0
-        uy = 0.0
-        g_min = np.inf
-        w_min = np.inf
-        for p in range(nbr_ptr[i], nbr_ptr[i + 1]):  # edges, from robot i's side
-            j = nbr[p]
-            a = nbr_a[p]
-            dx = q[j, 0] - q[i, 0]
-            dy = q[j, 1] - q[i, 1]
-            r2 = dx * dx + dy * dy
-            r = math.sqrt(r2)
-            clr = r - a
-            g_min = min(g_min, clr)
-            if clr <= 2.01 * disp:
-                w_min = min(w_min, _swept(q, qp, i, j, a))
-            if log_barrier:  # k_c phi'(r) / r, eqs. (7), (8)
-                g = t.edge_gain * (clr / (nbr_d[p] - a) - 1.0) / (clr * r)
-            else:  # Krick et al. 2009
-                g = t.edge_gain * (r2 - nbr_d[p] * nbr_d[p])
-            ux += g * dx
-            uy += g * dy
-        cx = int((q[i, 0] - xmin) / side)
-        cy = int((q[i, 1] - ymin) / side)
-        for gx in range(max(cx - 1, 0), min(cx + 2, nx)):
-            for gy in range(max(cy - 1, 0), min(cy + 2, ny)):
-                c = gx * ny + gy
-                for pos in range(cell_ptr[c], cell_ptr[c + 1]):
-                    j = items[pos]
-                    if j == i:
-                        continue
-                    is_edge = False
-                    for p in range(nbr_ptr[i], nbr_ptr[i + 1]):
-                        if nbr[p] == j:
-                            is_edge = True
-                            break
-                    if is_edge:
-                        continue
-                    a = t.radius[i] + t.radius[j]
-                    dx = q[j, 0] - q[i, 0]
-                    dy = q[j, 1] - q[i, 1]
-                    r = math.sqrt(dx * dx + dy * dy)
-                    clr = r - a
-                    if clr > h:
-                        continue
-                    g_min = min(g_min, clr)
-                    if clr <= 2.01 * disp:
-                        w_min = min(w_min, _swept(q, qp, i, j, a))
-                    if clr < s0:  # k_r gamma'(s) / r, Khatib
-                        g = rep * (s0 - clr) / (clr * clr * clr * r)
-                        ux += g * dx
-                        uy += g * dy
-        for p in range(term_ptr[i], term_ptr[i + 1]):  # eqs. (11), (13), (23)
-            v = torder[p]
-            if sigma[t.term_surface[v]] >= 0.0:  # Upsilon(0) = 1
-                w = t.term_weight[v]
-                j, k = t.term_j[v], t.term_k[v]
-                ux += w * (q[k, 1] - q[j, 1])
-                uy -= w * (q[k, 0] - q[j, 0])
-        for p in range(area_ptr[i], area_ptr[i + 1]):  # signed-area penalty
-            mm = area_item[p]
-            role = area_role[p]
-            ia, ib, ic = t.area_a[mm], t.area_b[mm], t.area_c[mm]
-            if role == 0:
-                ux += area_g[mm] * (q[ic, 1] - q[ib, 1])
-                uy -= area_g[mm] * (q[ic, 0] - q[ib, 0])
-            elif role == 1:
-                ux += area_g[mm] * (q[ia, 1] - q[ic, 1])
-                uy -= area_g[mm] * (q[ia, 0] - q[ic, 0])
-            else:
-                ux += area_g[mm] * (q[ib, 1] - q[ia, 1])
-                uy -= area_g[mm] * (q[ib, 0] - q[ia, 0])
-        u[i, 0] = ux
-        u[i, 1] = uy
-        gap[i] = g_min
-        swept[i] = w_min
+def _keep(x_out, v_out, row, q, u, perm):
+    """Save state ``q`` and velocity ``u`` as row ``row``, in the robots' own numbers."""
+    if perm.size == 0:
+        x_out[row] = q
+        v_out[row] = u
+        return
+    for r in range(q.shape[0]):
+        x_out[row, perm[r], 0] = q[r, 0]
+        x_out[row, perm[r], 1] = q[r, 1]
+        v_out[row, perm[r], 0] = u[r, 0]
+        v_out[row, perm[r], 1] = u[r, 1]
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
 def _run(
-    q0, t, nbr_ptr, nbr, nbr_d, nbr_a, term_ptr, torder, area_ptr, area_item, area_role,
-    reach, dt, k0, k_end, n_steps, save_every, k_out, x_out, v_out, info, clear,
+    q0, L, W, pairs, fp, p_rows, dt, k0, k_end, n_steps, save_every, k_out, x_out, v_out,
+    info, clear, kept, parallel, chunks,
 ):  # fmt: skip
     """The time loop from step ``k0`` (an accepted state) to ``k_end`` of ``n_steps``.
 
-    At each step: the field at ``x_k``, the verdict on the step that led there,
-    saving (every ``save_every`` steps, the last step, and a trial's last state),
-    then the Euler step. ``info`` returns status, last accepted step and rows
-    saved (appended after ``info[2]`` rows); ``clear`` the least clearance so far.
+    At each step: the close list rebuilt if it may miss a pair that matters, the
+    items at ``x_k`` and the verdict on the step that led there, the robots' field
+    and Euler step, saving (every ``save_every`` steps, the last step, and a trial's
+    last state). ``info`` returns status, last accepted step and rows saved (appended
+    after ``info[2]`` rows); ``clear`` the least clearance so far (over the edges and
+    the close pairs); ``q0`` the state of step ``info[1]`` (in the layout's numbers; the
+    saved states in the robots' own). The close list lasts from
+    segment to segment: its buffers (``pairs``, ``fp``, ``p_rows``) are returned,
+    ``kept`` holds its reach, the drift since it was built and its length.
     """
     n = q0.shape[0]
-    q = q0  # advanced in place: on return it holds the state of step info[1]
-    qp = q0.copy()
-    u = np.zeros((n, 2))
-    up = np.zeros((n, 2))
-    gap = np.empty(n)
-    swept = np.empty(n)
-    sigma = np.empty(t.surface_a.shape[0])
-    area_g = np.empty(t.area_a.shape[0])
-    cell_of = np.empty(n, np.int64)
-    items = np.empty(n, np.int64)
+    # three state buffers take turns (q_k, q_{k-1}, q_{k+1}) and two velocity buffers
+    # (u_{k-1}, u_k): a rejected step ends at q_{k-1} with the velocity it was left with
+    q, qp, qn = q0, W.qp, W.qn
+    qp[:] = q0
+    u, un = W.u, W.un
     disp = 0.0
+    reach, drift, n_pairs = kept[0], kept[1], int(kept[2])
     saved = int(info[2])
     status = 0
     least = clear[0]
     k = k0
     while True:
-        _field(
-            q, qp, disp, t, nbr_ptr, nbr, nbr_d, nbr_a, term_ptr, torder, area_ptr, area_item,
-            area_role, reach, u, gap, swept, sigma, area_g, cell_of, items,
-        )  # fmt: skip
+        need = max(L.influence, 2.01 * disp)
+        if not list_holds(drift, reach, need):
+            reach = need + L.skin
+            pairs, n_pairs = build_close_list(
+                q, L.radius, reach, L.nbr_ptr, L.nbr, pairs, W.cell_of, W.items, W.start,
+                W.stamp, W.cand,
+            )  # fmt: skip
+            p_rows = pair_rows(pairs, n_pairs, n, W.p_ptr, p_rows)
+            if fp.shape[0] < pairs.shape[0]:
+                fp = np.zeros((pairs.shape[0], 2))
+            W.qb[:] = q
+            drift = 0.0
+        if parallel:
+            items_parallel(
+                q, qp, 2.01 * disp, L, pairs, n_pairs, W.fe, fp, W.on, W.area_g, W.least, chunks
+            )  # fmt: skip
+        else:
+            items(q, qp, 2.01 * disp, L, pairs, n_pairs, W.fe, fp, W.on, W.area_g, W.least)
+        g = W.least[:chunks, 0].min()
         if k > k0:  # the step rule of System.step_verdict
-            g = gap.min()
             if not g > 0.0:
                 status = _COLLISION
-            elif not swept.min() > 0.0:
+            elif not W.least[:chunks, 1].min() > 0.0:
                 status = _TOO_LARGE
             if status:  # end at the last accepted state, with the velocity it was left with
                 if saved == 0 or k_out[saved - 1] != k - 1:
                     k_out[saved] = k - 1
-                    x_out[saved] = qp
-                    v_out[saved] = up
+                    _keep(x_out, v_out, saved, qp, u, L.perm)
                     saved += 1
-                q[:] = qp
+                q = qp
                 k -= 1
                 break
             least = min(least, g)
         elif k == 0:
-            least = gap.min()
+            least = g
+        if parallel:
+            robots_parallel(
+                q, qn, W.qb, dt, L, W.p_ptr, p_rows, W.fe, fp, W.on, W.area_g, un, W.moves,
+                chunks,
+            )  # fmt: skip
+        else:
+            robots(q, qn, W.qb, dt, L, W.p_ptr, p_rows, W.fe, fp, W.on, W.area_g, un, W.moves)
+        u, un = un, u  # u_k
         if (k % save_every == 0 or k == n_steps) and (k > k0 or k == 0):
             k_out[saved] = k
-            x_out[saved] = q
-            v_out[saved] = u
+            _keep(x_out, v_out, saved, q, u, L.perm)
             saved += 1
         if k == n_steps or k == k_end:
             break
-        largest = 0.0
-        for i in range(n):
-            for d in range(2):
-                qp[i, d] = q[i, d]
-                up[i, d] = u[i, d]
-                q[i, d] = q[i, d] + dt * u[i, d]  # explicit Euler
-            ex = q[i, 0] - qp[i, 0]
-            ey = q[i, 1] - qp[i, 1]
-            largest = max(largest, ex * ex + ey * ey)
+        qp, q, qn = q, qn, qp  # x_{k+1} is in qn
         k += 1
-        if not math.isfinite(largest):  # not finite: judged before the grid sees it
+        largest = W.moves[:chunks, 0].max()
+        if not math.isfinite(largest):  # not finite: judged before the list sees it
             status = _NON_FINITE
             if saved == 0 or k_out[saved - 1] != k - 1:
                 k_out[saved] = k - 1
-                x_out[saved] = qp
-                v_out[saved] = up
+                _keep(x_out, v_out, saved, qp, u, L.perm)
                 saved += 1
-            q[:] = qp
+            q = qp
             k -= 1
             break
         disp = math.sqrt(largest)
+        drift = math.sqrt(W.moves[:chunks, 1].max())
+    q0[:] = q  # (q0 itself or the other buffer)
+    kept[0], kept[1], kept[2] = reach, drift, n_pairs
     info[0] = status
     info[1] = k
     info[2] = saved
     clear[0] = least
+    return pairs, fp, p_rows
 
 
-def compiled_terms(system: System, integrator: object) -> KernelTerms | None:
-    """The law's kernel data when ``system`` under ``integrator`` can run compiled, else None.
+def compiled_terms(system: System, integrator: object) -> RunLayout | None:
+    """The law's kernel data laid out for the compiled run (:func:`.layout.run_layout`) when
+    ``system`` under ``integrator`` can run compiled, else None.
 
     Explicit Euler (exactly, not a subclass) on the paper's single integrators
     (no speed limit) without marching, with a law whose ``kernel_terms`` describe
@@ -387,14 +346,18 @@ def compiled_terms(system: System, integrator: object) -> KernelTerms | None:
         return None
     if system.sensed or (system.faults is not None and system.faults.any):
         return None
+    f = system.formation
+    # the robots' order first: its scratch is gone before the law's arrays are made
+    order = robot_order(f.edges[:, 0], f.edges[:, 1], f.n) if f.n >= REORDER_FROM else False
     try:
-        return system.law.compiled_terms(system.formation)
+        terms = system.law.compiled_terms(f, pairs=False)._asdict()
     except ParameterError:
         return None
+    return run_layout(terms, reorder=order)  # emptied as it is laid out
 
 
 def run_euler_compiled(
-    terms: KernelTerms,
+    terms: KernelTerms | RunLayout,
     system: System,
     x0: NDArray[np.float64],
     *,
@@ -403,12 +366,15 @@ def run_euler_compiled(
     save_every: int,
     progress: Callable[[float], None] | None = None,
     interruptible: bool = False,
+    diagnostics: bool = True,
 ) -> RawSolution:
     """:meth:`Euler.run` on the compiled path: the same :class:`RawSolution`.
 
-    The switching diagnostics are computed from the saved states (exact with
-    ``save_every = 1``, as the driver records them; from the saved states only
-    otherwise, which ``stats["diagnostics_from"]`` says).
+    The switching diagnostics are computed from the switching functions at the saved
+    states (exact with ``save_every = 1``, as the driver records them; from the saved
+    states only otherwise, which ``stats["diagnostics_from"]`` says): ``sigma(t)``
+    gives them (``simulate`` computes them once, after the run's lists are let go),
+    by default ``system.sigma`` of the saved states.
     """
     n_steps = steps_for(duration, dt)
     out = run_compiled(
@@ -424,14 +390,14 @@ def run_euler_compiled(
         x_last = out.x[-1]
         x_next = x_last + dt * out.v[-1]
         message = system.step_message(x_last, x_next, out.status, (out.steps + 1) * dt, dt)
-    sigma = system.sigma(out.x)
     stats: dict[str, Any] = {
         "steps": int(out.steps),
         "rhs_evaluations": int(out.steps) + 1,
         "wall_time_s": out.wall,
         "step_cost_s": out.wall / max(out.steps, 1),
-        **switching_diagnostics(t, sigma),
+        **(switching_diagnostics(t, system.sigma(out.x)) if diagnostics else {}),
         "diagnostics_from": "every step" if save_every == 1 else f"every {save_every} steps",
         "backend": "numba",
+        "threads": out.threads,
     }
     return RawSolution(t=t, x=out.x, v=out.v, status=out.status, message=message, stats=stats)

@@ -1,0 +1,217 @@
+"""Close-pair (Verlet) lists on a cell grid, compiled: who can touch or repel whom.
+
+Khatib's repulsion acts only between robots closer than ``a_ij + s0`` and contact
+only at ``r_ij <= a_ij``, so a run of many robots needs, at each step, only the
+pairs whose clearance ``r_ij - a_ij`` is below some ``c``. :func:`build_close_list`
+finds exactly the pairs with clearance below ``reach`` (robots binned into square
+cells at least ``max a_ij + reach`` wide, each robot looking at the 3 x 3 cells
+around its own), leaving out excluded partners (a formation's neighbours, whose
+edge potential has its own barrier). A list built with ``reach = c + skin`` still
+holds every pair of clearance below ``c`` while no robot has moved more than
+``skin / 2`` since the build (a pair's clearance changes by at most the sum of
+its robots' moves), so it is rebuilt only then (:func:`list_holds`).
+
+The pairs come out sorted, ``i < j``, and each robot's row of the list (the
+pairs it belongs to, as signed pair numbers: ``p`` where it is ``i``, ``~p``
+where it is ``j``) is sorted by partner: the same list, and the same order of
+every sum over it, whenever and from whatever state it was built.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+__all__ = ["CloseList", "build_close_list", "close_list", "list_holds", "pair_rows"]
+
+#: relative slack of the list's guarantee against rounding of the clearances
+_SLACK = 1e-9
+
+
+@njit(cache=True)
+def _bin(q, side, cell_of, items, start):
+    """Counting sort of the robots into square cells of side ``side``.
+
+    At most ``start.size - 1`` cells: the side is doubled until they fit (wider
+    cells still hold every pair within ``side``). Returns ``nx, ny, side, x0, y0``;
+    the robots of cell ``c`` are ``items[start[c]:start[c + 1]]``, in robot order.
+    """
+    n = q.shape[0]
+    x0, y0, x1, y1 = np.inf, np.inf, -np.inf, -np.inf
+    for i in range(n):
+        x0, x1 = min(x0, q[i, 0]), max(x1, q[i, 0])
+        y0, y1 = min(y0, q[i, 1]), max(y1, q[i, 1])
+    while (int((x1 - x0) / side) + 1) * (int((y1 - y0) / side) + 1) > start.size - 1:
+        side *= 2.0
+    nx = int((x1 - x0) / side) + 1
+    ny = int((y1 - y0) / side) + 1
+    cells = nx * ny
+    start[: cells + 1] = 0
+    for i in range(n):
+        c = int((q[i, 0] - x0) / side) * ny + int((q[i, 1] - y0) / side)
+        cell_of[i] = c
+        start[c + 1] += 1
+    for c in range(cells):
+        start[c + 1] += start[c]
+    for i in range(n - 1, -1, -1):  # backwards, so that each cell lists its robots in order
+        c = cell_of[i]
+        start[c + 1] -= 1
+        items[start[c + 1]] = i
+    for c in range(cells):  # start[c + 1] now points at cell c's first robot; shift back
+        start[c] = start[c + 1]
+    start[cells] = n
+    return nx, ny, side, x0, y0
+
+
+@njit(cache=True)
+def build_close_list(q, radius, reach, ex_ptr, ex_nbr, pairs, cell_of, items, start, stamp, cand):
+    """Pairs ``i < j``, not excluded, with ``r_ij - radius_i - radius_j < reach``.
+
+    Parameters
+    ----------
+    q : (n, 2) positions (finite); radius : (n,) half diameters; reach : clearance bound.
+    ex_ptr, ex_nbr : CSR rows of the excluded partners of each robot (int32).
+    pairs : (cap, 2) int32 buffer; a larger one is allocated if it is too small.
+    cell_of, items, stamp, cand : (n,) int32 scratch; start : (cells + 1,) int32 scratch.
+
+    Returns
+    -------
+    pairs : (cap', 2) int32, the first ``count`` rows sorted lexicographically.
+    count : int
+    """
+    n = q.shape[0]
+    top = 0.0
+    for i in range(n):
+        top = max(top, radius[i])
+    side = (2.0 * top + reach) * (1.0 + _SLACK) + 1e-300
+    nx, ny, side, x0, y0 = _bin(q, side, cell_of, items, start)
+    stamp[:] = -1
+    count = 0
+    for i in range(n):
+        for p in range(ex_ptr[i], ex_ptr[i + 1]):
+            stamp[ex_nbr[p]] = i
+        cx = int((q[i, 0] - x0) / side)
+        cy = int((q[i, 1] - y0) / side)
+        m = 0
+        for gx in range(max(cx - 1, 0), min(cx + 2, nx)):
+            for gy in range(max(cy - 1, 0), min(cy + 2, ny)):
+                c = gx * ny + gy
+                for pos in range(start[c], start[c + 1]):
+                    j = items[pos]
+                    if j <= i or stamp[j] == i:
+                        continue
+                    dx = q[j, 0] - q[i, 0]
+                    dy = q[j, 1] - q[i, 1]
+                    if math.sqrt(dx * dx + dy * dy) - (radius[i] + radius[j]) < reach:
+                        cand[m] = j
+                        m += 1
+        for a in range(1, m):  # insertion sort: rows are short
+            v = cand[a]
+            b = a - 1
+            while b >= 0 and cand[b] > v:
+                cand[b + 1] = cand[b]
+                b -= 1
+            cand[b + 1] = v
+        if count + m > pairs.shape[0]:
+            grown = np.empty((max(2 * pairs.shape[0], count + m, 16), 2), np.int32)
+            grown[:count] = pairs[:count]
+            pairs = grown
+        for a in range(m):
+            pairs[count, 0] = i
+            pairs[count, 1] = cand[a]
+            count += 1
+    return pairs, count
+
+
+@njit(cache=True)
+def pair_rows(pairs, count, n, ptr, rows):
+    """Each robot's row of the list: signed pair numbers sorted by partner.
+
+    ``ptr`` ``(n + 1,)`` int32 is filled; ``rows`` is a buffer of at least
+    ``2 count`` int32 (a larger one is allocated if needed) and returned. Pair
+    ``p = (i, j)`` is ``p`` in row ``i`` and ``~p`` in row ``j``. The pairs being
+    sorted, robot ``i`` meets its partners ``j < i`` (as the second robot) in
+    increasing order before its partners ``j > i`` (as the first).
+    """
+    if rows.shape[0] < 2 * count:
+        rows = np.empty(max(2 * count, 2 * rows.shape[0]), np.int32)
+    ptr[:] = 0
+    for p in range(count):
+        ptr[pairs[p, 0] + 1] += 1
+        ptr[pairs[p, 1] + 1] += 1
+    for i in range(n):
+        ptr[i + 1] += ptr[i]
+    fill = ptr[:n].copy()
+    for p in range(count):
+        j = pairs[p, 1]
+        rows[fill[j]] = ~p
+        fill[j] += 1
+    for p in range(count):
+        i = pairs[p, 0]
+        rows[fill[i]] = p
+        fill[i] += 1
+    return rows
+
+
+@njit(cache=True)
+def list_holds(drift, reach, need):
+    """Whether a list built with ``reach`` still holds every pair of clearance below ``need``
+    (the closest is at most ``need``) when no robot has moved more than ``drift`` since."""
+    return 2.0 * drift + _SLACK * (1.0 + reach) < reach - need
+
+
+class CloseList:
+    """A close-pair list of ``n`` robots with its scratch space (allocated once)."""
+
+    def __init__(self, n: int, capacity: int = 16) -> None:
+        self.pairs = np.empty((max(capacity, 16), 2), np.int32)
+        self.count = 0
+        self.ptr = np.zeros(n + 1, np.int32)
+        self.rows = np.empty(2 * max(capacity, 16), np.int32)
+        self.cell_of = np.empty(n, np.int32)
+        self.items = np.empty(n, np.int32)
+        self.start = np.empty(4 * n + 17, np.int32)  # at most 4 n + 16 cells
+        self.stamp = np.empty(n, np.int32)
+        self.cand = np.empty(n, np.int32)
+
+    def build(
+        self,
+        q: NDArray[np.float64],
+        radius: NDArray[np.float64],
+        reach: float,
+        ex_ptr: NDArray[np.int32],
+        ex_nbr: NDArray[np.int32],
+    ) -> None:
+        """Fill the list from positions ``q`` ``(n, 2)`` (:func:`build_close_list`)."""
+        n = q.shape[0]
+        self.pairs, self.count = build_close_list(
+            q, radius, reach, ex_ptr, ex_nbr, self.pairs, self.cell_of, self.items,
+            self.start, self.stamp, self.cand,
+        )  # fmt: skip
+        self.rows = pair_rows(self.pairs, self.count, n, self.ptr, self.rows)
+
+
+def close_list(
+    q: NDArray[np.float64],
+    radius: NDArray[np.float64] | float,
+    reach: float,
+    exclude: NDArray[np.int64] | None = None,
+) -> tuple[NDArray[np.int64], NDArray[np.int32], NDArray[np.int32]]:
+    """The pairs ``i < j`` of ``q`` ``(n, 2)`` with clearance ``r_ij - rho_i/2 - rho_j/2 <
+    reach``, not in ``exclude`` ``(m, 2)``: ``(p, 2)`` sorted, and each robot's row
+    (``ptr`` ``(n + 1,)``, ``rows``: signed pair numbers sorted by partner)."""
+    q = np.ascontiguousarray(q, dtype=float)
+    n = q.shape[0]
+    rad = np.broadcast_to(np.asarray(radius, dtype=float), (n,)).copy()
+    e = np.zeros((0, 2), np.int64) if exclude is None else np.asarray(exclude, np.int64)
+    e = e.reshape(-1, 2)
+    ends = np.concatenate([e[:, 0], e[:, 1]])
+    order = np.argsort(ends, kind="stable")
+    ex_ptr = np.concatenate([[0], np.cumsum(np.bincount(ends, minlength=n))]).astype(np.int32)
+    ex_nbr = np.concatenate([e[:, 1], e[:, 0]])[order].astype(np.int32)
+    cl = CloseList(n)
+    cl.build(q, rad, float(reach), ex_ptr, ex_nbr)
+    return cl.pairs[: cl.count].astype(np.int64), cl.ptr, cl.rows[: 2 * cl.count]
