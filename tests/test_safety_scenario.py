@@ -15,8 +15,8 @@ from formationlab.cli import _load_commands, app
 from formationlab.dynamics import System
 from formationlab.equilibria.report import find_equilibria, parse_equilibria
 from formationlab.errors import ScenarioError
-from formationlab.io.scenario import load_scenario
 from formationlab.integrators import get_integrator
+from formationlab.io.scenario import load_scenario
 from formationlab.safety import Circle, Polygon, SafetyFilter
 from formationlab.scenario import parse_scenario
 
