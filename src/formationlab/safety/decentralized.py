@@ -120,6 +120,29 @@ def _project(uh0: float, uh1: float, A: NDArray, b: NDArray, m: int, out: NDArra
 
 
 @njit(cache=True, nogil=True)
+def solve_rows(uh0: float, uh1: float, A: NDArray, b: NDArray, neg: NDArray, m: int,
+               out: NDArray) -> int:  # fmt: skip
+    """One robot's filtered command into ``out`` from its rows ``A[:m] u <= b[:m]``.
+
+    The projection (:func:`_project`); if it finds no feasible point, the rows flagged
+    ``neg`` (``h < 0``) are relaxed to bound 0 and it runs again. Returns the robot's
+    code: 0 unchanged (``out = u_hat``), 1 solved, 2 relaxed, 4 failed (``out = 0``).
+    ``b`` is changed in place by a relaxation.
+    """
+    code = _project(uh0, uh1, A, b, m, out)
+    if code >= 0:
+        return code
+    for k in range(m):
+        if neg[k]:
+            b[k] = 0.0
+    if _project(uh0, uh1, A, b, m, out) >= 0:
+        return 2
+    out[0] = 0.0
+    out[1] = 0.0
+    return 4
+
+
+@njit(cache=True, nogil=True)
 def _kernel(
     q: NDArray,
     uh: NDArray,
@@ -165,18 +188,7 @@ def _kernel(
             A[deg + n_obs + s, 1] = speed_n[s, 1]
             b[deg + n_obs + s] = speed_b
         u = np.empty(2)
-        code = _project(uh[r, 0], uh[r, 1], A, b, m, u)
-        if code < 0:
-            for k in range(m):
-                if neg[k]:
-                    b[k] = 0.0
-            code = _project(uh[r, 0], uh[r, 1], A, b, m, u)
-            if code >= 0:
-                code = 2
-            else:
-                code = 4
-                u[0] = 0.0
-                u[1] = 0.0
+        code = solve_rows(uh[r, 0], uh[r, 1], A, b, neg, m, u)
         out_u[r, 0] = u[0]
         out_u[r, 1] = u[1]
         out_code[r] = code
