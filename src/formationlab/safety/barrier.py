@@ -380,14 +380,6 @@ def barrier_filter(
         pairs = all_pairs[starts[t] : starts[t + 1], 1:]
         c = barrier_constraints(config, fq[t], obstacles, pairs)
         x_hat = fu[t].reshape(-1)
-        u_cf, code = _closed_form(c, fu[t])
-        if code == 0:
-            continue
-        if code == 1:  # one or two active rows: no solver call
-            out[t] = u_cf
-            status[t] = FilterStatus.SOLVED
-            _record_active(t, c, u_cf.reshape(-1), c.bound, x_hat, active, act_pairs, act_obs)
-            continue
         violated = c.G @ x_hat > c.bound
         if not violated.any():
             continue
@@ -400,6 +392,14 @@ def barrier_filter(
             G=c.G[keep][:, cols], bound=c.bound[keep], barrier=c.barrier[keep],
             kind=c.kind[keep], index=c.index[keep], coef=c.coef[keep],
         )  # fmt: skip
+        u_cf, code = _closed_form(c, fu[t])
+        if code >= 0:  # one or two active rows (0: none, up to rounding): no solver call
+            out[t] = u_cf
+            status[t] = FilterStatus.SOLVED if code else FilterStatus.UNCHANGED
+            x_sub = fu[t][chosen].reshape(-1)
+            _record_active(t, sub, u_cf[chosen].reshape(-1), sub.bound, x_sub, active,
+                           act_pairs, act_obs)  # fmt: skip
+            continue
         sol = solve_barrier_qp(sub, fu[t][chosen])
         if sol.status == FilterStatus.FAILED:
             fb = decentralized_filter(config, fq[t], fu[t], obstacles)

@@ -33,6 +33,7 @@ Clarabel, for the tests.
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Sequence
 
@@ -43,6 +44,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from .config import SafetyFilter
+from .obstacle_terms import barrier_row, hull_distance
 from .obstacles import Obstacle, obstacle_barrier_rows
 from .pairs import neighbour_lists, sensed_pairs
 from .result import FilterResult, summarise
@@ -140,6 +142,108 @@ def solve_rows(uh0: float, uh1: float, A: NDArray, b: NDArray, neg: NDArray, m: 
     out[0] = 0.0
     out[1] = 0.0
     return 4
+
+
+@njit(cache=True, nogil=True, inline="always")
+def unchanged_robot(r, q, uh0, uh1, nbr, deg, obs, d2, gamma, speed_n, speed_b) -> bool:
+    """Whether ``u_hat_r`` satisfies every row :func:`filter_robot` would build.
+
+    The same arithmetic as :func:`filter_robot` and :func:`_project`'s first test, so
+    ``True`` here is exactly the case where :func:`filter_robot` returns ``u_hat_r`` (code
+    0), found without building the rows; a polygon is settled by its enclosing disc when
+    that is far enough (``2 high |u_hat| < gamma (low^2 - D_o^2)^3``), else by its rows.
+    """
+    x = q[r, 0]
+    y = q[r, 1]
+    for t in range(deg):
+        j = nbr[t]
+        dx = x - q[j, 0]
+        dy = y - q[j, 1]
+        h = dx * dx + dy * dy - d2
+        if -2.0 * dx * uh0 + -2.0 * dy * uh1 > 0.5 * gamma * h * h * h:
+            return False
+    unorm = math.sqrt(uh0 * uh0 + uh1 * uh1)
+    for o in range(obs.radius.shape[0]):
+        polygon = obs.radius[o] <= 0
+        if polygon:
+            low, high = hull_distance(obs, o, x, y)
+            rho = obs.d_obstacle
+            if low > rho and 2.0 * high * unorm < gamma * (low * low - rho * rho) ** 3:
+                continue
+        pieces = obs.start[o + 1] - obs.start[o] if polygon else 1
+        for k in range(pieces):
+            a0, a1, bk, _ = barrier_row(obs, o, k, x, y)
+            if a0 * uh0 + a1 * uh1 > bk:
+                return False
+    for s in range(speed_n.shape[0]):
+        if speed_n[s, 0] * uh0 + speed_n[s, 1] * uh1 > speed_b:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def filter_robot(r, q, uh0, uh1, nbr, deg, obs, d2, gamma, speed_n, speed_b, A, b, neg, owner,
+                 out) -> int:  # fmt: skip
+    """Robot ``r``'s filtered command into ``out``: its rows built, then :func:`solve_rows`.
+
+    Rows in order: its ``deg`` neighbours ``nbr[:deg]`` (half responsibility, module
+    docstring), the barrier pieces of every obstacle (``obs``, an
+    :class:`~formationlab.safety.obstacle_terms.ObstacleTerms`), the speed polygon.
+    A polygon whose enclosing disc is so far that no command of norm ``<= |u_hat_r|`` can
+    violate its rows (``2 high |u_hat| < gamma (low^2 - D_o^2)^3``) is left out, and checked
+    at the answer: if the answer is longer than that bound allows, the rows are built
+    again in full and solved again. (The answer is the projection onto a set holding
+    ``0`` when no bound is negative, so it is no longer than ``u_hat``.) ``owner[k]``: the
+    obstacle of row ``k`` (-1 for other rows). Returns :func:`solve_rows`' code and the
+    number of rows ``m`` (``A[:m]``, ``b[:m]``, as solved).
+    """
+    unorm = math.sqrt(uh0 * uh0 + uh1 * uh1)
+    x = q[r, 0]
+    y = q[r, 1]
+    for attempt in range(2):
+        m = 0
+        for t in range(deg):
+            j = nbr[t]
+            dx = x - q[j, 0]
+            dy = y - q[j, 1]
+            h = dx * dx + dy * dy - d2
+            A[m, 0] = -2.0 * dx
+            A[m, 1] = -2.0 * dy
+            b[m] = 0.5 * gamma * h * h * h  # half of the pair's -gamma h^3
+            neg[m] = h < 0.0
+            owner[m] = -1
+            m += 1
+        limit = np.inf
+        for o in range(obs.radius.shape[0]):
+            polygon = obs.radius[o] <= 0
+            if polygon and attempt == 0:
+                low, high = hull_distance(obs, o, x, y)
+                rho = obs.d_obstacle
+                if low > rho:
+                    floor = gamma * (low * low - rho * rho) ** 3
+                    if 2.0 * high * unorm < floor:
+                        limit = min(limit, floor / (2.0 * high))
+                        continue
+            pieces = obs.start[o + 1] - obs.start[o] if polygon else 1
+            for k in range(pieces):
+                a0, a1, bk, _ = barrier_row(obs, o, k, x, y)
+                A[m, 0] = a0
+                A[m, 1] = a1
+                b[m] = bk
+                neg[m] = bk < 0.0
+                owner[m] = o
+                m += 1
+        for s in range(speed_n.shape[0]):
+            A[m, 0] = speed_n[s, 0]
+            A[m, 1] = speed_n[s, 1]
+            b[m] = speed_b
+            neg[m] = False
+            owner[m] = -1
+            m += 1
+        code = solve_rows(uh0, uh1, A, b, neg, m, out)
+        if math.sqrt(out[0] * out[0] + out[1] * out[1]) < limit:
+            return code, m
+    return code, m
 
 
 @njit(cache=True, nogil=True)

@@ -30,6 +30,7 @@ from .obstacles import Circle, Obstacle
 __all__ = [
     "ObstacleTerms",
     "barrier_row",
+    "hull_distance",
     "obstacle_terms",
     "piece_count",
     "repel",
@@ -48,6 +49,7 @@ class ObstacleTerms(NamedTuple):
     radius: NDArray[np.float64]  #: (O,) circle radius, 0 for a polygon
     start: NDArray[np.int64]  #: (O + 1,)
     vertices: NDArray[np.float64]  #: (V, 2)
+    hull: NDArray[np.float64]  #: (O, 3) a disc holding the obstacle: centre, radius
     d_obstacle: float  #: D_o of the filter's rows
     gamma: float  #: the filter's gain
     gain: float  #: the law's repulsion gain k (0: no repulsion)
@@ -65,20 +67,38 @@ def obstacle_terms(
     influence: float = 1.0,
 ) -> ObstacleTerms:
     """The :class:`ObstacleTerms` of ``obstacles`` (in their order)."""
-    radius, verts, start = [], [np.zeros((0, 2))], [0]
+    radius, verts, start, hull = [], [np.zeros((0, 2))], [0], [np.zeros((0, 3))]
     for ob in obstacles:
         if isinstance(ob, Circle):
             radius.append(ob.radius)
             verts.append(np.asarray(ob.center, dtype=float)[None])
+            hull.append(np.array([[*ob.center, ob.radius]]))
         else:
             radius.append(0.0)
             verts.append(np.asarray(ob.vertices, dtype=float))
+            mid = 0.5 * (verts[-1].min(axis=0) + verts[-1].max(axis=0))
+            reach = np.sqrt(np.sum((verts[-1] - mid) ** 2, axis=-1)).max()
+            hull.append(np.array([[*mid, reach * (1 + 1e-12) + 1e-12]]))  # (rounding margin)
         start.append(start[-1] + len(verts[-1]))
     return ObstacleTerms(
         radius=np.array(radius, dtype=float), start=np.array(start, dtype=np.int64),
-        vertices=np.ascontiguousarray(np.concatenate(verts)), d_obstacle=float(d_obstacle),
+        vertices=np.ascontiguousarray(np.concatenate(verts)),
+        hull=np.ascontiguousarray(np.concatenate(hull)), d_obstacle=float(d_obstacle),
         gamma=float(gamma), gain=float(gain), eta=float(eta), influence=float(influence),
     )  # fmt: skip
+
+
+@njit(cache=True, nogil=True, inline="always")
+def hull_distance(obs: ObstacleTerms, o: int, x: float, y: float):
+    """``(low, high)``: bounds on the distance of ``(x, y)`` to any point of obstacle ``o``.
+
+    From its enclosing disc: ``low <= delta`` where ``delta >= 0`` (``low`` may be negative),
+    and ``high`` at least the distance to its farthest point.
+    """
+    dx = x - obs.hull[o, 0]
+    dy = y - obs.hull[o, 1]
+    d = math.sqrt(dx * dx + dy * dy)
+    return d - obs.hull[o, 2], d + obs.hull[o, 2]
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -100,7 +120,7 @@ def _edge_point(x: float, y: float, ax: float, ay: float, bx: float, by: float):
     return ax + t * ex, ay + t * ey
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def signed_distance(obs: ObstacleTerms, o: int, x: float, y: float):
     """``(delta, gx, gy)``: signed distance of ``(x, y)`` to obstacle ``o`` and its gradient."""
     v = obs.vertices
@@ -136,7 +156,7 @@ def signed_distance(obs: ObstacleTerms, o: int, x: float, y: float):
     return sign * dist, sign * wx / den, sign * wy / den
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def repel(obs: ObstacleTerms, radius: NDArray, p: NDArray, u: NDArray) -> None:
     """``u_i -= k sum_o gamma'(s_io) grad s_io`` for every robot (``p``, ``u``: (n, 2))."""
     s0 = obs.influence
@@ -144,6 +164,8 @@ def repel(obs: ObstacleTerms, radius: NDArray, p: NDArray, u: NDArray) -> None:
         gx = 0.0
         gy = 0.0
         for o in range(obs.radius.shape[0]):
+            if hull_distance(obs, o, p[i, 0], p[i, 1])[0] - radius[i] >= s0:
+                continue  # gamma'(s) = 0 here: the term adds exactly 0
             delta, dx, dy = signed_distance(obs, o, p[i, 0], p[i, 1])
             s = delta - radius[i]
             slope = 0.0
@@ -155,7 +177,7 @@ def repel(obs: ObstacleTerms, radius: NDArray, p: NDArray, u: NDArray) -> None:
         u[i, 1] = u[i, 1] - obs.gain * gy
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def barrier_row(obs: ObstacleTerms, o: int, k: int, x: float, y: float):
     """``(a0, a1, b, h)`` of piece ``k`` of obstacle ``o`` (the circle, or its ``k``-th edge).
 
