@@ -183,7 +183,7 @@ def unchanged_robot(r, q, uh0, uh1, nbr, deg, obs, d2, gamma, speed_n, speed_b) 
 
 @njit(cache=True, nogil=True)
 def filter_robot(r, q, uh0, uh1, nbr, deg, obs, d2, gamma, speed_n, speed_b, A, b, neg, owner,
-                 out) -> int:  # fmt: skip
+                 out) -> tuple[int, int]:  # fmt: skip
     """Robot ``r``'s filtered command into ``out``: its rows built, then :func:`solve_rows`.
 
     Rows in order: its ``deg`` neighbours ``nbr[:deg]`` (half responsibility, module

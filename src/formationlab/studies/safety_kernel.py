@@ -520,12 +520,13 @@ def run_safety(
     while True:
         run_chunks(terms, robots, obs, flt, st, out, float(dt), int(n_steps), int(check_every),
                    float(tol.speed), int(window_step))  # fmt: skip
-        g, b = np.nonzero(st.need)
-        if g.size == 0:
+        wait_g, wait_b = np.nonzero(st.need)  # chunks paused, and their slots needing a QP
+        if wait_g.size == 0:
             break
-        res = barrier_filter(safety, st.need_p[g, b], st.need_u[g, b], obstacles)
-        st.given_u[g, b] = res.u
-        st.given[g, b] = True
-        st.need[g, b] = False
-        st.meta[np.unique(g), 4] = -1
+        res = barrier_filter(safety, st.need_p[wait_g, wait_b], st.need_u[wait_g, wait_b],
+                             obstacles)  # fmt: skip
+        st.given_u[wait_g, wait_b] = res.u
+        st.given[wait_g, wait_b] = True
+        st.need[wait_g, wait_b] = False
+        st.meta[np.unique(wait_g), 4] = -1
     return out.x, out.v, out.status, out.steps, out.mc, out.ns, out.qw, window_step
