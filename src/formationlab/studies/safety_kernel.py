@@ -41,7 +41,6 @@ from ..controllers import Law
 from ..dynamics import System
 from ..models import RobotModel
 from ..safety.closed_form import closed_form
-from ..safety.decentralized import filter_robot, unchanged_robot
 from ..safety.obstacle_terms import (
     barrier_row,
     hull_distance,
@@ -51,6 +50,7 @@ from ..safety.obstacle_terms import (
     signed_distance,
     swept_clearance,
 )
+from ..safety.projection import filter_robot, unchanged_robot
 from ..spec import Formation
 from .kernels import (
     _COLLISION,
