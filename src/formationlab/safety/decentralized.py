@@ -65,7 +65,7 @@ __all__ = [
 ]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _robot(t, r, q, uh, radius, dense, grid, obs, d2, gamma, speed_n, speed_b, nbr, A, b, neg,
            owner, out):  # fmt: skip
     """Robot ``r`` of trial ``t``: its neighbours, then unchanged or :func:`filter_robot`.
@@ -107,8 +107,9 @@ def _grid(q, radius, dense):
 
 
 @njit(cache=True, nogil=True)
-def _commands(q, uh, radius, dense, obs, d2, gamma, speed_n, speed_b, out_u, out_code):
-    """Pass 1: every robot's filtered command and code, trial by trial (``(T, n, 2)``)."""
+def _commands(q, uh, radius, dense, obs, d2, gamma, speed_n, speed_b, out_u, out_code,
+              out_rows):  # fmt: skip
+    """Pass 1: every robot's filtered command, code and rows (``m``, 0 when unchanged)."""
     T, n = q.shape[0], q.shape[1]
     rows = n + obs.vertices.shape[0] + obs.radius.shape[0] + speed_n.shape[0]
     nbr = np.empty(max(n, 1), np.int64)
@@ -120,11 +121,12 @@ def _commands(q, uh, radius, dense, obs, d2, gamma, speed_n, speed_b, out_u, out
     for t in range(T):
         grid = _grid(q[t], radius, dense)
         for r in range(n):
-            code = _robot(t, r, q, uh, radius, dense, grid, obs, d2, gamma, speed_n, speed_b,
-                          nbr, A, b, neg, owner, out)[0]  # fmt: skip
+            code, m, _ = _robot(t, r, q, uh, radius, dense, grid, obs, d2, gamma, speed_n,
+                                speed_b, nbr, A, b, neg, owner, out)  # fmt: skip
             out_u[t, r, 0] = out[0]
             out_u[t, r, 1] = out[1]
             out_code[t, r] = code
+            out_rows[t, r] = max(m, 0)
 
 
 @njit(cache=True, nogil=True)
@@ -202,7 +204,7 @@ def decentralized_commands(
     fq, fu, args = _setup(config, q, u_hat, obstacles)
     out_u = np.empty_like(fu)
     code = np.empty(fu.shape[:2], np.int8)
-    _commands(fq, fu, *args, out_u, code)  # type: ignore[call-arg]
+    _commands(fq, fu, *args, out_u, code, np.empty(fu.shape[:2], np.int64))  # type: ignore[call-arg]
     return out_u.reshape(u_hat.shape)
 
 
@@ -235,12 +237,13 @@ def decentralized_filter(
     trials = fq.shape[0]
     out_u = np.empty_like(fu)
     code = np.empty((trials, n), np.int8)
-    _commands(fq, fu, *args, out_u, code)  # type: ignore[call-arg]
+    m = np.empty((trials, n), np.int64)
+    _commands(fq, fu, *args, out_u, code, m)  # type: ignore[call-arg]
     status = code.max(axis=1, initial=0).astype(np.int8)
     changed = int(np.count_nonzero(code))
-    rows = n + len(args[2].vertices) + len(args[2].radius)
-    pairs = np.zeros((changed * rows, 3), np.int64)
-    obs_rows = np.zeros((changed * rows, 3), np.int64)
+    rows = int(m.sum())  # at most one active row each
+    pairs = np.empty((rows, 3), np.int64)
+    obs_rows = np.empty((rows, 3), np.int64)
     n_p, n_o = (_activity(fq, fu, *args, code, pairs, obs_rows) if changed  # type: ignore[call-arg]
                 else (0, 0))  # fmt: skip
     halves = pairs[:n_p]

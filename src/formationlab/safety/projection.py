@@ -68,28 +68,57 @@ def _project(uh0: float, uh1: float, A: NDArray, b: NDArray, m: int, out: NDArra
             out[0] = u0
             out[1] = u1
             return 1
-    for k in range(m):  # two active constraints: a 2 x 2 solve for the multipliers
-        gkk = A[k, 0] * A[k, 0] + A[k, 1] * A[k, 1]
+    for k in range(m):  # two active rows: k violated at u_hat, j violated at y_k (first)
+        nn = A[k, 0] * A[k, 0] + A[k, 1] * A[k, 1]
         rk = A[k, 0] * uh0 + A[k, 1] * uh1 - b[k]
-        for j in range(k + 1, m):
-            gjj = A[j, 0] * A[j, 0] + A[j, 1] * A[j, 1]
-            gkj = A[k, 0] * A[j, 0] + A[k, 1] * A[j, 1]
-            det = gkk * gjj - gkj * gkj
-            if det <= 1e-12 * gkk * gjj:
-                continue  # parallel rows: a single constraint covers them
-            rj = A[j, 0] * uh0 + A[j, 1] * uh1 - b[j]
-            lk = (gjj * rk - gkj * rj) / det
-            lj = (gkk * rj - gkj * rk) / det
-            floor = -1e-12 * (abs(lk) + abs(lj))
-            if lk < floor or lj < floor:
+        if rk <= 0.0 or nn == 0.0:
+            continue
+        y0 = uh0 - rk / nn * A[k, 0]
+        y1 = uh1 - rk / nn * A[k, 1]
+        scale = base + abs(y0) + abs(y1)
+        for j in range(m):
+            if j == k or A[j, 0] * y0 + A[j, 1] * y1 - b[j] <= -_row_tol(A[j, 0], A[j, 1], b[j],
+                                                                         scale):  # fmt: skip
                 continue
-            u0 = uh0 - lk * A[k, 0] - lj * A[j, 0]
-            u1 = uh1 - lk * A[k, 1] - lj * A[j, 1]
-            if _feasible(u0, u1, A, b, m, base + abs(u0) + abs(u1)):
-                out[0] = u0
-                out[1] = u1
+            if _pair(uh0, uh1, A, b, m, k, j, base, out):
+                return 1
+    feasible = True  # (every bound >= 0: u = 0 is feasible, so an answer exists)
+    for k in range(m):
+        feasible = feasible and b[k] >= 0.0
+    for k in range(m if feasible else 0):  # any two rows: only when rounding hid them above
+        for j in range(k + 1, m):
+            if _pair(uh0, uh1, A, b, m, k, j, base, out):
                 return 1
     return -1
+
+
+@njit(cache=True, nogil=True)
+def _pair(uh0, uh1, A, b, m, k, j, base, out) -> bool:
+    """The KKT point of rows ``k`` and ``j`` active into ``out``, if it is the answer.
+
+    Multipliers from the 2 x 2 system ``G lambda = A u_hat - b`` of the two rows; the
+    answer when both are ``>= 0`` and the point is feasible.
+    """
+    gkk = A[k, 0] * A[k, 0] + A[k, 1] * A[k, 1]
+    rk = A[k, 0] * uh0 + A[k, 1] * uh1 - b[k]
+    gjj = A[j, 0] * A[j, 0] + A[j, 1] * A[j, 1]
+    gkj = A[k, 0] * A[j, 0] + A[k, 1] * A[j, 1]
+    det = gkk * gjj - gkj * gkj
+    if det <= 1e-12 * gkk * gjj:
+        return False  # parallel rows: a single constraint covers them
+    rj = A[j, 0] * uh0 + A[j, 1] * uh1 - b[j]
+    lk = (gjj * rk - gkj * rj) / det
+    lj = (gkk * rj - gkj * rk) / det
+    floor = -1e-12 * (abs(lk) + abs(lj))
+    if lk < floor or lj < floor:
+        return False
+    u0 = uh0 - lk * A[k, 0] - lj * A[j, 0]
+    u1 = uh1 - lk * A[k, 1] - lj * A[j, 1]
+    if _feasible(u0, u1, A, b, m, base + abs(u0) + abs(u1)):
+        out[0] = u0
+        out[1] = u1
+        return True
+    return False
 
 
 @njit(cache=True, nogil=True)
