@@ -189,7 +189,7 @@ class System:
             u = self._repelled(p, u)
         if self.filtered:
             assert self.safety is not None
-            u = self.safety.apply(p, u, obstacles=self.obstacles).u
+            u = self.safety.command(p, u, obstacles=self.obstacles)
         return u
 
     def rhs(self, x: NDArray[np.float64], t: float = 0.0) -> NDArray[np.float64]:

@@ -20,7 +20,12 @@ from .barrier import (
 )
 from .config import FILTERS, SafetyFilter
 from .contact import segment_distances, swept_clearances
-from .decentralized import decentralized_filter, decentralized_reference, project_onto_halfplanes
+from .decentralized import (
+    decentralized_commands,
+    decentralized_filter,
+    decentralized_reference,
+    project_onto_halfplanes,
+)
 from .obstacles import (
     Circle,
     Obstacle,
@@ -59,6 +64,7 @@ __all__ = [
     "barrier_filter",
     "check_obstacle_starts",
     "clearances",
+    "decentralized_commands",
     "decentralized_filter",
     "decentralized_reference",
     "describe_obstacle",

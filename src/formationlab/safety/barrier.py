@@ -51,6 +51,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.sparse.csgraph import connected_components
 
+from .closed_form import closed_form
 from .config import SafetyFilter
 from .obstacles import Obstacle, obstacle_barrier_rows
 from .pairs import sensed_pairs
@@ -113,6 +114,8 @@ class BarrierConstraints:
     index : ndarray of int64, shape (M, 2)
         ``(i, j)`` for a pair row, ``(robot, obstacle)`` for an obstacle row,
         ``(robot, side)`` for a speed row (0-based).
+    coef : ndarray, shape (M, 2)
+        The row's coefficients ``a`` on its first robot (a pair row has ``-a`` on ``j``).
     """
 
     G: sp.csr_matrix
@@ -120,6 +123,7 @@ class BarrierConstraints:
     barrier: NDArray[np.float64]
     kind: NDArray[np.int8]
     index: NDArray[np.int64]
+    coef: NDArray[np.float64]
 
     @property
     def robots(self) -> NDArray[np.int64]:
@@ -174,8 +178,9 @@ def barrier_constraints(
             np.column_stack([np.repeat(robots, s), np.tile(np.arange(s), n)]),
         ]
     ).astype(np.int64)
+    coef = np.concatenate([a.reshape(-1, 2), obs.a.reshape(-1, 2), np.tile(normals, (n, 1))])
     return BarrierConstraints(
-        G=G, bound=bound, barrier=barrier, kind=kind.astype(np.int8), index=index
+        G=G, bound=bound, barrier=barrier, kind=kind.astype(np.int8), index=index, coef=coef
     )
 
 
@@ -254,6 +259,35 @@ def _active_rows(c: BarrierConstraints, x: NDArray, bound: NDArray, x_hat: NDArr
     slack = bound - c.G @ x
     scale = np.abs(bound) + abs(c.G) @ (np.abs(x) + np.abs(x_hat)) + 1e-300
     return (slack <= 1e-7 * scale) & (c.kind != SPEED)
+
+
+def _closed_form(c: BarrierConstraints, u_hat: NDArray[np.float64]) -> tuple[NDArray, int]:
+    """:func:`~formationlab.safety.closed_form.closed_form` on the rows of ``c``."""
+    ri = np.ascontiguousarray(c.index[:, 0])
+    rj = np.where(c.kind == PAIR, c.index[:, 1], -1).astype(np.int64)
+    out = np.empty_like(u_hat)
+    code = closed_form(
+        ri, rj, np.ascontiguousarray(c.coef), np.ascontiguousarray(c.bound),
+        np.ascontiguousarray(u_hat), out, np.empty(len(c.bound)),
+    )  # fmt: skip
+    return out, int(code)
+
+
+def _record_active(
+    t: int, c: BarrierConstraints, x: NDArray, bound: NDArray, x_hat: NDArray,
+    active: NDArray, act_pairs: list[NDArray[np.int64]], act_obs: list[NDArray[np.int64]],
+) -> None:  # fmt: skip
+    """Mark trial ``t``'s rows holding with equality at ``x`` (robots, pairs, obstacles)."""
+    on = _active_rows(c, x, bound, x_hat)
+    idx = c.index[on]
+    kind = c.kind[on]
+    pr = idx[kind == PAIR]
+    ob = idx[kind == OBSTACLE]
+    # index rows carry the original robot numbers (built before restricting)
+    active[t, pr.ravel()] = True
+    active[t, ob[:, 0]] = True
+    act_pairs.append(_in_trial(t, pr))
+    act_obs.append(np.unique(_in_trial(t, ob), axis=0).reshape(-1, 3))
 
 
 def _in_trial(t: int, rows: NDArray[np.int64]) -> NDArray[np.int64]:
@@ -339,7 +373,9 @@ def barrier_filter(
     out = fu.copy()
     status = np.zeros(trials, np.int8)
     active = np.zeros((trials, n), bool)
-    act_pairs, act_obs, notes = [], [], []
+    act_pairs: list[NDArray[np.int64]] = []
+    act_obs: list[NDArray[np.int64]] = []
+    notes: list[str] = []
     for t in map(int, np.flatnonzero(_maybe_violated(config, fq, fu, obstacles, all_pairs))):
         pairs = all_pairs[starts[t] : starts[t + 1], 1:]
         c = barrier_constraints(config, fq[t], obstacles, pairs)
@@ -354,8 +390,16 @@ def barrier_filter(
         cols = np.flatnonzero(np.repeat(chosen, 2))
         sub = BarrierConstraints(
             G=c.G[keep][:, cols], bound=c.bound[keep], barrier=c.barrier[keep],
-            kind=c.kind[keep], index=c.index[keep],
+            kind=c.kind[keep], index=c.index[keep], coef=c.coef[keep],
         )  # fmt: skip
+        u_cf, code = _closed_form(c, fu[t])
+        if code >= 0:  # one or two active rows (0: none, up to rounding): no solver call
+            out[t] = u_cf
+            status[t] = FilterStatus.SOLVED if code else FilterStatus.UNCHANGED
+            x_sub = fu[t][chosen].reshape(-1)
+            _record_active(t, sub, u_cf[chosen].reshape(-1), sub.bound, x_sub, active,
+                           act_pairs, act_obs)  # fmt: skip
+            continue
         sol = solve_barrier_qp(sub, fu[t][chosen])
         if sol.status == FilterStatus.FAILED:
             fb = decentralized_filter(config, fq[t], fu[t], obstacles)
@@ -370,16 +414,8 @@ def barrier_filter(
         status[t] = sol.status
         if sol.message:
             notes.append(f"trial {t + 1}: {sol.message}")
-        on = _active_rows(sub, sol.u.reshape(-1), sol.bound, fu[t][chosen].reshape(-1))
-        idx = sub.index[on]
-        kind = sub.kind[on]
-        pr = idx[kind == PAIR]
-        ob = idx[kind == OBSTACLE]
-        # index rows carry the original robot numbers (built before restricting)
-        active[t, pr.ravel()] = True
-        active[t, ob[:, 0]] = True
-        act_pairs.append(_in_trial(t, pr))
-        act_obs.append(np.unique(_in_trial(t, ob), axis=0).reshape(-1, 3))
+        x_sub = fu[t][chosen].reshape(-1)
+        _record_active(t, sub, sol.u.reshape(-1), sol.bound, x_sub, active, act_pairs, act_obs)
     msg = f"barrier: {summarise(status)}" + ("; " + "; ".join(notes) if notes else "")
     return FilterResult(
         u=out.reshape(u_hat.shape),

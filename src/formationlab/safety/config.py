@@ -162,6 +162,23 @@ class SafetyFilter:
                 f"{radius[k]:g} of robot {k + 1}; use obstacle_distance >= {radius[k]:g}"
             )
 
+    def command(
+        self, q: ArrayLike, u_hat: ArrayLike, *, obstacles: Sequence[Obstacle] = ()
+    ) -> NDArray[np.float64]:
+        """The filtered command alone, ``(..., n, 2)``: :meth:`apply`'s ``u``.
+
+        What the closed loop needs at every step; the decentralized filter then skips its
+        statuses and active set.
+        """
+        if self.filter == "barrier-decentralized":
+            from .decentralized import decentralized_commands
+
+            q_arr = np.asarray(q, dtype=float)
+            u_arr = np.asarray(u_hat, dtype=float)
+            if q_arr.shape == u_arr.shape and q_arr.ndim >= 2 and q_arr.shape[-1] == 2:
+                return decentralized_commands(self, q_arr, u_arr, obstacles)
+        return self.apply(q, u_hat, obstacles=obstacles).u
+
     def apply(
         self,
         q: ArrayLike,

@@ -21,10 +21,16 @@ violated constraint if it is feasible (closed form, multiplier
 ``(a . u_hat - b) / |a|^2 > 0``); else the first point on two lines whose two
 multipliers (a 2 x 2 solve) are non-negative and which is feasible. That is
 ``O(m^2)`` candidates of ``O(m)`` checks for ``m`` constraints, a few dozen flops per
-robot for the usual handful of neighbours, and it runs batched over trials and
-robots in one serial numba loop (``nogil``, so callers may run chunks in threads;
-a ``prange`` launch cost more than the whole loop below a few thousand robots when
-benchmarked). If no candidate exists, the constraints are infeasible (only
+robot for the usual handful of neighbours (:mod:`.projection`). It runs batched over
+trials and robots in one serial numba loop (``nogil``, so callers may run chunks in
+threads; a ``prange`` launch cost more than the whole loop below a few thousand robots
+when benchmarked), each robot's neighbours found by a grid of cells of the sensing
+radius (:mod:`.cell_grid`; all robots when the radius is infinite or below
+``DENSE_BELOW`` robots), and a robot whose command satisfies its rows is settled
+without building them (:func:`~.projection.unchanged_robot`).
+:func:`decentralized_commands` returns the commands only (what the closed loop needs);
+:func:`decentralized_filter` adds the statuses and the active set, found again for
+the robots whose command changed. If no candidate exists, the constraints are infeasible (only
 possible when some ``h < 0``); those rows are relaxed to ``h_dot >= 0`` (bound 0, which
 the zero command satisfies) and the projection is solved again (status
 ``RELAXED``). :func:`decentralized_reference` solves the same per-robot QPs with
@@ -33,6 +39,7 @@ Clarabel, for the tests.
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Sequence
 
@@ -42,154 +49,163 @@ import scipy.sparse as sp
 from numba import njit
 from numpy.typing import NDArray
 
+from .cell_grid import build_grid, neighbours_of
 from .config import SafetyFilter
+from .obstacle_terms import obstacle_terms
 from .obstacles import Obstacle, obstacle_barrier_rows
-from .pairs import neighbour_lists, sensed_pairs
+from .pairs import DENSE_BELOW, sensed_pairs
+from .projection import _project, _row_tol, filter_robot, unchanged_robot
 from .result import FilterResult, summarise
 
-__all__ = ["decentralized_filter", "decentralized_reference", "project_onto_halfplanes"]
-
-#: Relative tolerance of the feasibility and activity checks of a candidate.
-TOL = 1e-10
-
-
-@njit(cache=True, nogil=True)
-def _row_tol(a0: float, a1: float, b: float, u_scale: float) -> float:
-    return TOL * (abs(b) + (abs(a0) + abs(a1)) * u_scale)
+__all__ = [
+    "decentralized_commands",
+    "decentralized_filter",
+    "decentralized_reference",
+    "project_onto_halfplanes",
+]
 
 
-@njit(cache=True, nogil=True)
-def _feasible(u0: float, u1: float, A: NDArray, b: NDArray, m: int, scale: float) -> bool:
-    for k in range(m):
-        if A[k, 0] * u0 + A[k, 1] * u1 - b[k] > _row_tol(A[k, 0], A[k, 1], b[k], scale):
-            return False
-    return True
+@njit(cache=True, nogil=True, inline="always")
+def _robot(t, r, q, uh, radius, dense, grid, obs, d2, gamma, speed_n, speed_b, nbr, A, b, neg,
+           owner, out):  # fmt: skip
+    """Robot ``r`` of trial ``t``: its neighbours, then unchanged or :func:`filter_robot`.
 
-
-@njit(cache=True, nogil=True)
-def _project(uh0: float, uh1: float, A: NDArray, b: NDArray, m: int, out: NDArray) -> int:
-    """``argmin |u - u_hat|^2`` s.t. ``A[:m] u <= b[:m]`` in ``R^2`` into ``out``.
-
-    Returns 0 (``u_hat`` feasible, copied unchanged), 1 (solved) or -1 (no feasible
-    KKT point: the constraints are infeasible, up to the tolerance).
+    Returns ``(code, m, deg)``: the robot's code (0 unchanged, 1 solved, 2 relaxed, 4
+    failed), its rows ``A[:m]`` (-1 when not built) and its neighbours ``nbr[:deg]``.
     """
-    inside = True
-    for k in range(m):
-        if A[k, 0] * uh0 + A[k, 1] * uh1 > b[k]:
-            inside = False
-            break
-    if inside:
+    n = q.shape[1]
+    qt = q[t]
+    deg = 0
+    if dense:
+        for j in range(n):  # neighbours in ascending order
+            if j == r:
+                continue
+            dx = qt[r, 0] - qt[j, 0]
+            dy = qt[r, 1] - qt[j, 1]
+            if dx * dx + dy * dy <= radius * radius:
+                nbr[deg] = j
+                deg += 1
+    else:
+        x0, y0, side, nx, ny, start, order = grid
+        deg = neighbours_of(r, qt, radius * radius, x0, y0, side, nx, ny, start, order, nbr)
+    uh0 = uh[t, r, 0]
+    uh1 = uh[t, r, 1]
+    if unchanged_robot(r, qt, uh0, uh1, nbr, deg, obs, d2, gamma, speed_n, speed_b):
         out[0] = uh0
         out[1] = uh1
-        return 0
-    base = abs(uh0) + abs(uh1)
-    for k in range(m):  # one active constraint: closed form
-        nn = A[k, 0] * A[k, 0] + A[k, 1] * A[k, 1]
-        viol = A[k, 0] * uh0 + A[k, 1] * uh1 - b[k]
-        if viol <= 0.0 or nn == 0.0:
-            continue
-        lam = viol / nn
-        u0 = uh0 - lam * A[k, 0]
-        u1 = uh1 - lam * A[k, 1]
-        if _feasible(u0, u1, A, b, m, base + abs(u0) + abs(u1)):
-            out[0] = u0
-            out[1] = u1
-            return 1
-    for k in range(m):  # two active constraints: a 2 x 2 solve for the multipliers
-        gkk = A[k, 0] * A[k, 0] + A[k, 1] * A[k, 1]
-        rk = A[k, 0] * uh0 + A[k, 1] * uh1 - b[k]
-        for j in range(k + 1, m):
-            gjj = A[j, 0] * A[j, 0] + A[j, 1] * A[j, 1]
-            gkj = A[k, 0] * A[j, 0] + A[k, 1] * A[j, 1]
-            det = gkk * gjj - gkj * gkj
-            if det <= 1e-12 * gkk * gjj:
-                continue  # parallel rows: a single constraint covers them
-            rj = A[j, 0] * uh0 + A[j, 1] * uh1 - b[j]
-            lk = (gjj * rk - gkj * rj) / det
-            lj = (gkk * rj - gkj * rk) / det
-            floor = -1e-12 * (abs(lk) + abs(lj))
-            if lk < floor or lj < floor:
-                continue
-            u0 = uh0 - lk * A[k, 0] - lj * A[j, 0]
-            u1 = uh1 - lk * A[k, 1] - lj * A[j, 1]
-            if _feasible(u0, u1, A, b, m, base + abs(u0) + abs(u1)):
-                out[0] = u0
-                out[1] = u1
-                return 1
-    return -1
+        return 0, -1, deg
+    code, m = filter_robot(r, qt, uh0, uh1, nbr, deg, obs, d2, gamma, speed_n, speed_b, A, b,
+                           neg, owner, out)  # fmt: skip
+    return code, m, deg
 
 
 @njit(cache=True, nogil=True)
-def _kernel(
-    q: NDArray,
-    uh: NDArray,
-    ptr: NDArray,
-    nbr: NDArray,
-    obs_a: NDArray,
-    obs_b: NDArray,
-    speed_n: NDArray,
-    speed_b: float,
-    d2: float,
-    gamma: float,
-    out_u: NDArray,
-    out_code: NDArray,
-    out_nbr_active: NDArray,
-    out_obs_active: NDArray,
-) -> None:
-    n_rob = q.shape[0]
-    n_obs = obs_b.shape[1]
-    n_spd = speed_n.shape[0]
-    for r in range(n_rob):
-        start = ptr[r]
-        deg = ptr[r + 1] - start
-        m = deg + n_obs + n_spd
-        A = np.empty((m, 2))
-        b = np.empty(m)
-        neg = np.zeros(m, dtype=np.bool_)
-        for t in range(deg):
-            j = nbr[start + t]
-            dx = q[r, 0] - q[j, 0]
-            dy = q[r, 1] - q[j, 1]
-            h = dx * dx + dy * dy - d2
-            A[t, 0] = -2.0 * dx
-            A[t, 1] = -2.0 * dy
-            b[t] = 0.5 * gamma * h * h * h  # half of the pair's -gamma h^3
-            neg[t] = h < 0.0
-        for k in range(n_obs):
-            A[deg + k, 0] = obs_a[r, k, 0]
-            A[deg + k, 1] = obs_a[r, k, 1]
-            b[deg + k] = obs_b[r, k]
-            neg[deg + k] = obs_b[r, k] < 0.0
-        for s in range(n_spd):
-            A[deg + n_obs + s, 0] = speed_n[s, 0]
-            A[deg + n_obs + s, 1] = speed_n[s, 1]
-            b[deg + n_obs + s] = speed_b
-        u = np.empty(2)
-        code = _project(uh[r, 0], uh[r, 1], A, b, m, u)
-        if code < 0:
-            for k in range(m):
-                if neg[k]:
-                    b[k] = 0.0
-            code = _project(uh[r, 0], uh[r, 1], A, b, m, u)
-            if code >= 0:
-                code = 2
-            else:
-                code = 4
-                u[0] = 0.0
-                u[1] = 0.0
-        out_u[r, 0] = u[0]
-        out_u[r, 1] = u[1]
-        out_code[r] = code
-        if code == 0:
+def _grid(q, radius, dense):
+    if dense:
+        return 0.0, 0.0, 1.0, 1, 1, np.zeros(2, np.int64), np.zeros(q.shape[0], np.int64)
+    return build_grid(q, radius)
+
+
+@njit(cache=True, nogil=True)
+def _commands(q, uh, radius, dense, obs, d2, gamma, speed_n, speed_b, out_u, out_code,
+              out_rows):  # fmt: skip
+    """Pass 1: every robot's filtered command, code and rows (``m``, 0 when unchanged)."""
+    T, n = q.shape[0], q.shape[1]
+    rows = n + obs.vertices.shape[0] + obs.radius.shape[0] + speed_n.shape[0]
+    nbr = np.empty(max(n, 1), np.int64)
+    A = np.empty((rows, 2))
+    b = np.empty(rows)
+    neg = np.empty(rows, np.bool_)
+    owner = np.empty(rows, np.int64)
+    out = np.empty(2)
+    for t in range(T):
+        grid = _grid(q[t], radius, dense)
+        for r in range(n):
+            code, m, _ = _robot(t, r, q, uh, radius, dense, grid, obs, d2, gamma, speed_n,
+                                speed_b, nbr, A, b, neg, owner, out)  # fmt: skip
+            out_u[t, r, 0] = out[0]
+            out_u[t, r, 1] = out[1]
+            out_code[t, r] = code
+            out_rows[t, r] = max(m, 0)
+
+
+@njit(cache=True, nogil=True)
+def _activity(q, uh, radius, dense, obs, d2, gamma, speed_n, speed_b, code, pairs, obstacles):
+    """Pass 2, for the robots whose command changed: the rows holding with equality.
+
+    Fills ``pairs`` ``(K, 3)`` with ``(trial, i, j)`` (robot ``i``'s half active) and
+    ``obstacles`` ``(K, 3)`` with ``(trial, robot, obstacle)``; returns their counts.
+    """
+    T, n = q.shape[0], q.shape[1]
+    rows = n + obs.vertices.shape[0] + obs.radius.shape[0] + speed_n.shape[0]
+    nbr = np.empty(max(n, 1), np.int64)
+    A = np.empty((rows, 2))
+    b = np.empty(rows)
+    neg = np.empty(rows, np.bool_)
+    owner = np.empty(rows, np.int64)
+    out = np.empty(2)
+    n_pairs = 0
+    n_obs = 0
+    for t in range(T):
+        changed = False
+        for r in range(n):
+            changed = changed or code[t, r] != 0
+        if not changed:
             continue
-        scale = abs(u[0]) + abs(u[1]) + abs(uh[r, 0]) + abs(uh[r, 1])
-        for k in range(m):
-            slack = b[k] - A[k, 0] * u[0] - A[k, 1] * u[1]
-            on = slack <= 1e3 * _row_tol(A[k, 0], A[k, 1], b[k], scale)
-            if k < deg:
-                out_nbr_active[start + k] = on
-            elif k < deg + n_obs:
-                out_obs_active[r, k - deg] = on
+        grid = _grid(q[t], radius, dense)
+        for r in range(n):
+            if code[t, r] == 0:
+                continue
+            _, m, deg = _robot(t, r, q, uh, radius, dense, grid, obs, d2, gamma, speed_n,
+                               speed_b, nbr, A, b, neg, owner, out)  # fmt: skip
+            scale = abs(out[0]) + abs(out[1]) + abs(uh[t, r, 0]) + abs(uh[t, r, 1])
+            for k in range(m):
+                slack = b[k] - A[k, 0] * out[0] - A[k, 1] * out[1]
+                if slack > 1e3 * _row_tol(A[k, 0], A[k, 1], b[k], scale):
+                    continue
+                if k < deg:
+                    pairs[n_pairs, 0] = t
+                    pairs[n_pairs, 1] = r
+                    pairs[n_pairs, 2] = nbr[k]
+                    n_pairs += 1
+                elif k >= deg and owner[k] >= 0:
+                    obstacles[n_obs, 0] = t
+                    obstacles[n_obs, 1] = r
+                    obstacles[n_obs, 2] = owner[k]
+                    n_obs += 1
+    return n_pairs, n_obs
+
+
+def _setup(config: SafetyFilter, q: NDArray, u_hat: NDArray, obstacles: Sequence[Obstacle]):  # type: ignore[no-untyped-def]
+    n = q.shape[-2]
+    fq = np.ascontiguousarray(q.reshape(-1, n, 2), dtype=float)
+    fu = np.ascontiguousarray(u_hat.reshape(-1, n, 2), dtype=float)
+    radius = float(config.sensing_radius)
+    dense = (not math.isfinite(radius)) or n < DENSE_BELOW or not np.all(np.isfinite(fq))
+    obs = obstacle_terms(obstacles, d_obstacle=config.d_obstacle, gamma=config.gamma)
+    normals, bound = config.speed_polygon()
+    args = (radius, dense, obs, float(config.distance) ** 2, float(config.gamma),
+            np.ascontiguousarray(normals, dtype=float), float(bound))  # fmt: skip
+    return fq, fu, args
+
+
+def decentralized_commands(
+    config: SafetyFilter,
+    q: NDArray[np.float64],
+    u_hat: NDArray[np.float64],
+    obstacles: Sequence[Obstacle] = (),
+) -> NDArray[np.float64]:
+    """The decentralized filter's commands only (``(..., n, 2)``), as :func:`decentralized_filter`.
+
+    What the closed loop needs at every step: no status, no active set.
+    """
+    q = np.asarray(q, dtype=float)
+    u_hat = np.asarray(u_hat, dtype=float)
+    fq, fu, args = _setup(config, q, u_hat, obstacles)
+    out_u = np.empty_like(fu)
+    code = np.empty(fu.shape[:2], np.int8)
+    _commands(fq, fu, *args, out_u, code, np.empty(fu.shape[:2], np.int64))  # type: ignore[call-arg]
+    return out_u.reshape(u_hat.shape)
 
 
 def decentralized_filter(
@@ -217,38 +233,25 @@ def decentralized_filter(
     q = np.asarray(q, dtype=float)
     u_hat = np.asarray(u_hat, dtype=float)
     batch, n = q.shape[:-2], q.shape[-2]
-    flat_q = np.ascontiguousarray(q.reshape(-1, 2))
-    flat_u = np.ascontiguousarray(u_hat.reshape(-1, 2))
-    trials = flat_q.shape[0] // n
-    pairs = sensed_pairs(q, config.sensing_radius)
-    ptr, nbr = neighbour_lists(pairs, trials, n)
-    rows = obstacle_barrier_rows(
-        flat_q.reshape(trials, n, 2), obstacles, distance=config.d_obstacle, gamma=config.gamma
-    )
-    k = rows.b.shape[-1]
-    obs_a = np.ascontiguousarray(rows.a.reshape(trials * n, k, 2))
-    obs_b = np.ascontiguousarray(rows.b.reshape(trials * n, k))
-    normals, bound = config.speed_polygon()
-    out_u = np.empty_like(flat_u)
-    code = np.empty(flat_u.shape[0], np.int8)
-    nbr_active = np.zeros(nbr.shape[0], np.bool_)
-    obs_active = np.zeros((flat_u.shape[0], k), np.bool_)
-    _kernel(
-        flat_q, flat_u, ptr, nbr, obs_a, obs_b, np.ascontiguousarray(normals), bound,
-        config.distance**2, config.gamma, out_u, code, nbr_active, obs_active,
-    )  # fmt: skip
-    code_t = code.reshape(trials, n)
-    status = code_t.max(axis=1).astype(np.int8)
-    src = np.repeat(np.arange(trials * n), np.diff(ptr))
-    sel = nbr_active & (src < nbr)  # report each pair once, i < j
-    active_pairs = np.column_stack([src[sel] // n, src[sel] % n, nbr[sel] % n]).astype(np.int64)
-    r_o, piece = np.nonzero(obs_active)
-    active_obs = np.unique(
-        np.column_stack([r_o // n, r_o % n, rows.owner[piece]]).astype(np.int64), axis=0
-    ).reshape(-1, 3)
-    robot_active = np.zeros(trials * n, bool)
-    np.logical_or.at(robot_active, src[nbr_active], True)
-    robot_active |= obs_active.any(axis=1)
+    fq, fu, args = _setup(config, q, u_hat, obstacles)
+    trials = fq.shape[0]
+    out_u = np.empty_like(fu)
+    code = np.empty((trials, n), np.int8)
+    m = np.empty((trials, n), np.int64)
+    _commands(fq, fu, *args, out_u, code, m)  # type: ignore[call-arg]
+    status = code.max(axis=1, initial=0).astype(np.int8)
+    changed = int(np.count_nonzero(code))
+    rows = int(m.sum())  # at most one active row each
+    pairs = np.empty((rows, 3), np.int64)
+    obs_rows = np.empty((rows, 3), np.int64)
+    n_p, n_o = (_activity(fq, fu, *args, code, pairs, obs_rows) if changed  # type: ignore[call-arg]
+                else (0, 0))  # fmt: skip
+    halves = pairs[:n_p]
+    active_pairs = halves[halves[:, 1] < halves[:, 2]]  # each pair once, i < j
+    active_obs = np.unique(obs_rows[:n_o], axis=0).reshape(-1, 3)
+    robot_active = np.zeros((trials, n), bool)
+    robot_active[halves[:, 0], halves[:, 1]] = True
+    robot_active[active_obs[:, 0], active_obs[:, 1]] = True
     return FilterResult(
         u=out_u.reshape(u_hat.shape),
         status=status.reshape(batch),

@@ -22,10 +22,10 @@ chunks of trials, for the laws ``distance``, ``angle-restricted``,
 gives their data; and the robot models ``single-integrator``, ``unicycle``
 and ``double-integrator``) and ``"numpy"`` (the stepping driver,
 :func:`formationlab.integrators.drive`, with explicit Euler and a stop rule:
-the readable specification, for any law). The compiled kernel knows no
-obstacles and no safety filter: with either, :func:`batch_backend` chooses the
-numpy path (the decentralized filter is itself batched in numba; the centralized
-QP runs one solve per trial and step), and :func:`run_batch` follows it.
+the readable specification, for any law). With obstacles or a safety filter,
+``"numba"`` runs the compiled path of :mod:`.safety_kernel` (trial by trial the
+driver's run; the centralized filter's QP, when more than two rows are active, is
+solved by Clarabel between kernel calls).
 
 With sensing other than the paper's or faults, ``"numba"`` runs single integrators
 on the compiled sensed path (:mod:`.sensed_kernel`: the measurement channel, every
@@ -90,10 +90,10 @@ def batch_backend(
 ) -> tuple[Backend, str]:
     """The backend a batch runs on, and why it differs from ``backend`` ("" if it does not).
 
-    The numba kernels have neither obstacles nor a safety filter, so either moves the
-    batch to the numpy driver path. Sensing and faults (``sensed``) have their own
-    compiled path, :mod:`.sensed_kernel`, for single integrators (``model``, default
-    the paper's); sensed batches of other robot models run on the numpy driver path.
+    Obstacles and a safety filter have their own compiled path, :mod:`.safety_kernel`;
+    sensing and faults (``sensed``) theirs, :mod:`.sensed_kernel`, for single integrators
+    (``model``, default the paper's). Sensed batches of other robot models, or with
+    obstacles or a filter, run on the numpy driver path.
     """
     sensed_model = model is None or type(model) is SingleIntegrator
     if backend == "numba" and sensed and not sensed_model:
@@ -104,12 +104,12 @@ def batch_backend(
             "measurement channel)"
         )
     filtered = safety is not None and safety.enabled
-    if backend == "numba" and (obstacles or filtered):
+    if backend == "numba" and sensed and (obstacles or filtered):
         what = " and ".join(
             w for w, on in (("obstacles", bool(obstacles)), ("a safety filter", filtered)) if on
         )
         return "numpy", (
-            f"the compiled kernel has no {what}: the batch runs on the numpy driver path "
+            f"the compiled sensed path has no {what}: the batch runs on the numpy driver path "
             "(the decentralized filter is batched in numba, the centralized QP is solved "
             "per trial)"
         )
@@ -193,7 +193,13 @@ def run_batch(
     check_every = whole(check_every, "check_every")
     sensed = (sensing is not None and not sensing.ideal) or (faults is not None and faults.any)
     backend, _ = batch_backend(backend, obstacles, safety, sensed, model)
-    if backend == "numba" and sensed:
+    safe = bool(obstacles) or (safety is not None and safety.enabled)
+    if backend == "numba" and safe:
+        x, v, status, steps, mc, ns, qw, window_step = _run_safety(
+            formation, law, model, q0, float(dt), n_steps, int(check_every), tol,
+            obstacles, safety,
+        )  # fmt: skip
+    elif backend == "numba" and sensed:
         x, v, status, steps, mc, ns, qw, window_step = _run_sensed(
             formation, law, model, q0, float(dt), n_steps, int(check_every), tol,
             sensing, faults, seeds,
@@ -327,6 +333,20 @@ def _run_sensed(
     with _one_chunk_at_a_time():
         return run_sensed(
             formation, law, model, q0, dt, n_steps, check_every, tol, sensing, faults, seeds
+        )
+
+
+def _run_safety(
+    formation: Formation, law: Law, model: RobotModel, q0: NDArray[np.float64], dt: float,
+    n_steps: int, check_every: int, tol: Tolerances, obstacles: Sequence[Any], safety: Any,
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, int]:  # fmt: skip
+    from ..safety import check_obstacle_starts
+    from .safety_kernel import run_safety
+
+    check_obstacle_starts(model.positions(q0), formation.diameters / 2, tuple(obstacles))
+    with _one_chunk_at_a_time():
+        return run_safety(
+            formation, law, model, q0, dt, n_steps, check_every, tol, obstacles, safety
         )
 
 

@@ -184,7 +184,8 @@ class StudySetup:
         Static obstacles of every trial (starts touching one are drawn again).
     safety : SafetyFilter, optional
         Safety filter of every trial. With obstacles or a filter the trials run on the
-        numpy driver path (:func:`~formationlab.studies.batch.batch_backend`).
+        compiled path of :mod:`~formationlab.studies.safety_kernel`
+        (:func:`~formationlab.studies.batch.batch_backend`).
     """
 
     formation: Formation
@@ -468,9 +469,12 @@ def _warm_kernels(tasks: list[ChunkTask], notify: Callable[[str], None] | None) 
     start = time.perf_counter()
     for t in [*first.values(), *sensed]:
         f, g = t.group.formation, t.group
-        q0 = trial_initial_states(f, t.initial, t.seed, np.arange(1), center=t.center)
+        q0 = trial_initial_states(
+            f, t.initial, t.seed, np.arange(1), center=t.center, obstacles=t.obstacles
+        )
         run_batch(
             f, g.law, q0, dt=t.dt, duration=2 * t.dt, tolerances=t.tolerances,
+            obstacles=t.obstacles, safety=t.safety,
             sensing=g.sensing if g.sensed else None, faults=g.faults if g.sensed else None,
             seeds=[(t.seed, 0)] if g.sensed else None,
         )  # fmt: skip
