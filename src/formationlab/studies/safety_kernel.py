@@ -247,7 +247,13 @@ def _chunk(c, terms, model, obs, flt, st, out, dt, n_steps, check_every, speed, 
     f = np.empty((n, kk, C))
     u = np.empty((n, 2, C))
     p = np.empty((n, 2, C) if hand else (1, 2, 1))
-    h = np.empty((n, 2, C) if turns else (1, 2, 1))
+    # cos theta, sin theta of the unicycles (n, C), from the library at every step here
+    hshape = (n, C) if turns else (1, 1)
+    hc = np.empty(hshape)
+    hs = np.empty(hshape)
+    hcl = np.empty(hshape)
+    hsl = np.empty(hshape)
+    vel = np.empty(C)  # the unicycles' speeds (_rates)
     sigma = np.empty(C)
     gap = np.empty(C)
     swept = np.empty(C)
@@ -277,10 +283,10 @@ def _chunk(c, terms, model, obs, flt, st, out, dt, n_steps, check_every, speed, 
     while nact > 0:
         k = step
         if turns:
-            _headings(x, h, nact)
+            _headings(x, hc, hs, hcl, hsl, nact)
         src = p if hand else x
         if hand:
-            _points(x, h, p, nact, model)
+            _points(x, hc, hs, p, nact, model)
         _controls(src, u, sigma, nact, terms)
         pause = False
         for b in range(nact):  # obstacles' repulsion and the filter, trial by trial
@@ -325,7 +331,7 @@ def _chunk(c, terms, model, obs, flt, st, out, dt, n_steps, check_every, speed, 
             st.meta[c, 2] = kc
             st.meta[c, 4] = _PAUSED
             return
-        _rates(x, h, u, f, nact, model)
+        _rates(x, hc, hs, u, f, vel, nact, model)
         if k == window_step:  # start of the drift window (the driver's q_window)
             for b in range(nact):
                 for i in range(n):
