@@ -19,9 +19,12 @@ the unique point that satisfies the KKT conditions is the optimum, so: return
 ``u_hat_i`` unchanged if it is feasible; else the projection onto the line of one
 violated constraint if it is feasible (closed form, multiplier
 ``(a . u_hat - b) / |a|^2 > 0``); else the first point on two lines whose two
-multipliers (a 2 x 2 solve) are non-negative and which is feasible. That is
-``O(m^2)`` candidates of ``O(m)`` checks for ``m`` constraints, a few dozen flops per
-robot for the usual handful of neighbours (:mod:`.projection`). It runs batched over
+multipliers (a 2 x 2 solve) are non-negative and which is feasible, trying the rows
+``k`` violated at ``u_hat`` with the rows ``j`` violated at ``k``'s projection (one of two
+active rows is violated at ``u_hat``, and the other at the first one's projection, else
+that projection would be the answer): ``O(v m)`` candidates of ``O(m)`` checks for ``v``
+violated rows out of ``m``, a few dozen flops per robot for the usual handful of
+neighbours (:mod:`.projection`). It runs batched over
 trials and robots in one serial numba loop (``nogil``, so callers may run chunks in
 threads; a ``prange`` launch cost more than the whole loop below a few thousand robots
 when benchmarked), each robot's neighbours found by a grid of cells of the sensing
