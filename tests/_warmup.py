@@ -1,8 +1,9 @@
 """Fill the numba cache before the test workers start (see ``conftest.pytest_configure``).
 
 Each of the two parts compiles some of the package's kernels through the public API, on a
-tiny problem; ``python tests/_warmup.py PART`` runs one part. Run in parallel by the
-controlling process, they compile each kernel once instead of once per test worker.
+tiny problem, about a minute and a half each; ``python tests/_warmup.py PART`` runs one part.
+Run in parallel by the controlling process, they compile each kernel once instead of once
+per test worker.
 """
 
 from __future__ import annotations
@@ -23,9 +24,25 @@ def _triangle():
 
 
 def part0() -> None:
-    """The study kernel for every robot model, and the sensed kernel."""
+    """The batch kernel of obstacles and safety filters (the longest compilation)."""
+    fl, f, q0 = _triangle()
+    from formationlab.safety import Circle, SafetyFilter
+    from formationlab.studies.batch import run_batch
+
+    disc = (Circle(center=[5.0, 5.0], radius=0.5),)
+    for kind in ("barrier-decentralized", "barrier"):
+        cfg = SafetyFilter(filter=kind, distance=0.25)
+        run_batch(f, fl.get_law("distance"), q0, dt=1e-2, duration=0.05, safety=cfg,
+                  obstacles=disc)  # fmt: skip
+
+
+def part1() -> None:
+    """The study kernel for every robot model, the sensed kernel, compiled single runs of
+    both kinds of law, the filters of single runs, the rigidity check."""
     fl, f, q0 = _triangle()
     from formationlab.models import DoubleIntegrator, Unicycle
+    from formationlab.rigidity import is_generically_rigid
+    from formationlab.safety import SafetyFilter
     from formationlab.sensing import Sensing
     from formationlab.studies.batch import run_batch
 
@@ -36,19 +53,11 @@ def part0() -> None:
         run_batch(f, law, x0, dt=1e-2, duration=0.05, model=model)
     seeds = [(1, t) for t in range(len(q0))]
     run_batch(f, law, q0, dt=1e-2, duration=0.05, sensing=Sensing(noise=0.01), seeds=seeds)
-
-
-def part1() -> None:
-    """Compiled single runs of both kinds of law, the safety kernels, the pebble game."""
-    fl, f, q0 = _triangle()
-    from formationlab.safety import SafetyFilter
-
     for name in ("distance", "angle-restricted"):
         fl.simulate(f, fl.get_law(name), q0[0], duration=0.05)
-    cfg = SafetyFilter(filter="barrier-decentralized", distance=0.25)
-    fl.simulate(f, fl.get_law("distance"), q0[0], duration=0.05, safety=cfg)
-    from formationlab.rigidity import is_generically_rigid
-
+    for kind in ("barrier-decentralized", "barrier"):
+        cfg = SafetyFilter(filter=kind, distance=0.25)
+        fl.simulate(f, fl.get_law("distance"), q0[0], duration=0.05, safety=cfg)
     is_generically_rigid(f.edges, f.n)
 
 
