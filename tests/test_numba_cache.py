@@ -36,13 +36,15 @@ def _package(tmp_path: Path, k: int) -> Path:
     return pkg
 
 
-def _call(tmp_path: Path, guarded: bool) -> int:
-    guard = (
-        f"from formationlab._numba_cache import check; check(__import__('pathlib').Path({str(tmp_path / 'pkg')!r})); "
-        if guarded
-        else ""
-    )  # noqa: E501
+def _call(tmp_path: Path, guarded: bool, cache_dir: Path | None = None) -> int:
+    pkg = str(tmp_path / "pkg")
+    check_it = (
+        f"from formationlab._numba_cache import check; check(__import__('pathlib').Path({pkg!r})); "
+    )
+    guard = check_it if guarded else ""
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    if cache_dir is not None:
+        env["NUMBA_CACHE_DIR"] = str(cache_dir)
     out = subprocess.run(
         [sys.executable, "-c", RUN.format(root=str(tmp_path), guard=guard)],
         capture_output=True, text=True, env=env, check=True,
@@ -81,3 +83,17 @@ def test_only_the_packages_kernels_are_removed_and_only_when_sources_change(
     (pkg / "callee.py").write_text(CALLEE.format(k=5))
     check(pkg)
     assert not any(p.exists() for p in mine) and (cache / STAMP).read_text() != stamp
+
+
+def test_a_cache_folder_of_ones_own_is_kept_from_one_process_to_the_next(tmp_path: Path) -> None:
+    """NUMBA_CACHE_DIR empty at the first import: the stamp is written before numba's first
+    kernel, so the next process loads the kernels instead of compiling them again."""
+    _package(tmp_path, 1)
+    cache = tmp_path / "numba-cache"
+    assert _call(tmp_path, guarded=True, cache_dir=cache) == 2
+    (index,) = cache.glob("*/caller.f-*.nbi")
+    stamp = index.stat().st_mtime_ns
+    assert _call(tmp_path, guarded=True, cache_dir=cache) == 2
+    assert index.exists() and index.stat().st_mtime_ns == stamp  # loaded, not rebuilt
+    _package(tmp_path, 2)
+    assert _call(tmp_path, guarded=True, cache_dir=cache) == 3

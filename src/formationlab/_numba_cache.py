@@ -39,19 +39,22 @@ def digest(files: list[Path], root: Path) -> str:
     return h.hexdigest()
 
 
-def cache_folders(package_dir: Path) -> list[Path]:
-    """Folders where numba may cache the kernels of the modules in ``package_dir``: the
-    in-tree ``__pycache__``, and the sub-folder numba derives from the folder's path under
-    ``NUMBA_CACHE_DIR`` and under the user-wide cache."""
-    folders = [package_dir / "__pycache__"]
+def cache_folders(package_dir: Path) -> list[tuple[Path, bool]]:
+    """Folders where numba may cache the kernels of the modules in ``package_dir``, each with
+    whether to create it when missing: the in-tree ``__pycache__`` and the sub-folder numba
+    derives from the folder's path under ``NUMBA_CACHE_DIR`` (created, so that the stamp
+    is there before numba's first kernel), and under the user-wide cache (numba's choice when
+    the package's folder cannot be written; left alone until numba makes it)."""
+    folders = [(package_dir / "__pycache__", True)]
     try:
         from numba.core.caching import _CacheLocator
         from numba.misc.appdirs import AppDirs
 
         sub = _CacheLocator.get_suitable_cache_subpath(str(package_dir / "x.py"))
         user_wide = AppDirs(appname="numba", appauthor=False).user_cache_dir
-        roots = [os.environ.get("NUMBA_CACHE_DIR", ""), user_wide]
-        folders += [Path(r) / sub for r in roots if r]
+        if os.environ.get("NUMBA_CACHE_DIR"):
+            folders.append((Path(os.environ["NUMBA_CACHE_DIR"]) / sub, True))
+        folders.append((Path(user_wide) / sub, False))
     except Exception:  # numba's internals moved: the in-tree folder only
         pass
     return folders
@@ -59,7 +62,8 @@ def cache_folders(package_dir: Path) -> list[Path]:
 
 def purge(folder: Path, stems: set[str], new: str) -> bool:
     """Remove the cached kernels of modules ``stems`` from ``folder`` unless its stamp says
-    ``new``; store ``new``. False when the folder cannot be written."""
+    ``new`` (kernels without a stamp are of unknown sources: removed too); store ``new``.
+    False when the folder cannot be written."""
     stamp = folder / STAMP
     with contextlib.suppress(OSError):
         if stamp.read_text() == new:
@@ -87,7 +91,10 @@ def check(root: Path | None = None) -> None:
         for p in files:
             by_dir.setdefault(p.parent, set()).add(p.stem)
         for package_dir, stems in by_dir.items():
-            for folder in cache_folders(package_dir):
+            for folder, create in cache_folders(package_dir):
+                if create and not folder.is_dir():
+                    with contextlib.suppress(OSError):
+                        folder.mkdir(parents=True, exist_ok=True)
                 if folder.is_dir():
                     purge(folder, stems, new)
     except Exception:  # never stop the import: numba's own cache rules apply
