@@ -110,17 +110,20 @@ def _grid(q, radius, dense):
 
 
 @njit(cache=True, nogil=True)
+def _scratch(n, obs, speed_n):
+    """One robot's work arrays for :func:`_robot`: neighbours, rows ``A``, bounds ``b``,
+    relaxed flags, row owners and the command, sized for every row it can have."""
+    rows = n + obs.vertices.shape[0] + obs.radius.shape[0] + speed_n.shape[0]
+    return (np.empty(max(n, 1), np.int64), np.empty((rows, 2)), np.empty(rows),
+            np.empty(rows, np.bool_), np.empty(rows, np.int64), np.empty(2))  # fmt: skip
+
+
+@njit(cache=True, nogil=True)
 def _commands(q, uh, radius, dense, obs, d2, gamma, speed_n, speed_b, out_u, out_code,
               out_rows):  # fmt: skip
     """Pass 1: every robot's filtered command, code and rows (``m``, 0 when unchanged)."""
     T, n = q.shape[0], q.shape[1]
-    rows = n + obs.vertices.shape[0] + obs.radius.shape[0] + speed_n.shape[0]
-    nbr = np.empty(max(n, 1), np.int64)
-    A = np.empty((rows, 2))
-    b = np.empty(rows)
-    neg = np.empty(rows, np.bool_)
-    owner = np.empty(rows, np.int64)
-    out = np.empty(2)
+    nbr, A, b, neg, owner, out = _scratch(n, obs, speed_n)
     for t in range(T):
         grid = _grid(q[t], radius, dense)
         for r in range(n):
@@ -140,13 +143,7 @@ def _activity(q, uh, radius, dense, obs, d2, gamma, speed_n, speed_b, code, pair
     ``obstacles`` ``(K, 3)`` with ``(trial, robot, obstacle)``; returns their counts.
     """
     T, n = q.shape[0], q.shape[1]
-    rows = n + obs.vertices.shape[0] + obs.radius.shape[0] + speed_n.shape[0]
-    nbr = np.empty(max(n, 1), np.int64)
-    A = np.empty((rows, 2))
-    b = np.empty(rows)
-    neg = np.empty(rows, np.bool_)
-    owner = np.empty(rows, np.int64)
-    out = np.empty(2)
+    nbr, A, b, neg, owner, out = _scratch(n, obs, speed_n)
     n_pairs = 0
     n_obs = 0
     for t in range(T):
