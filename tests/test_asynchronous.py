@@ -258,7 +258,7 @@ def test_a_held_command_runs_a_slow_robot_into_a_stopped_one():
         ({"jitter": -0.1}, r"jitter must be a finite number >= 0"),
         ({"dt": 0.0}, r"dt must be a finite number > 0"),
         ({"duration": -1.0}, r"duration must be a finite number > 0"),
-        ({"seed": -1}, r"seed must be a whole number >= 0"),
+        ({"seed": -1}, r"seed must be a whole number in \[0, 2\*\*63\)"),
         ({"sensing": {"noise": 0.1}}, r"sensing must be a Sensing"),
         ({"faults": Faults(stop=[Stop(robot=4)])}, r"robot 4 does not exist"),
         ({"save_every": 0}, r"save_every must be an integer >= 1"),

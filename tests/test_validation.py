@@ -16,8 +16,10 @@ from formationlab.validation import (
     fraction,
     line_of,
     nonnegative,
+    number,
     one_of,
     positive,
+    seed,
     whole,
 )
 
@@ -115,6 +117,55 @@ def test_build_dataclass_is_strict_and_builds_nested_tables():
     with pytest.raises(ParameterError) as err:  # the class's own check, key made dotted
         build_dataclass(fl.DistanceLaw, {"repulsion": {"eta": -1.0}})
     assert err.value.key == "repulsion.eta"
+
+
+def test_number_bounds_infinity_and_seed():
+    assert number(float("inf"), "range", low=0.0, strict=True, allow_inf=True) == float("inf")
+    assert number(0.0, "drop", low=0.0, strict=False, below=1.0) == 0.0
+    cases = [
+        (dict(low=0.0, strict=True, allow_inf=True), float("nan"), "r must be a number > 0"),
+        (dict(low=0.0, strict=True), float("inf"), "r must be a finite number > 0"),
+        (dict(low=0.0, strict=False, below=1.0), 1.0, r"r must be a finite number in \[0, 1\)"),
+        (dict(low=2.0, strict=False), 1.5, "r must be a finite number >= 2"),
+    ]
+    for kw, bad, msg in cases:
+        with pytest.raises(ParameterError, match=msg) as info:
+            number(bad, "r", **kw)
+        assert info.value.key == "r"
+    assert seed(np.uint32(7)) == 7 and seed(2**63 - 1) == 2**63 - 1
+    for bad in (-1, 2**63, 1.0, True, None):
+        with pytest.raises(ParameterError, match=r"s must be a whole number in \[0, 2\*\*63\)"):
+            seed(bad, "s")
+
+
+@pytest.mark.parametrize(
+    ("line", "key"),
+    [
+        ("gamma = -1.0", "safety.gamma"),
+        ("max_speed = 0.0", "safety.max_speed"),
+        ("speed_sides = 3", "safety.speed_sides"),
+        ("sensing_radius = 0.25", "safety.sensing_radius"),
+        ("distance = 0.1", "safety.distance"),
+        ("obstacle_distance = 0.05", "safety.obstacle_distance"),
+    ],
+)
+def test_safety_errors_carry_their_key(line, key):
+    from formationlab.scenario import parse_scenario
+
+    text = (
+        "[robots]\npositions = [[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]\ndiameters = 0.2\n"
+        "[formation]\ndistances = 1.0\n"
+        '[controller]\nlaw = "distance"\n'
+        "[simulation]\nduration = 1.0\n"
+        '[safety]\nfilter = "barrier"\n'
+        + ("" if line.startswith("distance") else "distance = 0.3\n")
+        + line
+        + "\n"
+    )
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(text, source="t.toml")
+    assert info.value.key == key
+    assert str(info.value).startswith(f"t.toml: {key} (line ")
 
 
 def test_scenario_errors_carry_their_key_and_line():

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from .errors import ScenarioError, UserInputError
 from .spec import Formation
+from .validation import line_of
 
 if TYPE_CHECKING:
     from .safety import Obstacle, SafetyFilter
@@ -95,14 +96,8 @@ def build_safety(
         config = SafetyFilter(**values)
         config.check_contact(formation.contact_matrix)
     except UserInputError as exc:
-        msg = str(exc)
-        key = "safety.obstacle_distance" if "D_o" in msg else "safety.distance"
-        for name in ("gamma", "max_speed", "sensing_radius", "speed_sides"):
-            if msg.startswith(f"safety {name} "):
-                key = f"safety.{name}"
-        from .validation import line_of
-
-        raise ScenarioError(f"{where(key, line_of(text, key))}: {msg}", key=key) from None
+        key = f"safety.{exc.key or 'distance'}"
+        raise ScenarioError(f"{where(key, line_of(text, key))}: {exc}", key=key) from None
     if not config.enabled and given - {"filter"}:
         unused = ", ".join(sorted(given - {"filter"}))
         warnings.append(

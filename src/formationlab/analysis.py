@@ -47,11 +47,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .chunked import over_time, time_slices
-from .errors import ParameterError
 from .geometry import cross
 from .neighbours import close_pairs
 from .rigid_motion import DRIFTING, NOT_RIGID, ROTATING, RigidMotion, rigid_motion, rigid_outcome
 from .spec import DENSE_LIMIT, Formation
+from .validation import positive
 
 __all__ = [
     "OUTCOMES",
@@ -118,9 +118,7 @@ class Tolerances:
 
     def __post_init__(self) -> None:
         for name in ("distance", "speed", "window", "shape", "drift_window"):
-            v = getattr(self, name)
-            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
-                raise ParameterError(f"tolerance {name} must be a finite number > 0, got {v!r}")
+            positive(getattr(self, name), name, owner="tolerance")
 
     def drift_steps(self, dt: float) -> int:
         """Steps of ``dt`` in the drift window, ``max(1, round(drift_window / dt))``."""

@@ -37,9 +37,11 @@ __all__ = [
     "line_of",
     "nearest",
     "nonnegative",
+    "number",
     "one_of",
     "parameter_model",
     "positive",
+    "seed",
     "suggest",
     "validation_error",
     "whole",
@@ -50,39 +52,48 @@ def _label(name: str, owner: str | None) -> str:
     return f"{owner}.{name}" if owner else name
 
 
-def _number(value: Any, name: str, owner: str | None, rule: str) -> float:
+def number(
+    value: Any,
+    name: str,
+    *,
+    low: float,
+    strict: bool,
+    below: float | None = None,
+    allow_inf: bool = False,
+    owner: str | None = None,
+) -> float:
+    """``value`` as a float if it is a number ``> low`` (``strict``) or ``>= low``, and
+    ``< below`` when given; finite unless ``allow_inf``. Else a :class:`ParameterError`
+    naming ``owner.name``, the rule and the value (the one check of numeric parameters)."""
     ok = isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
-    if not ok or not math.isfinite(float(value)):
+    v = float(value) if ok else math.nan
+    ok = ok and not math.isnan(v) and (allow_inf or math.isfinite(v))
+    ok = ok and (v > low if strict else v >= low) and (below is None or v < below)
+    if not ok:
+        bound = f"> {low:g}" if strict else f">= {low:g}"
+        if below is not None:
+            bound = f"in [{low:g}, {below:g})"
+        kind = "a number" if allow_inf else "a finite number"
         raise ParameterError(
-            f"{_label(name, owner)} must be a finite number {rule}, got {value!r}", key=name
+            f"{_label(name, owner)} must be {kind} {bound}, got {value!r}", key=name
         )
-    return float(value)
+    return v
 
 
 def positive(value: Any, name: str, *, owner: str | None = None) -> float:
     """``value`` as a float if it is a finite number > 0, else a :class:`ParameterError`."""
-    v = _number(value, name, owner, "> 0")
-    if not v > 0:
-        raise ParameterError(
-            f"{_label(name, owner)} must be a finite number > 0, got {value!r}", key=name
-        )
-    return v
+    return number(value, name, low=0.0, strict=True, owner=owner)
 
 
 def nonnegative(value: Any, name: str, *, owner: str | None = None) -> float:
     """``value`` as a float if it is a finite number >= 0, else a :class:`ParameterError`."""
-    v = _number(value, name, owner, ">= 0")
-    if not v >= 0:
-        raise ParameterError(
-            f"{_label(name, owner)} must be a finite number >= 0, got {value!r}", key=name
-        )
-    return v
+    return number(value, name, low=0.0, strict=False, owner=owner)
 
 
 def fraction(value: Any, name: str, *, owner: str | None = None) -> float:
     """``value`` as a float if it is a number in [0, 1], else a :class:`ParameterError`."""
-    v = _number(value, name, owner, "in [0, 1]")
-    if not 0.0 <= v <= 1.0:
+    v = number(value, name, low=0.0, strict=False, owner=owner)
+    if v > 1.0:
         raise ParameterError(f"{_label(name, owner)} must be in [0, 1], got {value!r}", key=name)
     return v
 
@@ -93,6 +104,18 @@ def whole(value: Any, name: str, *, minimum: int = 1, owner: str | None = None) 
     if not ok or value < minimum:
         raise ParameterError(
             f"{_label(name, owner)} must be an integer >= {minimum}, got {value!r}", key=name
+        )
+    return int(value)
+
+
+def seed(value: Any, name: str = "seed", *, owner: str | None = None) -> int:
+    """``value`` as an int if it is a whole number in ``[0, 2**63)`` (a seed of numpy's
+    generators, stored as int64), else a :class:`ParameterError`."""
+    ok = isinstance(value, int | np.integer) and not isinstance(value, bool | np.bool_)
+    if not (ok and 0 <= value < 2**63):
+        raise ParameterError(
+            f"{_label(name, owner)} must be a whole number in [0, 2**63), got {value!r}",
+            key=name,
         )
     return int(value)
 

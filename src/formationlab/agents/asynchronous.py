@@ -60,6 +60,7 @@ from ..simulation import SimulationResult, initial_state
 from ..spec import Formation
 from ..status import Status
 from ..validation import nonnegative, positive, whole
+from ..validation import seed as check_seed
 from .bus import TIE, Bus, Message
 from .clock import VirtualClock
 
@@ -317,8 +318,8 @@ async def arun(
     sensing = sensing or Sensing()
     if seed is None:
         seed = int(sensing.seed)
-    elif isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise ParameterError(f"seed must be a whole number >= 0, got {seed!r}", key="seed")
+    else:
+        seed = check_seed(seed)
     law, robot = resolve(LAWS, law), resolve(MODELS, model or SingleIntegrator())
     n = formation.n
     T = _periods(periods, n, dt)

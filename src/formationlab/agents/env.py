@@ -61,7 +61,6 @@ system. With ``jitter`` the start is the scenario's initial state with Gaussian 
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
@@ -86,6 +85,8 @@ from ..scenario import Scenario, parse_scenario
 from ..sensing import Channel, Faults, Seed, Sensing, rotate
 from ..simulation import initial_state
 from ..status import Status
+from ..validation import nonnegative, positive
+from ..validation import seed as check_seed
 
 __all__ = ["MAX_COMMAND", "FormationEnv", "parallel_env"]
 
@@ -96,14 +97,6 @@ CONTACT_PENALTY = 100.0
 #: draws of a jittered start before giving up on one clear of contact
 _JITTER_TRIES = 100
 _LIVE = np.zeros(1, dtype=np.intp)  # the channel's one trial
-
-
-def _positive(value: Any, name: str, *, zero: bool = False) -> float:
-    ok = isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
-    if not (ok and math.isfinite(value) and (value >= 0 if zero else value > 0)):
-        bound = ">= 0" if zero else "> 0"
-        raise ParameterError(f"{name} must be a finite number {bound}, got {value!r}", key=name)
-    return float(value)
 
 
 class FormationEnv(ParallelEnv):
@@ -182,8 +175,8 @@ class FormationEnv(ParallelEnv):
         self.scenario, self.render_mode = scenario, render_mode
         self.formation, self.model = scenario.formation, model
         self.sensing = sensing or Sensing()
-        self.contact_penalty = _positive(contact_penalty, "contact_penalty", zero=True)
-        self.jitter = _positive(jitter, "jitter", zero=True)
+        self.contact_penalty = nonnegative(contact_penalty, "contact_penalty")
+        self.jitter = nonnegative(jitter, "jitter")
         self.tolerances = tolerances or Tolerances()
         self.dt = float(dt)
         self.n_steps = max(1, round(float(scenario.duration) / self.dt))
@@ -223,7 +216,7 @@ class FormationEnv(ParallelEnv):
 
     def _action_bound(self, max_command: float | None) -> NDArray[np.float64]:
         m = self.model
-        b = MAX_COMMAND if max_command is None else _positive(max_command, "max_command")
+        b = MAX_COMMAND if max_command is None else positive(max_command, "max_command")
         if isinstance(m, Unicycle):
             v = m.max_speed if m.max_speed is not None else b
             if m.max_turn_rate is not None:
@@ -282,11 +275,7 @@ class FormationEnv(ParallelEnv):
     ) -> tuple[dict[str, dict[str, NDArray]], dict[str, dict[str, Any]]]:
         """Start an episode (module docstring for the seeds); ``options`` are not used."""
         if seed is not None:
-            if not (
-                isinstance(seed, int | np.integer) and not isinstance(seed, bool) and seed >= 0
-            ):
-                raise ParameterError(f"seed must be a whole number >= 0 or None, got {seed!r}")
-            self._root, self._episode = int(seed), 0
+            self._root, self._episode = check_seed(seed), 0
         elif self._root is None:
             self._root, self._episode = int(np.random.SeedSequence().entropy), 0  # type: ignore[arg-type]
         assert self._root is not None

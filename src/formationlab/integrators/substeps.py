@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..dynamics import System
-from ..errors import ParameterError
+from ..validation import positive
 from .base import FixedStepIntegrator
 
 __all__ = ["Substepped"]
@@ -47,8 +47,7 @@ class Substepped(FixedStepIntegrator):
     def __post_init__(self) -> None:
         object.__setattr__(self, "dt", self.inner.dt)
         super().__post_init__()
-        if not (np.isfinite(self.reach) and self.reach > 0):
-            raise ParameterError(f"Substepped.reach must be a number > 0, got {self.reach!r}")
+        positive(self.reach, "reach", owner="Substepped")
 
     def advance(
         self,

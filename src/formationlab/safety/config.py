@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import ParameterError
+from ..validation import number, whole
 
 if TYPE_CHECKING:
     from .obstacles import Obstacle
@@ -29,16 +30,6 @@ __all__ = ["FILTERS", "FilterKind", "SafetyFilter"]
 
 FilterKind = Literal["none", "barrier", "barrier-decentralized"]
 FILTERS: tuple[str, ...] = ("none", "barrier", "barrier-decentralized")
-
-
-def _number(obj: object, name: str, *, low: float, strict: bool, allow_inf: bool = False) -> None:
-    v = getattr(obj, name)
-    ok = isinstance(v, int | float) and not isinstance(v, bool) and not math.isnan(v)
-    ok = ok and (allow_inf or math.isfinite(v)) and (v > low if strict else v >= low)
-    if not ok:
-        bound = f"> {low:g}" if strict else f">= {low:g}"
-        kind = "a number" if allow_inf else "a finite number"
-        raise ParameterError(f"safety {name} must be {kind} {bound}, got {v!r}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -90,23 +81,25 @@ class SafetyFilter:
     def __post_init__(self) -> None:
         if self.filter not in FILTERS:
             known = ", ".join(f'"{f}"' for f in FILTERS)
-            raise ParameterError(f"safety filter must be one of {known}, got {self.filter!r}")
-        _number(self, "distance", low=0.0, strict=True)
-        _number(self, "gamma", low=0.0, strict=False)
-        if self.max_speed is not None:
-            _number(self, "max_speed", low=0.0, strict=True)
-        if not (isinstance(self.speed_sides, int) and self.speed_sides >= 4):
             raise ParameterError(
-                f"safety speed_sides must be an integer >= 4, got {self.speed_sides!r}"
+                f"safety.filter must be one of {known}, got {self.filter!r}", key="filter"
             )
-        _number(self, "sensing_radius", low=0.0, strict=True, allow_inf=True)
+        number(self.distance, "distance", low=0.0, strict=True, owner="safety")
+        number(self.gamma, "gamma", low=0.0, strict=False, owner="safety")
+        if self.max_speed is not None:
+            number(self.max_speed, "max_speed", low=0.0, strict=True, owner="safety")
+        whole(self.speed_sides, "speed_sides", minimum=4, owner="safety")
+        number(self.sensing_radius, "sensing_radius", low=0.0, strict=True, allow_inf=True,
+               owner="safety")  # fmt: skip
         if self.sensing_radius <= self.distance:
             raise ParameterError(
-                f"safety sensing_radius ({self.sensing_radius:g}) must exceed the distance "
-                f"D_s ({self.distance:g}), or robots inside D_s would not see each other"
+                f"safety.sensing_radius ({self.sensing_radius:g}) must exceed the distance "
+                f"D_s ({self.distance:g}), or robots inside D_s would not see each other",
+                key="sensing_radius",
             )
         if self.obstacle_distance is not None:
-            _number(self, "obstacle_distance", low=0.0, strict=True)
+            number(self.obstacle_distance, "obstacle_distance", low=0.0, strict=True,
+                   owner="safety")  # fmt: skip
 
     @property
     def enabled(self) -> bool:
@@ -152,14 +145,16 @@ class SafetyFilter:
             raise ParameterError(
                 f"safety distance D_s = {self.distance:g} is below the contact distance "
                 f"a_{lo + 1}{hi + 1} = {off[i, j]:g} of robots {lo + 1} and {hi + 1}; "
-                f"use distance >= {off[i, j]:g}"
+                f"use distance >= {off[i, j]:g}",
+                key="distance",
             )
         radius = 0.5 * np.diag(a)
         k = int(np.argmax(radius))
         if self.d_obstacle < radius[k]:
             raise ParameterError(
                 f"safety obstacle_distance D_o = {self.d_obstacle:g} is below the radius "
-                f"{radius[k]:g} of robot {k + 1}; use obstacle_distance >= {radius[k]:g}"
+                f"{radius[k]:g} of robot {k + 1}; use obstacle_distance >= {radius[k]:g}",
+                key="obstacle_distance",
             )
 
     def command(

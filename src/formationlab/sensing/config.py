@@ -30,27 +30,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import ParameterError
+from ..validation import number
+from ..validation import seed as check_seed
 
 __all__ = ["FRAMES", "Faults", "Sensing", "Stop", "delay_steps"]
 
 FRAMES: tuple[str, ...] = ("global", "local")
 #: a delay is a whole number of steps when it is within this relative distance of one
 _WHOLE = 1e-9
-
-
-def _number(value: object, label: str, *, low: float, strict: bool, below: float | None = None,
-            allow_inf: bool = False) -> float:  # fmt: skip
-    ok = isinstance(value, int | float) and not isinstance(value, bool)
-    ok = ok and not math.isnan(value) and (allow_inf or math.isfinite(value))  # type: ignore[arg-type]
-    ok = ok and (value > low if strict else value >= low)  # type: ignore[operator]
-    ok = ok and (below is None or value < below)  # type: ignore[operator]
-    if not ok:
-        bound = f"> {low:g}" if strict else f">= {low:g}"
-        if below is not None:
-            bound = f"in [{low:g}, {below:g})"
-        kind = "a number" if allow_inf else "a finite number"
-        raise ParameterError(f"{label} must be {kind} {bound}, got {value!r}", key=label)
-    return float(value)  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -106,17 +93,12 @@ class Sensing:
             raise ParameterError(
                 f"sensing.frames must be one of {known}, got {self.frames!r}", key="sensing.frames"
             )
-        _number(self.noise, "sensing.noise", low=0.0, strict=False)
-        _number(self.range, "sensing.range", low=0.0, strict=True, allow_inf=True)
-        _number(self.delay, "sensing.delay", low=0.0, strict=False)
-        _number(self.drop, "sensing.drop", low=0.0, strict=False, below=1.0)
-        _number(self.mismatch, "sensing.mismatch", low=0.0, strict=False)
-        if not (isinstance(self.seed, int | np.integer) and not isinstance(self.seed, bool)
-                and 0 <= self.seed < 2**63):  # fmt: skip
-            raise ParameterError(
-                f"sensing.seed must be a whole number in [0, 2**63), got {self.seed!r}",
-                key="sensing.seed",
-            )
+        number(self.noise, "sensing.noise", low=0.0, strict=False)
+        number(self.range, "sensing.range", low=0.0, strict=True, allow_inf=True)
+        number(self.delay, "sensing.delay", low=0.0, strict=False)
+        number(self.drop, "sensing.drop", low=0.0, strict=False, below=1.0)
+        number(self.mismatch, "sensing.mismatch", low=0.0, strict=False)
+        check_seed(self.seed, "sensing.seed")
 
     @property
     def ideal(self) -> bool:
@@ -175,7 +157,7 @@ class Stop:
                 f"faults.stop robot must be a robot number >= 1 (robots are numbered from "
                 f"1), got {self.robot!r}", key="faults.stop",
             )  # fmt: skip
-        _number(self.at, "faults.stop at", low=0.0, strict=False, allow_inf=True)
+        number(self.at, "faults.stop at", low=0.0, strict=False, allow_inf=True)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -52,6 +52,7 @@ from ..models import RobotModel, SingleIntegrator
 from ..sensing import Faults, Sensing, delay_steps
 from ..spec import Formation
 from ..validation import positive, whole
+from ..validation import seed as check_seed
 from .chunks import ChunkTask, plan_chunks, run_chunk
 from .config import GaussianInitial, StudyConfig, parse_study
 from .executors import run_in_process, run_on_dask
@@ -371,8 +372,7 @@ def run_study(
     -------
     StudyResult
     """
-    if not isinstance(seed, int | np.integer) or seed < 0 or seed >= 2**63:
-        raise ParameterError(f"--seed must be a whole number in [0, 2**63), got {seed!r}")
+    check_seed(seed, "--seed")
     if workers is not None:
         whole(workers, "--workers")
     if resume and store is None:

@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..errors import ParameterError
 from ..models import RobotModel
 from ..spec import Formation
+from ..validation import seed as check_seed
 from .config import BoxInitial, GaussianInitial
 
 __all__ = [
@@ -160,8 +161,7 @@ def trial_initial_states(
     >>> q.shape, bool(abs(q).max() <= 3.0)
     ((2, 3, 2), True)
     """
-    if not isinstance(seed, int | np.integer) or seed < 0:
-        raise ParameterError(f"the seed must be a whole number >= 0, got {seed!r}")
+    check_seed(seed)
     c = None
     if isinstance(initial, GaussianInitial):
         if center is None:
