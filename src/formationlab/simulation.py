@@ -364,7 +364,7 @@ class SimulationResult:
         formation has more than :data:`LIST_LIMIT` edges.
         """
         f = self.formation
-        p, e = self.points[-1], f.edges
+        p, e = self.points[-1], f.edges.astype(np.int64)  # the table's robots as int64
         r = np.linalg.norm(p[e[:, 1]] - p[e[:, 0]], axis=-1)
         return {
             "edge": np.array(self.edge_labels),

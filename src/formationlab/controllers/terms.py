@@ -126,7 +126,7 @@ def build_terms(
     idx = np.flatnonzero(terms[:, 1] < terms[:, 2])
     idx = idx[np.argsort(surface[idx], kind="stable")]
     surface, alpha = surface[idx], alpha[idx]
-    i, j, k = (terms[idx, m] for m in range(3))
+    i, j, k = (np.asarray(terms[idx, m], dtype=np.int64) for m in range(3))  # the kernels' ints
     del idx
     alpha *= 2.0 * float(k_a)  # the weights 2 k_a alpha_ijk, in place
     start = np.searchsorted(surface, np.arange(len(tris) + 1)).astype(np.int64)
