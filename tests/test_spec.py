@@ -126,3 +126,8 @@ def test_index_arrays_are_int32_and_the_kernels_still_get_int64():
     ints = {k: v.dtype for k, v in terms._asdict().items()
             if isinstance(v, np.ndarray) and v.dtype.kind == "i"}  # fmt: skip
     assert ints and set(ints.values()) == {np.dtype(np.int64)}, ints
+    # for the compiled single run (no pair arrays), which lays them out as int32 anyway
+    lean = fl.AngleRestrictedLaw().kernel_terms(f, pairs=False)
+    for name in ("edge_i", "edge_j", "surface_a", "term_i", "term_k", "term_surface"):
+        assert getattr(lean, name).dtype == np.int32, name
+        np.testing.assert_array_equal(getattr(lean, name), getattr(terms, name))
