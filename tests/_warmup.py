@@ -38,12 +38,14 @@ def part0() -> None:
 
 def part1() -> None:
     """The study kernel for every robot model, the sensed kernel, compiled single runs of
-    both kinds of law, the filters of single runs, the rigidity check."""
+    both kinds of law (one by one and as a batch), the filters of single runs, the rigidity
+    check."""
     fl, f, q0 = _triangle()
     from formationlab.models import DoubleIntegrator, Unicycle
     from formationlab.rigidity import is_generically_rigid
     from formationlab.safety import SafetyFilter
     from formationlab.sensing import Sensing
+    from formationlab.simulation_batch import simulate_batch
     from formationlab.studies.batch import run_batch
 
     law = fl.get_law("angle-restricted")
@@ -55,6 +57,7 @@ def part1() -> None:
     run_batch(f, law, q0, dt=1e-2, duration=0.05, sensing=Sensing(noise=0.01), seeds=seeds)
     for name in ("distance", "angle-restricted"):
         fl.simulate(f, fl.get_law(name), q0[0], duration=0.05)
+    simulate_batch(f, law, q0, duration=0.05)  # compiled single runs as one batch
     for kind in ("barrier-decentralized", "barrier"):
         cfg = SafetyFilter(filter=kind, distance=0.25)
         fl.simulate(f, fl.get_law("distance"), q0[0], duration=0.05, safety=cfg)

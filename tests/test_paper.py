@@ -162,3 +162,15 @@ def test_the_diameter_scan_in_batches_equals_single_runs():
     outcomes = {row["diameter"]: row["simulation_2"]["outcome"] for row in batched}
     assert outcomes == {0.05: "desired", 0.2: "desired", 0.6: "incorrect"}  # a real test
     assert all(row["simulation_1"]["status"] == "success" for row in batched)
+
+
+def test_the_symmetry_scan_in_one_batch_equals_single_runs():
+    """The seven runs of the default scan as one compiled batch, against a single run each."""
+    from formationlab.paper import symmetry_scan
+
+    setup = PaperSetup()
+    batched, single = symmetry_scan(setup, batch=True), symmetry_scan(setup, batch=False)
+    assert batched == single
+    outcomes = {row["perturbation"]: row["outcome"] for row in batched}
+    assert outcomes[0.0] == "incorrect" and outcomes[1e-6] == "desired"  # a real test
+    assert {tuple(row["exchanged_pairs"]) for row in batched} == {(), ("1-2",)}

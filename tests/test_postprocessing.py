@@ -117,6 +117,29 @@ def test_slices_cover_the_rows_once_and_respect_the_budget() -> None:
     assert row_bytes(fl.Formation.from_distances(3, distances=1.0)) > 0
 
 
+def test_the_slice_budget_follows_the_saved_states() -> None:
+    """A slice's scratch: SCALE times the states it reads, between FLOOR and BUDGET."""
+    from formationlab import chunked
+
+    def states(t: int, n: int) -> np.ndarray:
+        return np.broadcast_to(0.0, (t, n, 2))  # the size without the memory
+
+    assert chunked.FLOOR < chunked.BUDGET and chunked.SCALE >= 1
+    assert chunked.slice_budget(states(3, 1000)) == chunked.FLOOR  # 48 KB of states
+    mid = states(200, 1000)  # 3.2 MB of states
+    assert chunked.slice_budget(mid) == chunked.SCALE * mid.nbytes
+    assert chunked.slice_budget(states(100_000, 1000)) == chunked.BUDGET
+    calls = []
+
+    def fn(s):
+        calls.append(len(s))
+        return s.sum(axis=(1, 2))
+
+    per_row = 1e6  # scratch bytes per state
+    over_time(fn, mid, per_row=per_row)
+    assert set(calls[:-1]) == {int(chunked.SCALE * mid.nbytes // per_row)} and sum(calls) == 200
+
+
 @pytest.mark.parametrize("seed", range(8))
 def test_sparse_contact_test_equals_all_pairs(seed: int, monkeypatch) -> None:
     from formationlab import analysis

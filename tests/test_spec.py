@@ -94,3 +94,40 @@ def test_connectivity_is_decided_in_one_place_for_matrices_and_edge_lists():
                     seen.add(int(j))
                     todo.append(int(j))
         assert is_connected(a | a.T) == edges_connected(edges, n) == (len(seen) == n)
+
+
+def test_index_arrays_are_int32_and_the_kernels_still_get_int64():
+    """Edges, restricted triples and surfaces in int32 (half the bytes); the same values as
+    the int64 lists they are made from; every array of the law's kernel data int64."""
+    from formationlab.orientation import alpha_from_shape, switching_surfaces
+
+    tpl = fl.lattice("triangular", 150, 1.0)
+    edges = fl.build_edges("delaunay", tpl)
+    f = fl.Formation.from_template(tpl, edges=edges, diameters=0.2, one_based=False)
+    tris, _, surface = f.surfaces
+    for arr in (f.edges, f.restricted_triples, tris, surface):
+        assert arr.dtype == np.int32
+    assert f.restricted_triples.nbytes == 12 * len(f.restricted_triples)
+    assert not f.edges.flags.writeable and not f.restricted_triples.flags.writeable
+    # the same numbers as the int64 lists they come from
+    t64, a64, _ = alpha_from_shape(tpl, np.asarray(edges, np.int64), "sign")
+    order = np.lexsort((t64[:, 2], t64[:, 1], t64[:, 0]))  # the formation's sorted order
+    t64, a64 = t64[order], a64[order]
+    np.testing.assert_array_equal(f.restricted_triples, t64)
+    np.testing.assert_array_equal(f.restricted_alpha, a64)
+    want = switching_surfaces(t64, a64)
+    for got, ref in zip(f.surfaces, want, strict=True):
+        np.testing.assert_array_equal(got, ref)
+    # rebuilt from its own int32 lists, a formation is the same
+    g = f.with_diameters(0.3)
+    np.testing.assert_array_equal(g.restricted_triples, f.restricted_triples)
+    assert g.restricted_triples.dtype == np.int32
+    terms = fl.AngleRestrictedLaw().kernel_terms(f)
+    ints = {k: v.dtype for k, v in terms._asdict().items()
+            if isinstance(v, np.ndarray) and v.dtype.kind == "i"}  # fmt: skip
+    assert ints and set(ints.values()) == {np.dtype(np.int64)}, ints
+    # for the compiled single run (no pair arrays), which lays them out as int32 anyway
+    lean = fl.AngleRestrictedLaw().kernel_terms(f, pairs=False)
+    for name in ("edge_i", "edge_j", "surface_a", "term_i", "term_k", "term_surface"):
+        assert getattr(lean, name).dtype == np.int32, name
+        np.testing.assert_array_equal(getattr(lean, name), getattr(terms, name))

@@ -85,7 +85,7 @@ def is_connected(adjacency: NDArray[np.bool_]) -> bool:
     return edges_connected(np.argwhere(np.triu(a | a.T, k=1)), a.shape[0])
 
 
-def edges_connected(edges: NDArray[np.int64], n: int) -> bool:
+def edges_connected(edges: NDArray[np.integer], n: int) -> bool:
     """Whether the graph of ``edges`` (m, 2) on ``n`` robots is connected (sparse, any size)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -95,7 +95,7 @@ def edges_connected(edges: NDArray[np.int64], n: int) -> bool:
     return bool(connected_components(graph, directed=False, return_labels=False) == 1)
 
 
-def is_rigid(edges: NDArray[np.int64], n: int, *, method: str = "auto") -> bool:
+def is_rigid(edges: NDArray[np.integer], n: int, *, method: str = "auto") -> bool:
     """Generic infinitesimal rigidity in the plane: the rigidity matrix has rank ``2n - 3``.
 
     Parameters

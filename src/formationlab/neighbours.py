@@ -35,7 +35,7 @@ def close_pairs(q: NDArray[np.float64], cutoff: float) -> NDArray[np.int64]:
     return np.unique(p, axis=0).astype(np.int64).reshape(-1, 2)
 
 
-def non_edges(pairs: NDArray[np.int64], edges: NDArray[np.int64], n: int) -> NDArray[np.int64]:
+def non_edges(pairs: NDArray[np.integer], edges: NDArray[np.integer], n: int) -> NDArray[np.int64]:
     """The ``pairs`` ``(p, 2)``, ``i < j``, that are not ``edges`` ``(m, 2)``, ``i < j``.
 
     Each pair is the key ``i n + j``, looked up in the sorted keys of the edges

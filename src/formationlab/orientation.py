@@ -34,7 +34,7 @@ def signed_angle(u: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.f
     return np.arctan2(cross(u, v), dot)
 
 
-def neighbour_triples(edges: NDArray[np.int64], n: int) -> NDArray[np.int64]:
+def neighbour_triples(edges: NDArray[np.integer], n: int) -> NDArray[np.int64]:
     """Every ordered ``(i, j, k)`` with ``j != k`` both neighbours of ``i`` (the sum of eq. 13).
 
     Shape ``(t, 3)``, sorted lexicographically; ``t = sum_i deg_i (deg_i - 1)``, so
@@ -112,7 +112,7 @@ def _check_oriented(
 
 
 def switching_surfaces(
-    triples: NDArray[np.int64], alpha: NDArray[np.float64]
+    triples: NDArray[np.integer], alpha: NDArray[np.float64]
 ) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.int64]]:
     """Distinct switching surfaces ``beta c_abc + theta = 0`` (see ``Formation.surfaces``).
 

@@ -47,6 +47,7 @@ __all__ = [
     "paper_runs",
     "paper_scans",
     "reproduce",
+    "symmetry_scan",
 ]
 
 #: Initial positions of section 4, robot 1 first.
@@ -287,36 +288,49 @@ def paper_scans(
     setup: PaperSetup | None = None, *, progress: Callable[[str], None] | None = None
 ) -> dict[str, list[dict[str, Any]]]:
     """The symmetry scan and the diameter scan of the summary: ``symmetry_scan``,
-    ``diameter_scan``.
-
-    The symmetry scan runs simulation 2 with each perturbation of ``setup.scan``, stored
-    every 10 steps: single runs on the compiled path, because it needs each run's paths
-    to find the robots that exchange positions. The diameter scan runs simulations 1 and 2
-    (perturbed and not) for each diameter of ``setup.diameters`` as batches of the study
-    kernel (:func:`formationlab.studies.run_batch`; one batch per formation, the trials
-    stopped once they have converged) when ``setup`` is the kernel's case (explicit
-    Euler); its rows equal those of single runs (outcome, converged time; a trial that
-    converged is a run that ended with status ``success``: tested).
+    ``diameter_scan``, each run as batches when ``setup`` is the kernels' case (explicit
+    Euler; :func:`symmetry_scan`, :func:`diameter_scan`).
     """
     setup = setup or PaperSetup()
     say = progress or (lambda _msg: None)
-    tol = setup.tolerances
-    scan = []
-    for eps in setup.scan:
-        say(f"symmetry scan, perturbation {eps:g}")
-        r = setup.run(2, perturbation=eps, save_every=10)
-        scan.append(
-            {
-                "perturbation": eps,
-                "outcome": r.outcome(tol),
-                "orientation": triangle_orientation(r.points[-1]),
-                "exchanged_pairs": exchanged_pairs(r.q),
-                "converged_time": r.converged_time(tol),
-            }
-        )
+    batch = setup.integrator == "euler"
+    say("symmetry scan")
+    scan = symmetry_scan(setup, batch=batch)
     say("diameter scan")
-    rows = diameter_scan(setup, batch=setup.integrator == "euler")
+    rows = diameter_scan(setup, batch=batch)
     return {"symmetry_scan": scan, "diameter_scan": rows}
+
+
+def symmetry_scan(setup: PaperSetup, *, batch: bool = True) -> list[dict[str, Any]]:
+    """Rows of the symmetry scan: simulation 2 with each perturbation of ``setup.scan``,
+    stored every 10 steps (the paths show which robots exchange positions): the outcome,
+    orientation, exchanged pairs and converged time of each run.
+
+    ``batch``: the runs as one batch of the compiled single-run path
+    (:func:`formationlab.simulation_batch.simulate_batch`: explicit Euler; each run the
+    same numbers as its single run, tested); otherwise single runs (any integrator).
+    """
+    tol = setup.tolerances
+    if batch:
+        from .simulation_batch import simulate_batch
+
+        runs = simulate_batch(
+            paper_formation(2, diameter=setup.diameter), paper_law(),
+            np.stack([setup.initial(eps) for eps in setup.scan]), duration=setup.duration,
+            integrator=get_integrator(setup.integrator, dt=setup.dt), save_every=10,
+        )  # fmt: skip
+    else:
+        runs = [setup.run(2, perturbation=eps, save_every=10) for eps in setup.scan]
+    return [
+        {
+            "perturbation": eps,
+            "outcome": r.outcome(tol),
+            "orientation": triangle_orientation(r.points[-1]),
+            "exchanged_pairs": exchanged_pairs(r.q),
+            "converged_time": r.converged_time(tol),
+        }
+        for eps, r in zip(setup.scan, runs, strict=True)
+    ]
 
 
 def diameter_scan(setup: PaperSetup, *, batch: bool = True) -> list[dict[str, Any]]:

@@ -35,7 +35,7 @@ _STARTS = 8
 _MAX_ROBOTS = 200
 
 
-def _triangles(edges: NDArray[np.int64], n: int) -> list[tuple[int, int, int]]:
+def _triangles(edges: NDArray[np.integer], n: int) -> list[tuple[int, int, int]]:
     """Triples ``i < j < k`` whose three pairs are all edges."""
     nbrs: list[set[int]] = [set() for _ in range(n)]
     for i, j in edges:

@@ -276,7 +276,7 @@ def generic_rank_deficit(edges: NDArray[np.int64], n: int) -> int:
     return 2 * n - 3 - carried - rank
 
 
-def is_generically_rigid(edges: NDArray[np.int64], n: int) -> bool:
+def is_generically_rigid(edges: NDArray[np.integer], n: int) -> bool:
     """Whether the graph is generically rigid in the plane; for any size (see the module).
 
     Parameters

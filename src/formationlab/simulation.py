@@ -35,7 +35,7 @@ from .chunked import over_time
 from .controllers import LAWS, Law
 from .dynamics import System
 from .errors import FormationError, ParameterError
-from .integrators import INTEGRATORS, Euler, Integrator
+from .integrators import INTEGRATORS, Euler, Integrator, RawSolution
 from .integrators.compiled import compiled_terms, run_euler_compiled
 from .integrators.diagnostics import switching_diagnostics
 from .marching import March, centroid_velocity, heading_spread
@@ -364,7 +364,7 @@ class SimulationResult:
         formation has more than :data:`LIST_LIMIT` edges.
         """
         f = self.formation
-        p, e = self.points[-1], f.edges
+        p, e = self.points[-1], f.edges.astype(np.int64)  # the table's robots as int64
         r = np.linalg.norm(p[e[:, 1]] - p[e[:, 0]], axis=-1)
         return {
             "edge": np.array(self.edge_labels),
@@ -526,6 +526,17 @@ def simulate(
             system, x0, float(duration), save_every=int(save_every), progress=progress,
             interruptible=interruptible,
         )  # fmt: skip
+    return _result(system, integrator, raw, interruptible=interruptible)
+
+
+def _result(
+    system: System, integrator: Integrator, raw: RawSolution, *, interruptible: bool = False
+) -> SimulationResult:
+    """The :class:`SimulationResult` of ``raw``, a run of ``system`` under ``integrator``:
+    the post-processing of :func:`simulate` (V, sigma, the switching diagnostics of a
+    compiled run, the safety record), slice by slice along time."""
+    formation, law, robot = system.formation, system.law, system.model
+    marching, sensing, faults = system.marching, system.sensing, system.faults
     points = robot.points(raw.x)
     record = None
     if system.obstacles or system.filtered:

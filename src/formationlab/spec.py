@@ -53,6 +53,17 @@ Orientation = Literal["free", "template", "mirror", "table"]
 DENSE_LIMIT = 64
 AlphaValues = Literal["sign", "angle"]
 
+#: Robot indices (edges, restricted triples, surfaces) are stored as int32 when robot
+#: numbers fit (every formation that fits in memory): half the bytes of int64.
+_INDEX_LIMIT = 2**31 - 1
+
+
+def _index(a: NDArray[np.integer], n: int) -> NDArray[np.integer]:
+    """Indices ``a`` (values in ``0..n-1``) in the formation's index type: int32 where ``n``
+    allows, else int64. Numpy indexes with either; code that combines indices into keys
+    (``i n + j``) or hands them to compiled kernels casts them to int64 first."""
+    return np.ascontiguousarray(a, dtype=np.int32 if n <= _INDEX_LIMIT else np.int64)
+
 
 def _per_item(value: float | ArrayLike, count: int, what: str, per: str) -> NDArray[np.float64]:
     arr = np.asarray(value, dtype=float)
@@ -80,7 +91,9 @@ class Formation:
     diameters : ndarray, shape (n,)
         Robot diameters ``rho_i``; ``a_ij = (rho_i + rho_j) / 2`` (eq. 5).
     edges : ndarray of int, shape (m, 2)
-        0-based pairs ``(i, j)`` with ``i < j``: ``j in N_i`` and ``i in N_j``.
+        0-based pairs ``(i, j)`` with ``i < j``: ``j in N_i`` and ``i in N_j``. Given as
+        any integers; stored as int32 (int64 beyond 2**31 - 1 robots), as are the
+        restricted triples and the surfaces.
     distances : ndarray, shape (m,)
         Desired distances ``d_ij`` per edge.
     alpha : ndarray, shape (n, n, n), optional
@@ -108,11 +121,11 @@ class Formation:
     """
 
     diameters: NDArray[np.float64]
-    edges: NDArray[np.int64]
+    edges: NDArray[np.integer]
     distances: NDArray[np.float64]
     alpha: NDArray[np.float64] | None = None
     #: (given or derived in ``__post_init__``: never None on a built formation)
-    restricted_triples: NDArray[np.int64] = None  # type: ignore[assignment]
+    restricted_triples: NDArray[np.integer] = None  # type: ignore[assignment]
     restricted_alpha: NDArray[np.float64] = None  # type: ignore[assignment]
     collinear_skipped: int = 0
     orientation: Orientation = "free"
@@ -170,13 +183,14 @@ class Formation:
             if template.shape != (n, 2) or not np.all(np.isfinite(template)):
                 raise FormationError(f"template must be a finite ({n}, 2) array", key="template")
             template.setflags(write=False)
-        for arr in (d, edges, dist):
+        index, tri_index = _index(edges, n), _index(triples, n)
+        for arr in (d, index, dist, tri_index):
             arr.setflags(write=False)
         object.__setattr__(self, "diameters", d)
-        object.__setattr__(self, "edges", edges)
+        object.__setattr__(self, "edges", index)
         object.__setattr__(self, "distances", dist)
         object.__setattr__(self, "alpha", alpha)
-        object.__setattr__(self, "restricted_triples", triples)
+        object.__setattr__(self, "restricted_triples", tri_index)
         object.__setattr__(self, "restricted_alpha", values)
         object.__setattr__(self, "template", template)
 
@@ -502,7 +516,7 @@ class Formation:
         return len(self.restricted_triples) > 0
 
     @cached_property
-    def surfaces(self) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.int64]]:
+    def surfaces(self) -> tuple[NDArray[np.integer], NDArray[np.float64], NDArray[np.integer]]:
         """The distinct switching surfaces ``beta_s c_abc + theta = 0`` of eq. (14).
 
         ``alpha_ijk c_ijk`` equals ``beta c_abc`` for the sorted triangle
@@ -512,14 +526,16 @@ class Formation:
 
         Returns
         -------
-        triangles : ndarray of int, shape (s, 3)
+        triangles : ndarray of int32, shape (s, 3)
             Sorted 0-based robots of each surface's triangle.
         beta : ndarray, shape (s,)
             Coefficient of ``c_abc`` in the switching function.
-        surface : ndarray of int, shape (t,)
+        surface : ndarray of int32, shape (t,)
             Surface of each restricted triple (``restricted_triples[m]``).
         """
-        return switching_surfaces(self.restricted_triples, self.restricted_alpha)
+        tris, beta, surface = switching_surfaces(self.restricted_triples, self.restricted_alpha)
+        # surfaces are numbered below the number of triples
+        return _index(tris, self.n), beta, _index(surface, len(surface))
 
     @cached_property
     def surface_labels(self) -> list[str]:

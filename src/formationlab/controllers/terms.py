@@ -44,7 +44,10 @@ class KernelTerms(NamedTuple):
 
     Pair arrays have length ``n (n - 1) / 2``; surface arrays length ``s``; term
     arrays length ``m`` (terms of surface ``s`` are ``term_start[s]:term_start[s + 1]``);
-    area arrays length ``t``.
+    area arrays length ``t``. Index arrays are int64, the kernels' signature; built with
+    ``pairs=False`` (for the compiled single run, which lays them out as int32 and needs
+    no pair arrays) the robots of edges, surfaces and terms keep the formation's int32,
+    half the bytes at the run's peak of memory.
     """
 
     kind: int  #: LOG_BARRIER or SQUARED
@@ -105,8 +108,10 @@ def build_terms(
     pairs: bool = True,
 ) -> KernelTerms:
     """Assemble :class:`KernelTerms`; the angular terms when ``k_a > 0`` and alpha is set;
-    the all-pairs arrays up to ``PAIR_LIMIT`` robots when ``pairs``."""
+    the all-pairs arrays up to ``PAIR_LIMIT`` robots when ``pairs``, and the robots' indices
+    as int64 (else in the formation's index type)."""
     n = formation.n
+    index = np.int64 if pairs else formation.edges.dtype  # the robots' numbers
     if n <= PAIR_LIMIT and pairs:
         pi, pj = (np.ascontiguousarray(x, dtype=np.int64) for x in np.triu_indices(n, k=1))
         is_edge = formation.adjacency[pi, pj].copy()
@@ -126,7 +131,7 @@ def build_terms(
     idx = np.flatnonzero(terms[:, 1] < terms[:, 2])
     idx = idx[np.argsort(surface[idx], kind="stable")]
     surface, alpha = surface[idx], alpha[idx]
-    i, j, k = (terms[idx, m] for m in range(3))
+    i, j, k = (np.asarray(terms[idx, m], dtype=index) for m in range(3))
     del idx
     alpha *= 2.0 * float(k_a)  # the weights 2 k_a alpha_ijk, in place
     start = np.searchsorted(surface, np.arange(len(tris) + 1)).astype(np.int64)
@@ -142,9 +147,9 @@ def build_terms(
         repulsion_gain=float(repulsion_gain),
         repulsion_eta=float(eta),
         repulsion_influence=float(influence),
-        surface_a=np.ascontiguousarray(tris[:, 0], dtype=np.int64),
-        surface_b=np.ascontiguousarray(tris[:, 1], dtype=np.int64),
-        surface_c=np.ascontiguousarray(tris[:, 2], dtype=np.int64),
+        surface_a=np.ascontiguousarray(tris[:, 0], dtype=index),
+        surface_b=np.ascontiguousarray(tris[:, 1], dtype=index),
+        surface_c=np.ascontiguousarray(tris[:, 2], dtype=index),
         surface_beta=np.array(beta, dtype=float),
         theta=float(theta),
         term_start=start,
@@ -157,10 +162,10 @@ def build_terms(
         area_c=np.ascontiguousarray(area_tris[:, 2], dtype=np.int64),
         area_target=np.array(target, dtype=float),
         area_gain=float(area_gain),
-        edge_i=np.ascontiguousarray(e[:, 0], dtype=np.int64),
-        edge_j=np.ascontiguousarray(e[:, 1], dtype=np.int64),
+        edge_i=np.ascontiguousarray(e[:, 0], dtype=index),
+        edge_j=np.ascontiguousarray(e[:, 1], dtype=index),
         edge_distance=np.array(formation.distances, dtype=float),
         edge_contact=0.5 * (formation.diameters[e[:, 0]] + formation.diameters[e[:, 1]]),
         radius=0.5 * np.array(formation.diameters, dtype=float),
-        term_surface=np.ascontiguousarray(surface, dtype=np.int64),
+        term_surface=np.ascontiguousarray(surface, dtype=np.int64 if pairs else surface.dtype),
     )

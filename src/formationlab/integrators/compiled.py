@@ -50,7 +50,14 @@ from .diagnostics import switching_diagnostics
 from .field import items, items_parallel, robots, robots_parallel
 from .layout import REORDER_FROM, RunLayout, robot_order, run_layout
 
-__all__ = ["PARALLEL_FROM", "CompiledRun", "compiled_terms", "run_compiled", "run_euler_compiled"]
+__all__ = [
+    "PARALLEL_FROM",
+    "CompiledRun",
+    "compiled_terms",
+    "raw_solution",
+    "run_compiled",
+    "run_euler_compiled",
+]
 
 _COLLISION = Status.COLLISION.code
 _TOO_LARGE = Status.STEP_TOO_LARGE.code
@@ -381,6 +388,13 @@ def run_euler_compiled(
         terms, x0, dt=dt, n_steps=n_steps, save_every=save_every, progress=progress,
         interruptible=interruptible,
     )  # fmt: skip
+    return raw_solution(out, system, dt=dt, save_every=save_every, diagnostics=diagnostics)
+
+
+def raw_solution(
+    out: CompiledRun, system: System, *, dt: float, save_every: int, diagnostics: bool = True
+) -> RawSolution:
+    """The :class:`RawSolution` of a compiled run (:func:`run_euler_compiled`)."""
     t = out.k * dt
     if out.status is Status.SUCCESS:
         message = f"integrated {out.steps} steps of dt = {dt:g} s"

@@ -129,7 +129,11 @@ def _layout(
     data: dict[str, Any] = {
         "V": (("time",), result.V, {"long_name": "Lyapunov function of the law"}),
         "diameter": (("robot",), f.diameters, {"long_name": "robot diameter rho_i"}),
-        "edge_robots": (("edge", "end"), f.edges + 1, {"long_name": "robots i, j (1-based)"}),
+        "edge_robots": (
+            ("edge", "end"),
+            f.edges.astype(np.int64) + 1,
+            {"long_name": "robots i, j (1-based)"},
+        ),
         "desired_distance": (("edge",), f.distances, {"long_name": "desired distance d_ij"}),
     }
     names = list(type(result.model).state_names)

@@ -131,7 +131,8 @@ def study_identity(
     for g in groups:
         f = g.formation
         alpha = f.alpha if f.alpha is not None or not f.has_orientation else f.restricted_alpha
-        for arr in (f.diameters, f.edges, f.distances, alpha, f.template):
+        edges = f.edges.astype(np.int64)  # the bytes of int64, as the fingerprint was defined
+        for arr in (f.diameters, edges, f.distances, alpha, f.template):
             h.update(b"-" if arr is None else np.ascontiguousarray(arr).tobytes())
     if center is not None:
         h.update(np.ascontiguousarray(center, dtype=float).tobytes())
