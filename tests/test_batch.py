@@ -486,3 +486,25 @@ def test_square_sliding_mode_equilibrium():
     late = fil.q[np.searchsorted(fil.t, 1.0)]
     assert np.linalg.norm(fil.q[-1] - late, axis=-1).max() < 1e-5
     assert np.linalg.norm(fil.q[-1] - a.q_final[0], axis=-1).max() < 5e-3
+
+
+def test_trials_thrown_far_are_classified_without_numpy_warnings():
+    """A trial whose last accepted step threw a robot far (coordinates whose squares
+    overflow) is a collision by its status; classifying the batch warns of nothing."""
+    import warnings
+
+    from formationlab.status import Status
+
+    f = paper_triangle()
+    x = np.array([[[0.0, 0.0], [1.0, 0.0], [0.5, 0.9]], [[0.0, 0.0], [1e200, -1e200], [0.5, 0.9]]])
+    v = np.array([np.zeros((3, 2)), [[0.0, 0.0], [1e200, 1e200], [0.0, 0.0]]])
+    status = np.array([Status.CONVERGED.code, Status.COLLISION.code], dtype=np.int8)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = BatchResult.from_final(
+            f, x=x, v=v, status=status, steps=np.array([10, 3]),
+            min_clearance=np.array([0.5, 0.1]), net_speed=np.array([0.0, np.inf]),
+            dt=1e-3, q_window=x.copy(), window_step=2,
+        )  # fmt: skip
+    assert res.outcome.tolist()[1] == "collision"
+    assert not np.isfinite(res.max_distance_error[1])

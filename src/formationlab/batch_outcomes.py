@@ -111,17 +111,22 @@ class BatchResult:
         q = x[..., :2] if q is None else q
         u = v[..., :2] if u is None else u
         contact = np.isin(status, [s.code for s in Status if s.contact])
-        if q_window is None:
-            motion = RigidMotion.unknown((len(q),))
-        else:
-            motion = rigid_motion(q_window, q, (steps - window_step) * float(dt))
-        outcome = classify_batch(
-            formation, q, u, tol, contact=contact, net_speed=net_speed, motion=motion
-        )
+        # a trial stopped by a huge or non-finite step (Khatib's repulsion at a near
+        # contact) holds coordinates whose squares overflow: its status already says
+        # what happened, and its inf / NaN figures are what the table should show
+        with np.errstate(over="ignore", invalid="ignore"):
+            if q_window is None:
+                motion = RigidMotion.unknown((len(q),))
+            else:
+                motion = rigid_motion(q_window, q, (steps - window_step) * float(dt))
+            outcome = classify_batch(
+                formation, q, u, tol, contact=contact, net_speed=net_speed, motion=motion
+            )
+            errors = max_distance_errors(formation, q)
         converged = status == Status.CONVERGED.code
         return cls(
             q_final=q, u_final=u, outcome=outcome,
-            max_distance_error=max_distance_errors(formation, q),
+            max_distance_error=errors,
             converged_time=np.where(converged, steps * float(dt), np.nan),
             min_clearance=min_clearance, steps=steps, net_speed=net_speed,
             status=status, x_final=x, motion=motion,
