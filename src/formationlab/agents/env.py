@@ -139,7 +139,7 @@ class FormationEnv(ParallelEnv):
             scenario = parse_scenario(scenario)
         if not isinstance(scenario, Scenario):
             raise ParameterError(
-                "parallel_env takes a Scenario (formationlab.io.load_scenario, "
+                "parallel_env takes a Scenario (formationlab.io.scenario.load_scenario, "
                 f"parse_scenario) or a scenario's TOML text, got {type(scenario).__name__}"
             )
         sensing = getattr(scenario, "sensing", None) if sensing is None else sensing
@@ -462,7 +462,7 @@ def parallel_env(
     Parameters
     ----------
     scenario : Scenario or str
-        A scenario (``formationlab.io.load_scenario``) or its TOML text.
+        A scenario (``formationlab.io.scenario.load_scenario``) or its TOML text.
     sensing, faults : Sensing, Faults, optional
         Override the scenario's ``[sensing]`` and ``[faults]`` (default: the scenario's;
         without them the paper's exact, common-frame sensing and no faults).
