@@ -130,11 +130,10 @@ def psi_sum(formation: Formation, q: NDArray[np.float64], theta: float) -> NDArr
     """
     q = np.asarray(q, dtype=float)
     t = formation.restricted_triples
-    alpha = formation.restricted_alpha
     if len(t) <= PSI_PART:
         i, j, k = t.T
         c = cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :])  # c_ijk
-        ac = alpha * c
+        ac = formation.restricted_alpha * c
         return np.sum(ac * _steps(formation, q, theta), axis=-1)  # eq. (14): alpha c Upsilon(.)
     on = upsilon(switching_functions(formation, q, theta))  # (..., s)
     _, _, surface = formation.surfaces
@@ -143,7 +142,8 @@ def psi_sum(formation: Formation, q: NDArray[np.float64], theta: float) -> NDArr
         i, j, k = t[a : a + PSI_PART].T
         c = cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :])  # c_ijk
         steps = np.take(on, surface[a : a + PSI_PART], axis=-1)
-        total = total + np.sum(alpha[a : a + PSI_PART] * c * steps, axis=-1)  # eq. (14)
+        alpha = formation.alpha_at(slice(a, a + PSI_PART))  # (its part only)
+        total = total + np.sum(alpha * c * steps, axis=-1)  # eq. (14)
     return total
 
 
