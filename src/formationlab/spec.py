@@ -542,9 +542,19 @@ class Formation:
     def alpha_at(self, which: slice | NDArray[np.integer]) -> NDArray[np.float64]:
         """``restricted_alpha[which]`` (float64) without making the whole array when the
         formation holds signs."""
-        stored: NDArray = self.__dict__["_alpha_stored"]
-        part = stored[which]
+        part = self._held_alpha(which)
         return part if part.dtype == np.float64 else part.astype(np.float64)
+
+    def _held_alpha(self, which: slice | NDArray[np.integer]) -> NDArray:
+        """``restricted_alpha[which]`` as held: int8 signs or float64. Multiplied into a
+        float64 array they give its numbers (numpy casts int8 to the same float64)."""
+        held: NDArray = self.__dict__["_alpha_stored"]
+        return held[which]
+
+    def _held_beta(self, which: slice | NDArray[np.integer]) -> NDArray:
+        """``surfaces[1][which]`` as held: int8 signs or float64 (as :meth:`_held_alpha`)."""
+        held: NDArray = self._surface_lists[1]
+        return held[which]
 
     @cached_property
     def _surface_lists(self) -> tuple[NDArray[np.integer], NDArray, NDArray[np.integer]]:
@@ -581,10 +591,16 @@ class Formation:
         tris, beta, surface = self._surface_lists
         return tris, _floats(beta), surface
 
+    @property
+    def triple_surface(self) -> NDArray[np.integer]:
+        """Surface of each restricted triple, int32 ``(t,)``: ``surfaces[2]``, without making
+        the float64 ``beta`` of :attr:`surfaces`."""
+        return self._surface_lists[2]
+
     @cached_property
     def surface_labels(self) -> list[str]:
         """1-based label of each switching surface, ``"alpha_ijk"`` of its first triple."""
-        _, _, surface = self.surfaces
+        surface = self.triple_surface
         first = np.unique(surface, return_index=True)[1]
         firsts = (self.restricted_triples[first] + 1).tolist()  # ints: 10x faster to format
         return ["alpha_{}{}{}".format(*ijk) for ijk in firsts]
