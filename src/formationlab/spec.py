@@ -65,6 +65,26 @@ def _index(a: NDArray[np.integer], n: int) -> NDArray[np.integer]:
     return np.ascontiguousarray(a, dtype=np.int32 if n <= _INDEX_LIMIT else np.int64)
 
 
+def _signs(values: NDArray[np.float64]) -> NDArray[np.int8] | None:
+    """``values`` as int8 when every one is exactly +1 or -1 (sign-valued alpha and its
+    ``beta``): an eighth of the bytes, and :func:`_floats` gives back the same float64
+    numbers, bit for bit. None otherwise (angles, given values), which stay float64."""
+    if values.size == 0 or not np.all(np.abs(values) == 1.0):
+        return None
+    signs = values.astype(np.int8)
+    signs.setflags(write=False)
+    return signs
+
+
+def _floats(stored: NDArray) -> NDArray[np.float64]:
+    """The float64 numbers of values stored by :func:`_signs` (or already float64), read-only."""
+    if stored.dtype == np.float64:
+        return stored
+    out = stored.astype(np.float64)
+    out.setflags(write=False)
+    return out
+
+
 def _per_item(value: float | ArrayLike, count: int, what: str, per: str) -> NDArray[np.float64]:
     arr = np.asarray(value, dtype=float)
     if arr.ndim == 0:
@@ -107,7 +127,9 @@ class Formation:
         both ``(i, j, k)`` and ``(i, k, j)``. What every computation uses: its size
         grows with the edges, not with ``n^3``.
     restricted_alpha : ndarray, shape (t,), optional
-        ``alpha_ijk`` of those triples.
+        ``alpha_ijk`` of those triples, float64. When every value is +1 or -1 (sign-valued
+        alpha) the formation holds them as int8 signs and gives a new read-only float64
+        array of the same numbers at each access (an eighth of the bytes at rest).
     orientation : {"free", "template", "mirror", "table"}
         Where ``alpha`` came from.
     alpha_values : {"sign", "angle"}
@@ -191,7 +213,9 @@ class Formation:
         object.__setattr__(self, "distances", dist)
         object.__setattr__(self, "alpha", alpha)
         object.__setattr__(self, "restricted_triples", tri_index)
-        object.__setattr__(self, "restricted_alpha", values)
+        signs = _signs(values)
+        self.__dict__.pop("_restricted_alpha", None)  # as given: replaced by the stored form
+        object.__setattr__(self, "_alpha_stored", values if signs is None else signs)
         object.__setattr__(self, "template", template)
 
     def _restrictions(self, n: int, edges: NDArray[np.int64]) -> tuple[NDArray, NDArray]:
@@ -515,7 +539,34 @@ class Formation:
         """Whether some triple is restricted (the orientation is not free)."""
         return len(self.restricted_triples) > 0
 
+    def alpha_at(self, which: slice | NDArray[np.integer]) -> NDArray[np.float64]:
+        """``restricted_alpha[which]`` (float64) without making the whole array when the
+        formation holds signs."""
+        part = self._held_alpha(which)
+        return part if part.dtype == np.float64 else part.astype(np.float64)
+
+    def _held_alpha(self, which: slice | NDArray[np.integer]) -> NDArray:
+        """``restricted_alpha[which]`` as held: int8 signs or float64. Multiplied into a
+        float64 array they give its numbers (numpy casts int8 to the same float64)."""
+        held: NDArray = self.__dict__["_alpha_stored"]
+        return held[which]
+
+    def _held_beta(self, which: slice | NDArray[np.integer]) -> NDArray:
+        """``surfaces[1][which]`` as held: int8 signs or float64 (as :meth:`_held_alpha`)."""
+        held: NDArray = self._surface_lists[1]
+        return held[which]
+
     @cached_property
+    def _surface_lists(self) -> tuple[NDArray[np.integer], NDArray, NDArray[np.integer]]:
+        """:attr:`surfaces` as held: ``beta`` as int8 signs when every one is +1 or -1."""
+        alpha = self.restricted_alpha
+        tris, beta, surface = switching_surfaces(self.restricted_triples, alpha)
+        del alpha
+        signs = _signs(beta)
+        # surfaces are numbered below the number of triples
+        return _index(tris, self.n), beta if signs is None else signs, _index(surface, len(surface))
+
+    @property
     def surfaces(self) -> tuple[NDArray[np.integer], NDArray[np.float64], NDArray[np.integer]]:
         """The distinct switching surfaces ``beta_s c_abc + theta = 0`` of eq. (14).
 
@@ -528,19 +579,28 @@ class Formation:
         -------
         triangles : ndarray of int32, shape (s, 3)
             Sorted 0-based robots of each surface's triangle.
-        beta : ndarray, shape (s,)
-            Coefficient of ``c_abc`` in the switching function.
+        beta : ndarray of float64, shape (s,)
+            Coefficient of ``c_abc`` in the switching function. Held as int8 signs when
+            every one is +1 or -1 (sign-valued alpha), then a new read-only float64 array
+            of the same numbers at each access.
         surface : ndarray of int32, shape (t,)
             Surface of each restricted triple (``restricted_triples[m]``).
+
+        Built once (on first access) and kept.
         """
-        tris, beta, surface = switching_surfaces(self.restricted_triples, self.restricted_alpha)
-        # surfaces are numbered below the number of triples
-        return _index(tris, self.n), beta, _index(surface, len(surface))
+        tris, beta, surface = self._surface_lists
+        return tris, _floats(beta), surface
+
+    @property
+    def triple_surface(self) -> NDArray[np.integer]:
+        """Surface of each restricted triple, int32 ``(t,)``: ``surfaces[2]``, without making
+        the float64 ``beta`` of :attr:`surfaces`."""
+        return self._surface_lists[2]
 
     @cached_property
     def surface_labels(self) -> list[str]:
         """1-based label of each switching surface, ``"alpha_ijk"`` of its first triple."""
-        _, _, surface = self.surfaces
+        surface = self.triple_surface
         first = np.unique(surface, return_index=True)[1]
         firsts = (self.restricted_triples[first] + 1).tolist()  # ints: 10x faster to format
         return ["alpha_{}{}{}".format(*ijk) for ijk in firsts]
@@ -595,3 +655,29 @@ class Formation:
                 key="positions",
             )
         return arr
+
+
+def _get_restricted_alpha(self: Formation) -> NDArray[np.float64]:
+    held = self.__dict__
+    if "_alpha_stored" in held:  # a built formation
+        return _floats(held["_alpha_stored"])
+    return held.get("_restricted_alpha")  # type: ignore[return-value]  # as given, being built
+
+
+def _set_restricted_alpha(self: Formation, value: NDArray[np.float64] | None) -> None:
+    self.__dict__["_restricted_alpha"] = value  # by the dataclass's __init__ only (frozen)
+
+
+# ``restricted_alpha`` stays a field (an argument of the constructor, of
+# ``dataclasses.replace``), read through this property: the values as float64, held as
+# int8 signs when every one is +1 or -1 (``_signs``).
+setattr(  # noqa: B010 (a property over the dataclass field of the same name)
+    Formation,
+    "restricted_alpha",
+    property(
+        _get_restricted_alpha,
+        _set_restricted_alpha,
+        doc="``alpha_ijk`` of the restricted triples, float64 ``(t,)``, read-only; held as "
+        "int8 signs when every value is +1 or -1 (then a new array at each access).",
+    ),
+)

@@ -49,20 +49,22 @@ def switching_functions(
     restriction is decided on or off: the control, ``psi``, the integrators'
     switching diagnostics and the compiled kernels all use these numbers.
     """
-    tris, beta, _ = formation.surfaces
+    tris = formation.surfaces[0]
     if len(tris) <= PSI_PART:
+        beta = formation.surfaces[1]
         return beta * triangle_products(q, tris) + theta  # eq. (14)
     q = np.asarray(q, dtype=float)
     out = np.empty((*q.shape[:-2], len(tris)))
     for a in range(0, len(tris), PSI_PART):  # in parts (the same numbers: element by element)
         part = slice(a, a + PSI_PART)
-        out[..., part] = beta[part] * triangle_products(q, tris[part]) + theta  # eq. (14)
+        beta = formation._held_beta(part)  # (int8 signs or float64: the same products)
+        out[..., part] = beta * triangle_products(q, tris[part]) + theta  # eq. (14)
     return out
 
 
 def triple_steps(formation: Formation, weights: NDArray[np.float64]) -> NDArray[np.float64]:
     """Per-surface weights ``(..., s)`` spread to the restricted triples, ``(..., t)``."""
-    _, _, surface = formation.surfaces
+    surface = formation.triple_surface
     w = np.asarray(weights, dtype=float)
     if w.shape[-1] == 0:
         return np.zeros((*w.shape[:-1], len(surface)))
@@ -130,20 +132,20 @@ def psi_sum(formation: Formation, q: NDArray[np.float64], theta: float) -> NDArr
     """
     q = np.asarray(q, dtype=float)
     t = formation.restricted_triples
-    alpha = formation.restricted_alpha
     if len(t) <= PSI_PART:
         i, j, k = t.T
         c = cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :])  # c_ijk
-        ac = alpha * c
+        ac = formation.restricted_alpha * c
         return np.sum(ac * _steps(formation, q, theta), axis=-1)  # eq. (14): alpha c Upsilon(.)
     on = upsilon(switching_functions(formation, q, theta))  # (..., s)
-    _, _, surface = formation.surfaces
+    surface = formation.triple_surface
     total = np.zeros(q.shape[:-2])
     for a in range(0, len(t), PSI_PART):
         i, j, k = t[a : a + PSI_PART].T
         c = cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :])  # c_ijk
         steps = np.take(on, surface[a : a + PSI_PART], axis=-1)
-        total = total + np.sum(alpha[a : a + PSI_PART] * c * steps, axis=-1)  # eq. (14)
+        alpha = formation._held_alpha(slice(a, a + PSI_PART))  # (int8 signs or float64)
+        total = total + np.sum(alpha * c * steps, axis=-1)  # eq. (14)
     return total
 
 

@@ -122,15 +122,20 @@ def build_terms(
         is_edge, dist, contact = np.zeros(0, bool), np.zeros(0), np.zeros(0)
     e = formation.edges
     tris, beta, surface = formation.surfaces
-    terms, alpha = formation.restricted_triples, formation.restricted_alpha
-    if not formation.has_orientation or k_a <= 0:
+    terms = formation.restricted_triples
+    oriented = formation.has_orientation and k_a > 0
+    if not oriented:
         tris, beta = np.zeros((0, 3), np.int64), np.zeros(0)
-        terms, alpha, surface = np.zeros((0, 3), np.int64), np.zeros(0), np.zeros(0, np.int64)
+        terms, surface = np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
     # (i, k, j) is the same term as (i, j, k): the halves with j < k, grouped by surface
-    # (one gather of each column, so that no copy of the (t, 3) triples is made)
+    # (one gather of each column, so that no copy of the (t, 3) triples is made; alpha of
+    # the halves only, not the whole float64 array when the formation holds signs)
     idx = np.flatnonzero(terms[:, 1] < terms[:, 2])
     idx = idx[np.argsort(surface[idx], kind="stable")]
-    surface, alpha = surface[idx], alpha[idx]
+    surface = surface[idx]
+    alpha = formation.alpha_at(idx) if oriented else np.zeros(0)
+    if not alpha.flags.owndata:  # (a view of the formation's own values: never changed)
+        alpha = alpha.copy()
     i, j, k = (np.asarray(terms[idx, m], dtype=index) for m in range(3))
     del idx
     alpha *= 2.0 * float(k_a)  # the weights 2 k_a alpha_ijk, in place

@@ -139,13 +139,14 @@ def _pair_swept(p, q, qp, radius, pairs):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
-def _surface(s, q, surf_a, surf_b, surf_c, surf_beta, theta, on):
-    """Whether surface ``s`` switches its restrictions on: eq. (14), as triangle_products."""
+def _surface(s, q, surf_a, surf_b, surf_c, surf_beta, stride, theta, on):
+    """Whether surface ``s`` switches its restrictions on: eq. (14), as triangle_products
+    (its ``beta`` is ``surf_beta[s * stride]``)."""
     ia, ib, ic = surf_a[s], surf_b[s], surf_c[s]
     cab = (q[ib, 0] - q[ia, 0]) * (q[ic, 1] - q[ia, 1]) - (q[ib, 1] - q[ia, 1]) * (
         q[ic, 0] - q[ia, 0]
     )
-    on[s] = surf_beta[s] * cab + theta >= 0.0  # Upsilon(0) = 1
+    on[s] = surf_beta[s * stride] * cab + theta >= 0.0  # Upsilon(0) = 1
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
@@ -232,6 +233,7 @@ def items_chunk(c, chunks, q, qp, sweep, L, pairs, n_pairs, fe, fp, on, area_g, 
     kind, gain, ei, ej, ea, ed = L.kind, L.edge_gain, L.edge_i, L.edge_j, L.edge_a, L.edge_d
     radius, s0, rep = L.radius, L.influence, L.repulsion
     sa, sb, sc, beta, theta = L.surf_a, L.surf_b, L.surf_c, L.surf_beta, L.theta
+    stride = L.surf_stride
     aa, ab, ac, target, a_gain = L.area_a, L.area_b, L.area_c, L.area_target, L.area_gain
     lo, hi = _part(c, chunks, L.edge_i.shape[0])
     g_min, w_min = _edges(lo, hi, q, qp, sweep, kind, gain, ei, ej, ea, ed, fe)
@@ -243,7 +245,7 @@ def items_chunk(c, chunks, q, qp, sweep, L, pairs, n_pairs, fe, fp, on, area_g, 
             w_min = min(w_min, _pair_swept(p, q, qp, radius, pairs))
     lo, hi = _part(c, chunks, L.surf_a.shape[0])
     for s in range(lo, hi):
-        _surface(s, q, sa, sb, sc, beta, theta, on)
+        _surface(s, q, sa, sb, sc, beta, stride, theta, on)
     lo, hi = _part(c, chunks, L.area_a.shape[0])
     for mm in range(lo, hi):
         _area(mm, q, aa, ab, ac, target, a_gain, area_g)

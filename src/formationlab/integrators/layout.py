@@ -8,7 +8,11 @@ as arrays) rearranged for a time loop over many robots (``integrators/compiled.p
   (``nbr_edge``: ``e`` where it is ``i``, ``~e`` where it is ``j``; ``nbr``: the
   partner), in the order of the rows, so that every robot's sum has one fixed order
   however the loop is split between threads;
-* **switching surfaces** ``(a, b, c, beta)`` of eq. (14), decided once per step;
+* **switching surfaces** ``(a, b, c, beta)`` of eq. (14), decided once per step. Each
+  surface's ``beta`` is made positive by exchanging its corners ``b`` and ``c``
+  (``c_acb = -c_abc``, exactly, so ``beta c_abc`` is the same number); when every
+  surface then has the same ``beta`` (sign-valued alpha: 1) it is stored once
+  (``surf_stride = 0``), otherwise once per surface;
 * **restricted terms** ``(i, j, k)``, ``j < k``, of eq. (13) in rows by robot ``i``:
   ``term_j``, ``term_k`` and the surface ``term_s``, 12 bytes a term. Each term's
   weight ``2 k_a alpha_ijk`` is made positive by exchanging ``j`` and ``k`` (the
@@ -63,7 +67,8 @@ class RunLayout(NamedTuple):
     surf_a: NDArray[np.int32]  #: (s,)
     surf_b: NDArray[np.int32]
     surf_c: NDArray[np.int32]
-    surf_beta: NDArray[np.float64]
+    surf_beta: NDArray[np.float64]  #: (s,) or (1,) when surf_stride is 0; positive
+    surf_stride: int
     term_ptr: NDArray[np.int32]  #: (n + 1,)
     term_j: NDArray[np.int32]  #: (t,)
     term_k: NDArray[np.int32]
@@ -183,8 +188,15 @@ def run_layout(
     s_pos = np.empty(s_order.size, _I32)
     s_pos[s_order] = np.arange(s_order.size, dtype=_I32)
     surf = [c[s_order] for c in surf]
-    surf_beta = np.ascontiguousarray(t.pop("surface_beta")[s_order], dtype=float)
+    beta = np.ascontiguousarray(t.pop("surface_beta")[s_order], dtype=float)
     del s_order
+    flip = np.flatnonzero(beta < 0)  # beta c_abc = |beta| c_acb, exactly
+    surf[1][flip], surf[2][flip] = surf[2][flip], surf[1][flip]
+    np.abs(beta, out=beta)
+    del flip
+    same = beta.size > 0 and bool(np.all(beta == beta[0]))
+    surf_beta = beta[:1].copy() if same else beta
+    del beta
     term_s = s_pos[term_s]
     del s_pos
     # edges stored by their least robot (new numbers), each keeping its ends' roles; each
@@ -232,7 +244,8 @@ def run_layout(
         surf_a=surf[0],
         surf_b=surf[1],
         surf_c=surf[2],
-        surf_beta=surf_beta,
+        surf_beta=surf_beta if surf_beta.size else np.zeros(1),
+        surf_stride=0 if same or surf_beta.size == 0 else 1,
         term_ptr=term_ptr,
         term_j=term_j,
         term_k=term_k,
