@@ -12,12 +12,15 @@ as ``System.rhs`` and the driver do it:
    (:func:`formationlab.safety.obstacle_terms.repel`);
 3. then the filter: ``barrier-decentralized`` robot by robot, the rows of
    :func:`formationlab.safety.decentralized_filter` in its order solved by its
-   :func:`~formationlab.safety.decentralized.solve_rows`; ``barrier`` by the closed form
-   of one or two active rows (:func:`formationlab.safety.closed_form.closed_form`) on
-   the rows of :func:`formationlab.safety.barrier_constraints`. When more rows are
-   active the trial pauses; :func:`run_safety` solves its QP with
-   :func:`formationlab.safety.barrier_filter` (Clarabel, as the driver's closed loop
-   does) and the trial resumes with that command;
+   :func:`~formationlab.safety.decentralized.solve_rows`; ``barrier`` on the rows of
+   :func:`formationlab.safety.barrier_constraints` by
+   :func:`formationlab.safety.dual_active_set.centralized_command`: the closed form of
+   one or two active rows, else Goldfarb and Idnani's dual active-set method (exact for
+   any number of active rows), with ``barrier_filter``'s relaxation of rows with
+   ``h < 0`` and its decentralized fallback. Only if rounding defeats that method (never
+   met in the studies) does the trial pause; :func:`run_safety` then solves its QP
+   with :func:`formationlab.safety.barrier_filter` (Clarabel) and the trial resumes
+   with that command;
 4. the robot model's rates, the stop rule, and the Euler step judged by the contact
    rule (``System.step_verdict``): not finite, contact between robots (``.kernels``'
    ``_contact``) or with an obstacle at the end of the step, or along it.
