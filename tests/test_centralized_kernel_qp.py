@@ -18,6 +18,8 @@ import numpy as np
 import pytest
 import qpsolvers
 import scipy.sparse as sp
+from _exact_qp import exact_solve
+from _exact_qp import solve_rows as _solve
 
 import formationlab.safety as safety_pkg
 import formationlab.safety.barrier as barrier
@@ -33,7 +35,7 @@ from formationlab.safety import (
 )
 from formationlab.safety.barrier import PAIR
 from formationlab.safety.closed_form import TOL
-from formationlab.safety.dual_active_set import centralized_command, dual_active_set, workspace
+from formationlab.safety.dual_active_set import centralized_command, workspace
 from formationlab.studies.batch import run_batch
 from formationlab.studies.config import BoxInitial
 from formationlab.studies.sampling import trial_initial_states
@@ -92,14 +94,6 @@ def _clarabel(G, rb, u_hat, tol):
         sol = qpsolvers.solve_problem(problem, solver="clarabel", tol_feas=tol, tol_gap_abs=tol,
                                       tol_gap_rel=tol)  # fmt: skip
     return np.asarray(sol.x) if sol.found else None
-
-
-def _solve(ri, rj, ra, rb, u_hat):
-    n = u_hat.shape[0]
-    mats, vecs, lam, act, _ = workspace(n, len(rb))
-    out = np.empty((n, 2))
-    code = dual_active_set(ri, rj, ra, rb, u_hat, out, lam, mats, vecs, act)
-    return code, out, lam
 
 
 def _assert_kkt(G, rb, u_hat, x, lam):
@@ -229,23 +223,6 @@ def test_crowded_robots_match_barrier_filter(max_speed, gamma):
     assert many >= 20 and converged >= 50, (many, converged)
 
 
-def _exact_solve(G, bound, x_hat):
-    """``barrier._solve`` by the dual active-set method (None when the rows are infeasible)."""
-    Gd = G.toarray()
-    n = Gd.shape[1] // 2
-    blocks = Gd.reshape(len(bound), n, 2)
-    on = np.any(blocks != 0.0, axis=-1)
-    ri = np.argmax(on, axis=1)
-    two = on.sum(axis=1) == 2
-    rj = np.where(two, n - 1 - np.argmax(on[:, ::-1], axis=1), -1)
-    ra = blocks[np.arange(len(bound)), ri]
-    assert np.all(blocks[two, rj[two]] == -ra[two])
-    code, out, lam = _solve(ri.astype(np.int64), rj.astype(np.int64), np.ascontiguousarray(ra),
-                            np.ascontiguousarray(bound), x_hat.reshape(n, 2))  # fmt: skip
-    assert code != -2
-    return None if code == -1 else (out.reshape(-1), lam)
-
-
 def _gap():
     sc = load_scenario(EXAMPLES / "ten-robots-gap.toml")
     q0 = trial_initial_states(sc.formation, BoxInitial(half_width=3.0), 1, np.arange(8),
@@ -303,7 +280,7 @@ def test_gap_batch_under_barrier_equals_the_driver(monkeypatch):
     assert calls == []  # no step left the kernel
     monkeypatch.setattr(safety_pkg, "barrier_filter", real)
     solves = []
-    monkeypatch.setattr(barrier, "_solve", lambda *x: solves.append(1) or _exact_solve(*x))
+    monkeypatch.setattr(barrier, "_solve", lambda *x: solves.append(1) or exact_solve(*x))
     for duration in (0.3, 3.0):
         kw = dict(dt=1e-3, duration=duration, obstacles=sc.obstacles, safety=cfg)
         runs[duration, "numpy"] = run_batch(sc.formation, sc.law, q0, backend="numpy", **kw)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _exact_qp import exact_solve
 
 import formationlab.safety as safety_pkg
 from formationlab.controllers import AngleRestrictedLaw, DistanceLaw, SquaredDistanceLaw
@@ -66,13 +67,16 @@ def test_kernel_equals_driver_with_obstacles_and_filter(kind, law, starts):
     assert len(set(a.outcome)) >= 2  # the starts end in several ways
 
 
-def test_kernel_equals_driver_with_speed_limit_and_sensing_radius(starts):
+def test_kernel_equals_driver_with_speed_limit_and_sensing_radius(starts, monkeypatch):
     cfg = SafetyFilter(filter="barrier-decentralized", distance=0.3, gamma=5.0, max_speed=0.6,
                        sensing_radius=1.5)  # fmt: skip
     a, b = _both(TRIANGLE, SquaredDistanceLaw(), starts, duration=1.0, obstacles=OBSTACLES,
                  safety=cfg)  # fmt: skip
     _same(a, b)
     cfg = SafetyFilter(filter="barrier", distance=0.3, gamma=5.0, max_speed=0.6)
+    # a robot at the speed limit holds two sides of the polygon and often a pair row: the
+    # kernel solves those QPs exactly, and so does the driver here (its Clarabel is 1e-7 off)
+    monkeypatch.setattr(safety_pkg.barrier, "_solve", exact_solve)
     a, b = _both(TRIANGLE, SquaredDistanceLaw(), starts[:4], duration=1.0, safety=cfg)
     _same(a, b)
 

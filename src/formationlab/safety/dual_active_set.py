@@ -29,12 +29,12 @@ of the rows)
 
 Every iteration keeps the multipliers of the active rows ``>= 0`` and the dual objective
 does not decrease (it increases on every step of positive length), so the method ends
-after finitely many steps (their Theorem 3). Rounding is guarded by a relative tolerance on violation (that
-of :mod:`.closed_form`, ``TOL``), a test of ``|z|`` relative to ``|g_p|`` for linear
-dependence, and an iteration limit (``-2``: a numerical failure the caller hands to
-Clarabel). The answer is written as ``x_hat - sum lambda_k g_k`` on the active rows, so
-robots on no active row keep ``x_hat`` bit for bit. Nothing is allocated: the work
-arrays come from :func:`workspace`.
+after finitely many steps (their Theorem 3). Rounding is guarded by a relative
+tolerance on violation (that of :mod:`.closed_form`, ``TOL``), a test of ``|z|``
+relative to ``|g_p|`` for linear dependence, and an iteration limit (``-2``: a
+numerical failure the caller hands to Clarabel). The answer is written as
+``x_hat - sum lambda_k g_k`` on the active rows, so robots on no active row keep
+``x_hat`` bit for bit. Nothing is allocated: the work arrays come from :func:`workspace`.
 
 :func:`centralized_command` wraps it with the semantics of
 :func:`~formationlab.safety.barrier_filter` for one trial: ``x_hat`` when feasible, the
