@@ -24,8 +24,8 @@ and ``double-integrator``) and ``"numpy"`` (the stepping driver,
 :func:`formationlab.integrators.drive`, with explicit Euler and a stop rule:
 the readable specification, for any law). With obstacles or a safety filter,
 ``"numba"`` runs the compiled path of :mod:`.safety_kernel` (trial by trial the
-driver's run; the centralized filter's QP, when more than two rows are active, is
-solved by Clarabel between kernel calls).
+driver's run; the centralized filter's QP is solved exactly in the kernel, by a closed
+form for one or two active rows and a dual active-set method beyond).
 
 With sensing other than the paper's or faults, ``"numba"`` runs single integrators
 on the compiled sensed path (:mod:`.sensed_kernel`: the measurement channel, every

@@ -12,12 +12,15 @@ as ``System.rhs`` and the driver do it:
    (:func:`formationlab.safety.obstacle_terms.repel`);
 3. then the filter: ``barrier-decentralized`` robot by robot, the rows of
    :func:`formationlab.safety.decentralized_filter` in its order solved by its
-   :func:`~formationlab.safety.decentralized.solve_rows`; ``barrier`` by the closed form
-   of one or two active rows (:func:`formationlab.safety.closed_form.closed_form`) on
-   the rows of :func:`formationlab.safety.barrier_constraints`. When more rows are
-   active the trial pauses; :func:`run_safety` solves its QP with
-   :func:`formationlab.safety.barrier_filter` (Clarabel, as the driver's closed loop
-   does) and the trial resumes with that command;
+   :func:`~formationlab.safety.decentralized.solve_rows`; ``barrier`` on the rows of
+   :func:`formationlab.safety.barrier_constraints` by
+   :func:`formationlab.safety.dual_active_set.centralized_command`: the closed form of
+   one or two active rows, else Goldfarb and Idnani's dual active-set method (exact for
+   any number of active rows), with ``barrier_filter``'s relaxation of rows with
+   ``h < 0`` and its decentralized fallback. Only if rounding defeats that method (never
+   met in the studies) does the trial pause; :func:`run_safety` then solves its QP
+   with :func:`formationlab.safety.barrier_filter` (Clarabel) and the trial resumes
+   with that command;
 4. the robot model's rates, the stop rule, and the Euler step judged by the contact
    rule (``System.step_verdict``): not finite, contact between robots (``.kernels``'
    ``_contact``) or with an obstacle at the end of the step, or along it.
@@ -40,7 +43,7 @@ from ..analysis import Tolerances
 from ..controllers import Law
 from ..dynamics import System
 from ..models import RobotModel
-from ..safety.closed_form import closed_form
+from ..safety.dual_active_set import FALLBACK, NUMERICAL, centralized_command
 from ..safety.obstacle_terms import (
     barrier_row,
     hull_distance,
@@ -165,8 +168,12 @@ def _decentralized(pq, uq, uf, obs, flt, nbr, A, bb, neg, owner, out) -> None:
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _centralized(pq, uq, uf, obs, flt, ri, rj, ra, rb, lam) -> int:
-    """``uf`` by the closed form on the rows of ``barrier_constraints``; -1: needs the QP."""
+def _centralized(pq, uq, uf, obs, flt, ri, rj, ra, rb, rh, lam, mats, vecs, act, rb2) -> int:
+    """``uf`` by :func:`centralized_command` on the rows of ``barrier_constraints``.
+
+    Returns its status (``FALLBACK``: apply the decentralized filter; ``NUMERICAL``: solve
+    the QP with Clarabel).
+    """
     n = pq.shape[0]
     m = 0
     for i in range(n):  # pair rows, (i, j) in lexicographic order
@@ -181,17 +188,19 @@ def _centralized(pq, uq, uf, obs, flt, ri, rj, ra, rb, lam) -> int:
             ra[m, 0] = -2.0 * wx
             ra[m, 1] = -2.0 * wy
             rb[m] = flt.gamma * h**3
+            rh[m] = h
             m += 1
     for i in range(n):  # obstacle rows, robot-major
         for o in range(obs.radius.shape[0]):
             pieces = 1 if obs.radius[o] > 0 else obs.start[o + 1] - obs.start[o]
             for k in range(pieces):
-                a0, a1, b, _ = barrier_row(obs, o, k, pq[i, 0], pq[i, 1])
+                a0, a1, b, h = barrier_row(obs, o, k, pq[i, 0], pq[i, 1])
                 ri[m] = i
                 rj[m] = -1
                 ra[m, 0] = a0
                 ra[m, 1] = a1
                 rb[m] = b
+                rh[m] = h
                 m += 1
     for i in range(n):  # speed rows, robot-major
         for s in range(flt.speed_n.shape[0]):
@@ -200,8 +209,10 @@ def _centralized(pq, uq, uf, obs, flt, ri, rj, ra, rb, lam) -> int:
             ra[m, 0] = flt.speed_n[s, 0]
             ra[m, 1] = flt.speed_n[s, 1]
             rb[m] = flt.speed_b
+            rh[m] = np.inf
             m += 1
-    return closed_form(ri[:m], rj[:m], ra[:m], rb[:m], uq, uf, lam[:m])
+    return centralized_command(ri[:m], rj[:m], ra[:m], rb[:m], rh[:m], uq, uf, lam[:m], mats,
+                               vecs, act, rb2[:m])  # fmt: skip
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -276,7 +287,13 @@ def _chunk(c, terms, model, obs, flt, st, out, dt, n_steps, check_every, speed, 
     rj = np.empty(big, dtype=np.int64)
     ra = np.empty((big, 2))
     rb = np.empty(big)
+    rh = np.empty(big)
     lam = np.empty(big)
+    rb2 = np.empty(big)
+    dq = 2 * n if flt.kind == 2 else 1  # the centralized QP's unknowns (dual_active_set)
+    mats = np.empty((2, dq, dq))
+    vecs = np.empty((5, dq))
+    act = np.empty(dq, dtype=np.int64)
     nact = st.meta[c, 0]
     step = st.meta[c, 1]
     kc = st.meta[c, 2]
@@ -307,8 +324,12 @@ def _chunk(c, terms, model, obs, flt, st, out, dt, n_steps, check_every, speed, 
                     uf[i, 0] = st.given_u[c, b, i, 0]
                     uf[i, 1] = st.given_u[c, b, i, 1]
             elif flt.kind == CENTRALIZED:
-                if _centralized(pq, uq, uf, obs, flt, ri, rj, ra, rb, lam) < 0:
-                    st.need[c, b] = True  # more than two active rows: Clarabel's turn
+                qp = _centralized(pq, uq, uf, obs, flt, ri, rj, ra, rb, rh, lam, mats, vecs,
+                                  act, rb2)  # fmt: skip
+                if qp == FALLBACK:  # relaxed rows infeasible too: barrier_filter's fallback
+                    _decentralized(pq, uq, uf, obs, flt, nbr, A, bb, neg, owner, out2)
+                elif qp == NUMERICAL:
+                    st.need[c, b] = True  # rounding defeated the exact method: Clarabel's turn
                     for i in range(n):
                         st.need_p[c, b, i, 0] = pq[i, 0]
                         st.need_p[c, b, i, 1] = pq[i, 1]
