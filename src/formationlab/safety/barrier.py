@@ -199,8 +199,27 @@ class QPSolution(NamedTuple):
 
 
 def _solve(G: sp.csr_matrix, bound: NDArray, u_hat: NDArray) -> tuple[NDArray, NDArray] | None:
-    nv = G.shape[1]
-    problem = qpsolvers.Problem(sp.identity(nv, format="csc"), -u_hat, sp.csc_matrix(G), bound)
+    """Clarabel on the QP preconditioned: ``x = s y`` with ``s = max |u_hat|``, every row
+    scaled to a unit normal, and without the rows that cannot be active.
+
+    When every bound is >= 0 the zero command is feasible, so the solution lies within
+    ``|x - u_hat| <= |u_hat|``, hence ``|x| <= 2 |u_hat|``: a row with
+    ``bound_k > 2 |G_k| |u_hat|`` holds strictly there and has multiplier 0 (far pairs,
+    whose ``gamma h^3`` reaches 1e7). Unscaled, Clarabel failed on such feasible QPs at
+    starts near a disc (commands up to 4e4).
+    """
+    G = sp.csr_matrix(G)
+    norms = np.sqrt(np.asarray(G.multiply(G).sum(axis=1), dtype=float).ravel())
+    norms = np.where(norms > 0.0, norms, 1.0)
+    s = float(np.abs(u_hat).max()) or 1.0
+    keep = np.ones(len(bound), dtype=bool)
+    if np.all(bound >= 0.0):
+        keep = bound <= norms * 2.0 * float(np.linalg.norm(u_hat)) * (1.0 + 1e-9)
+    Gk = sp.diags(1.0 / norms[keep]) @ G[keep]
+    problem = qpsolvers.Problem(
+        sp.identity(G.shape[1], format="csc"), -u_hat / s, sp.csc_matrix(Gk),
+        bound[keep] / (norms[keep] * s),
+    )  # fmt: skip
     with warnings.catch_warnings():
         # qpsolvers warns on a non-solved status; the caller reads the status and acts on it
         warnings.filterwarnings("ignore", message="Clarabel.rs terminated", category=UserWarning)
@@ -210,11 +229,13 @@ def _solve(G: sp.csr_matrix, bound: NDArray, u_hat: NDArray) -> tuple[NDArray, N
         )  # fmt: skip
     if not sol.found or sol.x is None:
         return None
-    x = np.asarray(sol.x, dtype=float)
+    x = np.asarray(sol.x, dtype=float) * s
     scale = np.abs(bound) + abs(G) @ (np.abs(x) + np.abs(u_hat)) + 1e-300
     if np.any(G @ x - bound > 1e-7 * scale):
         return None
-    z = np.zeros(len(bound)) if sol.z is None else np.maximum(np.asarray(sol.z, float), 0.0)
+    z = np.zeros(len(bound))
+    if sol.z is not None:  # multipliers of the scaled rows: z_k = s w_k / |G_k|
+        z[keep] = np.maximum(np.asarray(sol.z, float), 0.0) * s / norms[keep]
     return x, z
 
 
