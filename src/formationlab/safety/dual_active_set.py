@@ -61,7 +61,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from .closed_form import TOL, _feasible, _value, closed_form
+from .closed_form import TOL, _feasible, _shift, _value, closed_form
 
 __all__ = [
     "FALLBACK",
@@ -316,13 +316,7 @@ def dual_active_set(ri, rj, ra, rb, uh, out, lam, mats, vecs, act) -> int:
         k = act[a]
         lk = max(u[a], 0.0)
         lam[k] = lk
-        i = ri[k]
-        out[i, 0] -= lk * ra[k, 0]
-        out[i, 1] -= lk * ra[k, 1]
-        j = rj[k]
-        if j >= 0:
-            out[j, 0] += lk * ra[k, 0]
-            out[j, 1] += lk * ra[k, 1]
+        _shift(ri, rj, ra, k, lk, out)
     if not _feasible(ri, rj, ra, rb, out, uh):
         return -2
     return 1
