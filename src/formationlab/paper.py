@@ -237,8 +237,9 @@ def _polylines_cross(
     thinned to at most ``max_points`` points).
 
     Two segments cross only if their bounding boxes overlap, so the exact orientation test
-    runs on those pairs only (found by sorting the segments along x): the same answer as
-    testing all pairs, without the ``max_points^2`` arrays.
+    runs on those pairs only: the same answer as testing all pairs. Finding the pairs takes
+    one boolean ``max_points^2`` array (about 2 MB), not the float arrays of the orientation
+    test over all pairs.
     """
     step = max(1, len(p) // max_points)
     p, r = p[::step], r[::step]
