@@ -39,28 +39,37 @@ def test_alpha_and_beta_read_back_as_the_numbers_they_come_from(values):
     assert beta.tobytes() == want[1].tobytes()
     np.testing.assert_array_equal(tris, want[0])
     np.testing.assert_array_equal(surface, want[2])
-    held = vars(f)["_alpha_stored"]
+    held = f.half_alpha()
     assert held.dtype == (np.int8 if values == "sign" else np.float64)
-    held_beta = vars(f)["_surface_lists"][1]
+    held_beta = f.held_surfaces[1]
     assert held_beta.dtype == (np.int8 if values == "sign" else np.float64)
     assert "restricted_alpha" not in vars(f) and "surfaces" not in vars(f)
-    # parts without the whole array
-    idx = np.array([5, 0, len(alpha) - 1, 17])
-    assert f.alpha_at(idx).tobytes() == alpha[idx].tobytes()
-    assert f.alpha_at(slice(3, 40)).tobytes() == alpha[3:40].tobytes()
+    # the halves j < k the formation holds, with their alpha, bit for bit
+    half = t64[:, 1] < t64[:, 2]
+    np.testing.assert_array_equal(f.restricted_halves, t64[half])
+    assert f.restricted_halves.dtype == np.int32
+    assert held.astype(np.float64).tobytes() == a64[half].tobytes()
+    idx = np.array([5, 0, len(held) - 1, 17])
+    assert f.half_alpha(idx).tobytes() == held[idx].tobytes()
+    np.testing.assert_array_equal(f.half_surface, want[2][half])
+    # both orders derived from the halves: the lists of before, in their order
+    np.testing.assert_array_equal(f.restricted_triples, t64)
+    np.testing.assert_array_equal(f.triple_surface, want[2])
+    first = np.unique(want[2], return_index=True)[1]
+    assert f.surface_labels == ["alpha_{}{}{}".format(*(t64[m] + 1)) for m in first]
     # rebuilt from what it gives, a formation holds the same
     g = f.with_diameters(0.25)
     assert g.restricted_alpha.tobytes() == alpha.tobytes()
-    assert vars(g)["_alpha_stored"].dtype == held.dtype
+    assert g.half_alpha().dtype == held.dtype
 
 
 def test_values_other_than_plus_and_minus_one_stay_float64():
     table = {(1, 2, 3): 2.5, (2, 3, 1): 1.0, (3, 1, 2): -1.0}
     f = fl.Formation.from_alpha_table(table, n=3, distances=1.0)
-    assert vars(f)["_alpha_stored"].dtype == np.float64
+    assert f.half_alpha().dtype == np.float64
     assert f.alpha[0, 1, 2] == 2.5 and f.alpha[0, 2, 1] == -2.5
     signs = fl.Formation.from_alpha_table({(1, 2, 3): 1, (3, 1, 2): 1, (2, 1, 3): -1}, n=3)
-    assert vars(signs)["_alpha_stored"].dtype == np.int8
+    assert signs.half_alpha().dtype == np.int8
     assert set(np.unique(signs.alpha).tolist()) == {-1.0, 0.0, 1.0}
 
 
@@ -93,3 +102,37 @@ def test_positive_beta_with_exchanged_corners_decides_every_surface_alike():
     assert a.status == ref.status == "success"
     assert np.any(a.sigma >= 0) and np.any(a.sigma < 0)  # restrictions on and off
     np.testing.assert_allclose(a.q, ref.q, rtol=0, atol=1e-10)
+
+
+def test_a_formation_beyond_the_held_limit_holds_only_its_halves(monkeypatch):
+    # the same lists, built at each access instead of kept; the same compiled run
+    import formationlab.spec as spec
+
+    f = patch(300, "sign", seed=6)
+    lists = (f.restricted_triples, f.restricted_alpha, *f.surfaces, f.restricted_sign)
+    q0 = f.template + np.random.default_rng(7).normal(0, 0.08, (f.n, 2))
+    kw = {"dt": 1e-3, "n_steps": 200, "save_every": 50}
+    law = fl.AngleRestrictedLaw()
+    kept = run_compiled(run_layout(law.compiled_terms(f, pairs=False)), q0, **kw)
+    monkeypatch.setattr(spec, "HELD_LIMIT", 2 * len(f.restricted_halves) - 1)
+    g = f.with_diameters(0.2)
+    again = (g.restricted_triples, g.restricted_alpha, *g.surfaces, g.restricted_sign)
+    for a, b in zip(lists, again, strict=True):
+        assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+        assert not b.flags.writeable
+    derived = ("_ordered_lists", "_surfaces_held", "_triple_surface")
+    assert not set(derived) & set(vars(g)) and set(derived) <= set(vars(f))
+    arrays = [v for v in vars(g).values() if isinstance(v, np.ndarray)]
+    assert sum(a.nbytes for a in arrays) < sum(x.nbytes for x in lists[:2])
+    built = run_compiled(run_layout(law.compiled_terms(g, pairs=False)), q0, **kw)
+    assert built.status == kept.status
+    np.testing.assert_array_equal(built.x, kept.x)
+    # kept for a run of the numpy driver, dropped after it
+    with g.holding():
+        assert g.restricted_triples is g.restricted_triples
+        assert set(derived[:1]) <= set(vars(g))
+    assert not set(derived) & set(vars(g))
+    res = fl.simulate(g, "angle-restricted", q0, duration=0.05, backend="numpy")
+    ref = fl.simulate(f, "angle-restricted", q0, duration=0.05, backend="numpy")
+    assert res.status == ref.status and not set(derived) & set(vars(g))
+    np.testing.assert_array_equal(res.q, ref.q)

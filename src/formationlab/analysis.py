@@ -177,12 +177,14 @@ def orientation_agreement(formation: Formation, q: ArrayLike) -> tuple[int, int]
     """Restricted triples whose ``sign(c_ijk)`` agrees / disagrees with the desired one.
 
     Counts ordered triples ``(i, j, k)``; a state with no restriction returns ``(0, 0)``.
+    ``(i, k, j)`` agrees exactly when ``(i, j, k)`` does (both signs change, eq. 3): the
+    halves ``j < k`` the formation holds are counted twice.
     """
     q = np.asarray(q, dtype=float)
-    i, j, k = formation.restricted_triples.T
+    i, j, k = formation.restricted_halves.T
     s = np.sign(cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :]))
-    s = s * formation.restricted_sign
-    return int(np.sum(s > 0)), int(np.sum(s <= 0))
+    s = s * -np.sign(formation.half_alpha())  # the desired sign(c_ijk) is -sign(alpha_ijk)
+    return 2 * int(np.sum(s > 0)), 2 * int(np.sum(s <= 0))
 
 
 def touching(formation: Formation, q: ArrayLike) -> bool:

@@ -57,7 +57,7 @@ def row_bytes(formation: Formation, k: int = 2) -> int:
     """
     n = formation.n
     pairs = n * (n - 1) // 2 if n <= DENSE_LIMIT else 3 * n
-    items = n * k + len(formation.edges) + 2 * len(formation.restricted_triples) + pairs
+    items = n * k + len(formation.edges) + 4 * len(formation.restricted_halves) + pairs
     return 8 * _COPIES * items
 
 

@@ -10,12 +10,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import FormationError
-from .geometry import cross, parity
+from .geometry import cross
 
 __all__ = [
     "BETA_RTOL",
     "COLLINEAR_SIN",
     "alpha_from_shape",
+    "both_orders",
     "neighbour_triples",
     "signed_angle",
     "switching_surfaces",
@@ -113,36 +114,108 @@ def _check_oriented(
 
 def switching_surfaces(
     triples: NDArray[np.integer], alpha: NDArray[np.float64]
-) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.int64]]:
+) -> tuple[NDArray[np.integer], NDArray[np.float64], NDArray[np.int32]]:
     """Distinct switching surfaces ``beta c_abc + theta = 0`` (see ``Formation.surfaces``).
 
     ``triples`` ``(t, 3)`` sorted lexicographically and their ``alpha`` ``(t,)``.
     Triples of one sorted triangle whose ``beta`` agree to ``BETA_RTOL`` share a
     surface, whose ``beta`` is that of its first triple; surfaces are numbered in
-    the order of their first triple. Returns the triangles ``(s, 3)``, ``beta``
-    ``(s,)`` and the surface of each triple ``(t,)``.
+    the order of their first triple. Returns the triangles ``(s, 3)`` (of the triples'
+    integer type), ``beta`` ``(s,)`` (float64; ``alpha`` may be float64 or int8 signs) and
+    the surface of each triple ``(t,)`` (int32).
+
+    Each triangle is one int64 key and sign-valued ``beta`` one bit of it, so that the
+    scratch stays near 40 bytes a triple (a formation of 100,000 robots derives its
+    surfaces inside a run: docs/swarms.md).
     """
-    t = np.asarray(triples, dtype=np.int64).reshape(-1, 3)
-    srt = np.sort(t, axis=1)
-    beta = np.asarray(alpha, dtype=float) * parity(t[:, 0], t[:, 1], t[:, 2])
+    t = np.asarray(triples).reshape(-1, 3)
     if len(t) == 0:
-        empty = (np.zeros((0, 3), np.int64), np.zeros(0), np.zeros(0, np.int64))
+        empty = (np.zeros((0, 3), t.dtype), np.zeros(0), np.zeros(0, np.int32))
         for arr in empty:
             arr.setflags(write=False)
         return empty
-    order = np.lexsort((beta, srt[:, 2], srt[:, 1], srt[:, 0]))
-    st, sb = srt[order], beta[order]
-    new_triangle = np.any(st[1:] != st[:-1], axis=1)
-    new_beta = np.abs(sb[1:] - sb[:-1]) > BETA_RTOL * np.maximum(1.0, np.abs(sb[:-1]))
-    group = np.empty(len(t), dtype=np.int64)
-    group[order] = np.cumsum(np.concatenate([[True], new_triangle | new_beta])) - 1
-    first = np.full(group.max() + 1, len(t), dtype=np.int64)
-    np.minimum.at(first, group, np.arange(len(t)))
-    rank = np.empty(first.size, dtype=np.int64)
-    rank[np.argsort(first, kind="stable")] = np.arange(first.size)
-    surface = rank[group]
-    firsts = np.sort(first)
-    tri_arr, beta_arr = srt[firsts], beta[firsts]
+    i, j, k = t.T
+    held = np.asarray(alpha)
+    # alpha_ijk parity(i, j, k): c_ijk = parity c_abc; int8 signs stay int8 (a byte a triple)
+    beta = np.array(held, dtype=np.int8 if held.dtype == np.int8 else float).reshape(-1)
+    beta[(i > j) ^ (i > k) ^ (j > k)] *= -1
+    lo, hi = np.minimum(np.minimum(i, j), k), np.maximum(np.maximum(i, j), k)
+    top = int(hi.max()) + 1
+    if top**3 < 2**62:  # the sorted triangle (a, b, c) as one key, sign-valued beta a bit of it
+        key = lo.astype(np.int64)
+        key *= top * top
+        mid = i.astype(np.int64)
+        for x in (j, k):
+            mid += x
+        for x in (lo, hi):
+            mid -= x
+        del lo
+        mid *= top
+        key += mid
+        del mid
+        key += hi
+        del hi
+        if np.all(np.abs(beta) == 1):
+            key *= 2
+            key += beta > 0
+            order = np.argsort(key, kind="stable")
+            key = key[order]
+            new = key[1:] != key[:-1]
+        else:
+            order = np.lexsort((beta, key))
+            key = key[order]
+            sb = beta[order]
+            new = (key[1:] != key[:-1]) | (
+                np.abs(sb[1:] - sb[:-1]) > BETA_RTOL * np.maximum(1.0, np.abs(sb[:-1]))
+            )
+            del sb
+        del key
+    else:  # beyond 1.6 million robots: the three columns
+        srt = np.sort(t, axis=1)
+        order = np.lexsort((beta, srt[:, 2], srt[:, 1], srt[:, 0]))
+        st, sb = srt[order], beta[order]
+        new = np.any(st[1:] != st[:-1], axis=1) | (
+            np.abs(sb[1:] - sb[:-1]) > BETA_RTOL * np.maximum(1.0, np.abs(sb[:-1]))
+        )
+        del srt, st, sb
+    new = np.concatenate([[True], new])
+    starts = np.flatnonzero(new)
+    first = np.minimum.reduceat(order, starts)  # each surface's first triple
+    del starts
+    group = np.cumsum(new, dtype=np.int32)
+    group -= 1
+    del new
+    rank = np.empty(first.size, dtype=np.int32)
+    rank[np.argsort(first, kind="stable")] = np.arange(first.size, dtype=np.int32)
+    surface = np.empty(len(t), dtype=np.int32)
+    surface[order] = rank[group]
+    del order, group, rank
+    first.sort()
+    tri_arr = t[first]
+    tri_arr.sort(axis=1)
+    beta_arr = beta[first].astype(float)
     for arr in (tri_arr, beta_arr, surface):
         arr.setflags(write=False)
     return tri_arr, beta_arr, surface
+
+
+def both_orders(
+    halves: NDArray[np.integer], alpha: NDArray
+) -> tuple[NDArray[np.int64], NDArray, NDArray[np.int64]]:
+    """Every restricted triple in both orders, from one of each pair.
+
+    ``halves`` ``(h, 3)``: the triples ``(i, j, k)`` with ``j < k``, and their
+    ``alpha`` ``(h,)``; ``alpha_ikj = -alpha_ijk`` (eq. 3) gives the others. Returns the
+    ``2 h`` triples sorted lexicographically, their alpha (of ``alpha``'s type) and the
+    half each one comes from.
+    """
+    t = np.asarray(halves, dtype=np.int64).reshape(-1, 3)
+    h = len(t)
+    full = np.concatenate([t, t[:, [0, 2, 1]]])
+    order = np.lexsort((full[:, 2], full[:, 1], full[:, 0]))
+    values = np.concatenate([alpha, -alpha])[order]  # eq. (3)
+    half = np.concatenate([np.arange(h), np.arange(h)])[order]
+    out = (full[order], values, half)
+    for arr in out:
+        arr.setflags(write=False)
+    return out

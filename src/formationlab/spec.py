@@ -24,20 +24,22 @@ Conventions (written down once, see ``docs/conventions.md``)
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import FormationError
 from .graph import as_edges, complete_edges, edges_connected, is_rigid
-from .orientation import alpha_from_shape, neighbour_triples, switching_surfaces
+from .orientation import alpha_from_shape, both_orders, neighbour_triples, switching_surfaces
 
 __all__ = [
     "DENSE_LIMIT",
+    "HELD_LIMIT",
     "AlphaValues",
     "Formation",
     "FormationError",
@@ -52,6 +54,17 @@ Orientation = Literal["free", "template", "mirror", "table"]
 #: lists of restricted triples, which every computation of the package uses.
 DENSE_LIMIT = 64
 AlphaValues = Literal["sign", "angle"]
+
+#: A formation holds one of each pair of restricted triples, ``(i, j, k)`` with ``j < k``
+#: (``alpha_ikj = -alpha_ijk``, eq. 3, gives the other). What it derives from them (the
+#: ordered list of both, the switching surfaces) it keeps once built when there are at most
+#: this many restricted triples, and builds again at each access beyond (a triangular
+#: lattice of more than about 44,000 robots): memory for time, where the compiled run
+#: reads them once and the held lists would be most of the memory. At 100,000 robots they
+#: take about 0.2 s each to build and would hold 0.45 KB per robot (docs/swarms.md).
+HELD_LIMIT = 1 << 20
+#: The names under which a formation keeps what it derives from its halves.
+_DERIVED = ("_ordered_lists", "_surfaces_held", "_triple_surface")
 
 #: Robot indices (edges, restricted triples, surfaces) are stored as int32 when robot
 #: numbers fit (every formation that fits in memory): half the bytes of int64.
@@ -124,8 +137,9 @@ class Formation:
         form may be given; the other is derived.
     restricted_triples : ndarray of int, shape (t, 3), optional
         The triples ``(i, j, k)`` with a non-zero ``alpha_ijk``, 0-based, sorted;
-        both ``(i, j, k)`` and ``(i, k, j)``. What every computation uses: its size
-        grows with the edges, not with ``n^3``.
+        both ``(i, j, k)`` and ``(i, k, j)``. Its size grows with the edges, not with
+        ``n^3``. The formation holds the halves ``j < k`` (:attr:`restricted_halves`)
+        and derives this list from them (kept up to :data:`HELD_LIMIT` triples).
     restricted_alpha : ndarray, shape (t,), optional
         ``alpha_ijk`` of those triples, float64. When every value is +1 or -1 (sign-valued
         alpha) the formation holds them as int8 signs and gives a new read-only float64
@@ -205,17 +219,21 @@ class Formation:
             if template.shape != (n, 2) or not np.all(np.isfinite(template)):
                 raise FormationError(f"template must be a finite ({n}, 2) array", key="template")
             template.setflags(write=False)
-        index, tri_index = _index(edges, n), _index(triples, n)
-        for arr in (d, index, dist, tri_index):
+        half = triples[:, 1] < triples[:, 2]  # the mirrors follow from eq. (3)
+        index, halves = _index(edges, n), _index(triples[half], n)
+        values = values[half]
+        del triples, half
+        for arr in (d, index, dist, halves):
             arr.setflags(write=False)
         object.__setattr__(self, "diameters", d)
         object.__setattr__(self, "edges", index)
         object.__setattr__(self, "distances", dist)
         object.__setattr__(self, "alpha", alpha)
-        object.__setattr__(self, "restricted_triples", tri_index)
         signs = _signs(values)
-        self.__dict__.pop("_restricted_alpha", None)  # as given: replaced by the stored form
-        object.__setattr__(self, "_alpha_stored", values if signs is None else signs)
+        for given in ("_restricted_triples", "_restricted_alpha"):  # replaced by the halves
+            self.__dict__.pop(given, None)
+        object.__setattr__(self, "_halves", halves)
+        object.__setattr__(self, "_half_alpha", values if signs is None else signs)
         object.__setattr__(self, "template", template)
 
     def _restrictions(self, n: int, edges: NDArray[np.int64]) -> tuple[NDArray, NDArray]:
@@ -518,9 +536,10 @@ class Formation:
         r.setflags(write=False)
         return r
 
-    @cached_property
+    @property
     def restricted_sign(self) -> NDArray[np.float64]:
-        """Desired ``sign(c_ijk)`` of each restricted triple, ``-sign(alpha_ijk)``; ``(t,)``."""
+        """Desired ``sign(c_ijk)`` of each restricted triple, ``-sign(alpha_ijk)``; ``(t,)``
+        (a new read-only array at each access)."""
         s = -np.sign(self.restricted_alpha)
         s.setflags(write=False)
         return s
@@ -537,34 +556,83 @@ class Formation:
     @property
     def has_orientation(self) -> bool:
         """Whether some triple is restricted (the orientation is not free)."""
-        return len(self.restricted_triples) > 0
+        return len(self.restricted_halves) > 0
 
-    def alpha_at(self, which: slice | NDArray[np.integer]) -> NDArray[np.float64]:
-        """``restricted_alpha[which]`` (float64) without making the whole array when the
-        formation holds signs."""
-        part = self._held_alpha(which)
-        return part if part.dtype == np.float64 else part.astype(np.float64)
+    @property
+    def restricted_halves(self) -> NDArray[np.integer]:
+        """The restricted triples ``(i, j, k)`` with ``j < k``, sorted, int32 ``(h,)``: what
+        the formation holds; ``(i, k, j)`` is restricted with ``alpha_ikj = -alpha_ijk``."""
+        halves: NDArray[np.integer] = self.__dict__["_halves"]
+        return halves
 
-    def _held_alpha(self, which: slice | NDArray[np.integer]) -> NDArray:
-        """``restricted_alpha[which]`` as held: int8 signs or float64. Multiplied into a
-        float64 array they give its numbers (numpy casts int8 to the same float64)."""
-        held: NDArray = self.__dict__["_alpha_stored"]
+    def half_alpha(self, which: slice | NDArray[np.integer] = slice(None)) -> NDArray:
+        """``alpha_ijk`` of :attr:`restricted_halves` ``[which]`` as held: int8 signs
+        (sign-valued alpha) or float64. Multiplied into a float64 array the signs give the
+        same numbers as their float64 values (numpy casts int8 exactly)."""
+        held: NDArray = self.__dict__["_half_alpha"]
         return held[which]
 
-    def _held_beta(self, which: slice | NDArray[np.integer]) -> NDArray:
-        """``surfaces[1][which]`` as held: int8 signs or float64 (as :meth:`_held_alpha`)."""
-        held: NDArray = self._surface_lists[1]
-        return held[which]
+    def _kept(self, name: str, build: Callable[[], Any]) -> Any:
+        """What the formation derives from its halves: kept once built up to
+        :data:`HELD_LIMIT` restricted triples, built at each access beyond."""
+        held = self.__dict__.get(name)
+        if held is None:
+            held = build()
+            for arr in held if isinstance(held, tuple) else (held,):
+                arr.setflags(write=False)
+            if 2 * len(self.restricted_halves) <= HELD_LIMIT or self.__dict__.get("_holding", 0):
+                self.__dict__[name] = held
+        return held
 
-    @cached_property
-    def _surface_lists(self) -> tuple[NDArray[np.integer], NDArray, NDArray[np.integer]]:
-        """:attr:`surfaces` as held: ``beta`` as int8 signs when every one is +1 or -1."""
-        alpha = self.restricted_alpha
-        tris, beta, surface = switching_surfaces(self.restricted_triples, alpha)
-        del alpha
-        signs = _signs(beta)
-        # surfaces are numbered below the number of triples
-        return _index(tris, self.n), beta if signs is None else signs, _index(surface, len(surface))
+    @contextmanager
+    def holding(self) -> Iterator[Formation]:
+        """Keep what the formation derives from its halves while the block runs, whatever
+        its size (the numpy driver's run: its field reads them at every step); beyond
+        :data:`HELD_LIMIT` restricted triples they are dropped at the end."""
+        depth = self.__dict__.get("_holding", 0)
+        self.__dict__["_holding"] = depth + 1
+        try:
+            yield self
+        finally:
+            self.__dict__["_holding"] = depth
+            if depth == 0 and 2 * len(self.restricted_halves) > HELD_LIMIT:
+                for name in _DERIVED:
+                    self.__dict__.pop(name, None)
+
+    @property
+    def _ordered(self) -> tuple[NDArray[np.integer], NDArray]:
+        """Both orders of every restricted triple, sorted, and their alpha as held
+        (:func:`orientation.both_orders`)."""
+
+        def build() -> tuple[NDArray[np.integer], NDArray]:
+            t, a, _ = both_orders(self.restricted_halves, self.half_alpha())
+            return _index(t, self.n), a
+
+        return self._kept("_ordered_lists", build)  # type: ignore[no-any-return]
+
+    @property
+    def held_surfaces(self) -> tuple[NDArray[np.integer], NDArray, NDArray[np.integer]]:
+        """:attr:`surfaces` as held: the triangles, ``beta`` (int8 signs when every one is +1
+        or -1, as :meth:`half_alpha`) and the surface of each of :attr:`restricted_halves`
+        (the same surfaces, numbered alike, as from both orders: a triple's mirror lies on
+        its surface, after it). One build where both orders are not needed."""
+
+        def build() -> tuple[NDArray[np.integer], NDArray, NDArray[np.integer]]:
+            tris, beta, surface = switching_surfaces(self.restricted_halves, self.half_alpha())
+            signs = _signs(beta)
+            # surfaces are numbered below the number of triples
+            return (
+                _index(tris, self.n),
+                beta if signs is None else signs,
+                _index(surface, len(surface)),
+            )
+
+        return self._kept("_surfaces_held", build)  # type: ignore[no-any-return]
+
+    @property
+    def half_surface(self) -> NDArray[np.integer]:
+        """Surface of each of :attr:`restricted_halves`, int32 ``(h,)``."""
+        return self.held_surfaces[2]
 
     @property
     def surfaces(self) -> tuple[NDArray[np.integer], NDArray[np.float64], NDArray[np.integer]]:
@@ -586,23 +654,26 @@ class Formation:
         surface : ndarray of int32, shape (t,)
             Surface of each restricted triple (``restricted_triples[m]``).
 
-        Built once (on first access) and kept.
+        Built from the halves on first access and kept (up to :data:`HELD_LIMIT`
+        restricted triples; built at each access beyond).
         """
-        tris, beta, surface = self._surface_lists
-        return tris, _floats(beta), surface
+        tris, beta, _ = self.held_surfaces
+        return tris, _floats(beta), self.triple_surface
 
     @property
     def triple_surface(self) -> NDArray[np.integer]:
         """Surface of each restricted triple, int32 ``(t,)``: ``surfaces[2]``, without making
         the float64 ``beta`` of :attr:`surfaces`."""
-        return self._surface_lists[2]
+        return self._kept(  # type: ignore[no-any-return]
+            "_triple_surface",
+            lambda: self.half_surface[both_orders(self.restricted_halves, self.half_alpha())[2]],
+        )
 
     @cached_property
     def surface_labels(self) -> list[str]:
         """1-based label of each switching surface, ``"alpha_ijk"`` of its first triple."""
-        surface = self.triple_surface
-        first = np.unique(surface, return_index=True)[1]
-        firsts = (self.restricted_triples[first] + 1).tolist()  # ints: 10x faster to format
+        first = np.unique(self.half_surface, return_index=True)[1]  # (a half: before its mirror)
+        firsts = (self.restricted_halves[first] + 1).tolist()  # ints: 10x faster to format
         return ["alpha_{}{}{}".format(*ijk) for ijk in firsts]
 
     @property
@@ -657,27 +728,46 @@ class Formation:
         return arr
 
 
+def _given(self: Formation, name: str) -> NDArray | None:
+    """The value given for ``name`` while the formation is being built."""
+    return self.__dict__.get(f"_{name}")
+
+
+def _get_restricted_triples(self: Formation) -> NDArray[np.integer]:
+    if "_halves" in self.__dict__:  # a built formation
+        return self._ordered[0]
+    return _given(self, "restricted_triples")  # type: ignore[return-value]
+
+
 def _get_restricted_alpha(self: Formation) -> NDArray[np.float64]:
-    held = self.__dict__
-    if "_alpha_stored" in held:  # a built formation
-        return _floats(held["_alpha_stored"])
-    return held.get("_restricted_alpha")  # type: ignore[return-value]  # as given, being built
+    if "_halves" in self.__dict__:
+        return _floats(self._ordered[1])
+    return _given(self, "restricted_alpha")  # type: ignore[return-value]
 
 
-def _set_restricted_alpha(self: Formation, value: NDArray[np.float64] | None) -> None:
-    self.__dict__["_restricted_alpha"] = value  # by the dataclass's __init__ only (frozen)
+def _setter(name: str) -> Callable[[Formation, NDArray | None], None]:
+    def put(self: Formation, value: NDArray | None) -> None:
+        self.__dict__[f"_{name}"] = value  # by the dataclass's __init__ only (frozen)
+
+    return put
 
 
-# ``restricted_alpha`` stays a field (an argument of the constructor, of
-# ``dataclasses.replace``), read through this property: the values as float64, held as
-# int8 signs when every one is +1 or -1 (``_signs``).
-setattr(  # noqa: B010 (a property over the dataclass field of the same name)
-    Formation,
-    "restricted_alpha",
-    property(
+# ``restricted_triples`` and ``restricted_alpha`` stay fields (arguments of the
+# constructor, of ``dataclasses.replace``), read through these properties: both orders of
+# every triple, derived from the halves the formation holds; alpha as float64 (held as
+# int8 signs when every one is +1 or -1, ``_signs``).
+for _name, _get, _doc in (
+    (
+        "restricted_triples",
+        _get_restricted_triples,
+        "The restricted triples, both ``(i, j, k)`` and ``(i, k, j)``, sorted, int32 ``(t, "
+        "3)``, read-only; derived from :attr:`Formation.restricted_halves`.",
+    ),
+    (
+        "restricted_alpha",
         _get_restricted_alpha,
-        _set_restricted_alpha,
-        doc="``alpha_ijk`` of the restricted triples, float64 ``(t,)``, read-only; held as "
+        "``alpha_ijk`` of the restricted triples, float64 ``(t,)``, read-only; held as "
         "int8 signs when every value is +1 or -1 (then a new array at each access).",
     ),
-)
+):
+    setattr(Formation, _name, property(_get, _setter(_name), doc=_doc))

@@ -49,16 +49,14 @@ def switching_functions(
     restriction is decided on or off: the control, ``psi``, the integrators'
     switching diagnostics and the compiled kernels all use these numbers.
     """
-    tris = formation.surfaces[0]
+    tris, beta, _ = formation.held_surfaces  # (beta as int8 signs or float64: the same products)
     if len(tris) <= PSI_PART:
-        beta = formation.surfaces[1]
         return beta * triangle_products(q, tris) + theta  # eq. (14)
     q = np.asarray(q, dtype=float)
     out = np.empty((*q.shape[:-2], len(tris)))
     for a in range(0, len(tris), PSI_PART):  # in parts (the same numbers: element by element)
         part = slice(a, a + PSI_PART)
-        beta = formation._held_beta(part)  # (int8 signs or float64: the same products)
-        out[..., part] = beta * triangle_products(q, tris[part]) + theta  # eq. (14)
+        out[..., part] = beta[part] * triangle_products(q, tris[part]) + theta  # eq. (14)
     return out
 
 
@@ -127,26 +125,26 @@ def grad_psi(
 def psi_sum(formation: Formation, q: NDArray[np.float64], theta: float) -> NDArray[np.float64]:
     """``sum_i psi_i`` over ordered pairs (eq. 13); shape ``(...)``.
 
-    Beyond :data:`PSI_PART` restricted triples, summed part by part (the same terms;
-    the sum's rounding may differ in the last bits).
+    Beyond :data:`PSI_PART` restricted triples, summed part by part over the halves
+    ``j < k`` the formation holds, twice (``alpha_ikj c_ikj = alpha_ijk c_ijk`` and both
+    switch on one surface: the same terms; the sum's rounding may differ in the last bits).
     """
     q = np.asarray(q, dtype=float)
-    t = formation.restricted_triples
-    if len(t) <= PSI_PART:
-        i, j, k = t.T
+    if 2 * len(formation.restricted_halves) <= PSI_PART:
+        i, j, k = formation.restricted_triples.T
         c = cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :])  # c_ijk
         ac = formation.restricted_alpha * c
         return np.sum(ac * _steps(formation, q, theta), axis=-1)  # eq. (14): alpha c Upsilon(.)
     on = upsilon(switching_functions(formation, q, theta))  # (..., s)
-    surface = formation.triple_surface
+    halves, surface = formation.restricted_halves, formation.half_surface
     total = np.zeros(q.shape[:-2])
-    for a in range(0, len(t), PSI_PART):
-        i, j, k = t[a : a + PSI_PART].T
+    for a in range(0, len(halves), PSI_PART):
+        i, j, k = halves[a : a + PSI_PART].T
         c = cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :])  # c_ijk
         steps = np.take(on, surface[a : a + PSI_PART], axis=-1)
-        alpha = formation._held_alpha(slice(a, a + PSI_PART))  # (int8 signs or float64)
+        alpha = formation.half_alpha(slice(a, a + PSI_PART))  # (int8 signs or float64)
         total = total + np.sum(alpha * c * steps, axis=-1)  # eq. (14)
-    return total
+    return 2.0 * total  # eq. (13): the ordered pairs (j, k) and (k, j)
 
 
 @register

@@ -121,25 +121,26 @@ def build_terms(
         pi = pj = np.zeros(0, np.int64)
         is_edge, dist, contact = np.zeros(0, bool), np.zeros(0), np.zeros(0)
     e = formation.edges
-    tris, beta, surface = formation.surfaces
-    terms = formation.restricted_triples
     oriented = formation.has_orientation and k_a > 0
-    if not oriented:
+    if oriented:  # (i, k, j) is the same term as (i, j, k): the halves j < k the formation holds
+        tris, held_beta, surface = formation.held_surfaces
+        beta = held_beta.astype(np.float64)
+        terms = formation.restricted_halves
+    else:
         tris, beta = np.zeros((0, 3), np.int64), np.zeros(0)
         terms, surface = np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
-    # (i, k, j) is the same term as (i, j, k): the halves with j < k, grouped by surface
-    # (one gather of each column, so that no copy of the (t, 3) triples is made; alpha of
-    # the halves only, not the whole float64 array when the formation holds signs)
-    idx = np.flatnonzero(terms[:, 1] < terms[:, 2])
-    idx = idx[np.argsort(surface[idx], kind="stable")]
+    # grouped by surface (one gather of each column, so that no copy of the (h, 3) triples
+    # is made; alpha as float64 for the halves taken)
+    idx = np.argsort(surface, kind="stable")
     surface = surface[idx]
-    alpha = formation.alpha_at(idx) if oriented else np.zeros(0)
-    if not alpha.flags.owndata:  # (a view of the formation's own values: never changed)
-        alpha = alpha.copy()
+    alpha = formation.half_alpha(idx).astype(np.float64) if oriented else np.zeros(0)
     i, j, k = (np.asarray(terms[idx, m], dtype=index) for m in range(3))
     del idx
     alpha *= 2.0 * float(k_a)  # the weights 2 k_a alpha_ijk, in place
-    start = np.searchsorted(surface, np.arange(len(tris) + 1)).astype(np.int64)
+    start = np.searchsorted(surface, np.arange(len(tris) + 1, dtype=surface.dtype))
+    start = start.astype(np.int64, copy=False)
+    corners = [np.ascontiguousarray(tris[:, c], dtype=index) for c in range(3)]
+    del tris  # (the formation's, or built for this call: let go before the rest is made)
     area_tris, target = areas if areas is not None else (np.zeros((0, 3), np.int64), np.zeros(0))
     return KernelTerms(
         kind=int(kind),
@@ -152,10 +153,10 @@ def build_terms(
         repulsion_gain=float(repulsion_gain),
         repulsion_eta=float(eta),
         repulsion_influence=float(influence),
-        surface_a=np.ascontiguousarray(tris[:, 0], dtype=index),
-        surface_b=np.ascontiguousarray(tris[:, 1], dtype=index),
-        surface_c=np.ascontiguousarray(tris[:, 2], dtype=index),
-        surface_beta=np.array(beta, dtype=float),
+        surface_a=corners[0],
+        surface_b=corners[1],
+        surface_c=corners[2],
+        surface_beta=beta,  # (a new float64 array)
         theta=float(theta),
         term_start=start,
         term_i=i,

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -144,6 +145,16 @@ class Stepped:
 
 
 def drive(
+    system: System, stepper: FixedStepIntegrator, x0: NDArray[np.float64], **kw: Any
+) -> Stepped:
+    """Step the trials ``x0`` ``(B, n, k)``: :func:`_drive`, with the lists the formation
+    derives from its restricted triples kept for the run (``Formation.holding``)."""
+    formation = getattr(system, "formation", None)  # (duck-typed systems of the tests)
+    with formation.holding() if formation is not None else nullcontext():
+        return _drive(system, stepper, x0, **kw)
+
+
+def _drive(
     system: System,
     stepper: FixedStepIntegrator,
     x0: NDArray[np.float64],
