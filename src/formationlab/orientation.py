@@ -130,10 +130,11 @@ def switching_surfaces(
     """
     t = np.asarray(triples).reshape(-1, 3)
     if len(t) == 0:
-        empty = (np.zeros((0, 3), t.dtype), np.zeros(0), np.zeros(0, np.int32))
-        for arr in empty:
+        none = t[:0].copy()
+        beta, surface = np.zeros(0), np.zeros(0, np.int32)
+        for arr in (none, beta, surface):
             arr.setflags(write=False)
-        return empty
+        return none, beta, surface
     i, j, k = t.T
     held = np.asarray(alpha)
     # alpha_ijk parity(i, j, k): c_ijk = parity c_abc; int8 signs stay int8 (a byte a triple)

@@ -40,11 +40,12 @@ always a trial's last state. Counts in ``stats`` are integers.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 from contextlib import nullcontext
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Concatenate, ParamSpec, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -58,6 +59,9 @@ if TYPE_CHECKING:
     from .base import FixedStepIntegrator
 
 __all__ = ["Stepped", "StopRule", "drive"]
+
+P = ParamSpec("P")
+R = TypeVar("R")
 
 Progress = Callable[[float], None]
 #: the progress callback is called at least this often (seconds of wall time)
@@ -144,17 +148,23 @@ class Stepped:
         return np.asarray(ks, dtype=float) * self.dt, np.asarray(xs), np.asarray(vs)
 
 
+def _holding_formation(
+    fn: Callable[Concatenate[System, P], R],
+) -> Callable[Concatenate[System, P], R]:
+    """``fn`` with the lists the system's formation derives from its restricted triples
+    kept while it runs (``Formation.holding``): a field evaluated at every step reads them."""
+
+    @functools.wraps(fn)
+    def run(system: System, *args: P.args, **kw: P.kwargs) -> R:
+        formation = getattr(system, "formation", None)  # (duck-typed systems of the tests)
+        with formation.holding() if formation is not None else nullcontext():
+            return fn(system, *args, **kw)
+
+    return run
+
+
+@_holding_formation
 def drive(
-    system: System, stepper: FixedStepIntegrator, x0: NDArray[np.float64], **kw: Any
-) -> Stepped:
-    """Step the trials ``x0`` ``(B, n, k)``: :func:`_drive`, with the lists the formation
-    derives from its restricted triples kept for the run (``Formation.holding``)."""
-    formation = getattr(system, "formation", None)  # (duck-typed systems of the tests)
-    with formation.holding() if formation is not None else nullcontext():
-        return _drive(system, stepper, x0, **kw)
-
-
-def _drive(
     system: System,
     stepper: FixedStepIntegrator,
     x0: NDArray[np.float64],
