@@ -17,10 +17,10 @@ as ``System.rhs`` and the driver do it:
    :func:`formationlab.safety.dual_active_set.centralized_command`: the closed form of
    one or two active rows, else Goldfarb and Idnani's dual active-set method (exact for
    any number of active rows), with ``barrier_filter``'s relaxation of rows with
-   ``h < 0`` and its decentralized fallback. Only if rounding defeats that method (never
-   met in the studies) does the trial pause; :func:`run_safety` then solves its QP
-   with :func:`formationlab.safety.barrier_filter` (Clarabel) and the trial resumes
-   with that command;
+   ``h < 0`` and its decentralized fallback. Only if rounding defeats that method (rare:
+   at the gap's starts with a robot near a disc, docs/safety.md) does the trial pause;
+   :func:`run_safety` then solves its QP with :func:`formationlab.safety.barrier_filter`
+   (Clarabel) and the trial resumes with that command;
 4. the robot model's rates, the stop rule, and the Euler step judged by the contact
    rule (``System.step_verdict``): not finite, contact between robots (``.kernels``'
    ``_contact``) or with an obstacle at the end of the step, or along it.
