@@ -136,3 +136,16 @@ def test_a_formation_beyond_the_held_limit_holds_only_its_halves(monkeypatch):
     ref = fl.simulate(f, "angle-restricted", q0, duration=0.05, backend="numpy")
     assert res.status == ref.status and not set(derived) & set(vars(g))
     np.testing.assert_array_equal(res.q, ref.q)
+
+
+def test_switching_surfaces_beyond_the_one_key_range_are_the_same():
+    # robot numbers whose cube overflows the int64 key take the three-column path; a
+    # numbering that keeps the order gives the same surfaces, renumbered alike
+    f = patch(120, "angle", seed=8)
+    t, a = f.restricted_halves.astype(np.int64), f.half_alpha()
+    big = 2_000_000 + 1_000 * t  # (the largest number exceeds 2**62 ** (1/3))
+    want = switching_surfaces(t, a)
+    got = switching_surfaces(big, a)
+    np.testing.assert_array_equal(got[0], 2_000_000 + 1_000 * want[0])
+    assert got[1].tobytes() == want[1].tobytes()
+    np.testing.assert_array_equal(got[2], want[2])

@@ -580,9 +580,14 @@ class Formation:
             held = build()
             for arr in held if isinstance(held, tuple) else (held,):
                 arr.setflags(write=False)
-            if 2 * len(self.restricted_halves) <= HELD_LIMIT or self.__dict__.get("_holding", 0):
+            if not self._beyond_limit or self.__dict__.get("_holding", 0):
                 self.__dict__[name] = held
         return held
+
+    @property
+    def _beyond_limit(self) -> bool:
+        """Whether the formation has more than :data:`HELD_LIMIT` restricted triples."""
+        return 2 * len(self.restricted_halves) > HELD_LIMIT
 
     @contextmanager
     def holding(self) -> Iterator[Formation]:
@@ -595,7 +600,7 @@ class Formation:
             yield self
         finally:
             self.__dict__["_holding"] = depth
-            if depth == 0 and 2 * len(self.restricted_halves) > HELD_LIMIT:
+            if depth == 0 and self._beyond_limit:
                 for name in _DERIVED:
                     self.__dict__.pop(name, None)
 
