@@ -334,6 +334,33 @@ def test_bad_tables_fail_validate_and_run_with_one_line(
     assert not (tmp_path / "out").exists()  # nothing half-written
 
 
+def test_a_robot_that_stops_later_needs_a_fixed_step_scheme(tmp_path: Path) -> None:
+    """A stop at t > 0 makes the field depend on time, which filippov does not step: the
+    scenario says so at the integrator's line (validate and run alike), not the run."""
+    text = triangle("late", "1.0", "[faults]\nstop = [{ robot = 2, at = 0.5 }]\n")
+    path = tmp_path / "late.toml"
+    path.write_text(text.replace('"euler"\ndt = 1e-3', '"filippov"'))
+    for args in (["validate", str(path)], ["run", str(path), "-o", str(tmp_path / "out")]):
+        res = CLI.invoke(app, args)
+        assert res.exit_code == 2, res.output
+        assert "Traceback" not in res.output
+        assert "simulation.integrator (line" in res.output
+        assert "robot 2 stops at t = 0.5 s" in res.output
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("at", [0.0, np.inf])
+def test_a_stop_at_the_start_or_never_leaves_the_field_constant_in_time(at: float) -> None:
+    faults = Faults(stop=[Stop(robot=2, at=at)])
+    system = System(formation=TRIANGLE, law=fl.DistanceLaw(), faults=faults)
+    assert not system.time_dependent
+    run = fl.simulate(TRIANGLE, "distance", Q0, duration=0.5, integrator="filippov", faults=faults)
+    moved = np.abs(run.q[-1] - Q0).max(axis=-1)
+    assert (moved[1] == 0.0) == (at == 0.0)  # robot 2 held only when it stops at t = 0
+    assert System(formation=TRIANGLE, law=fl.DistanceLaw(),
+                  faults=Faults(stop=[Stop(robot=2, at=0.25)])).time_dependent  # fmt: skip
+
+
 def test_a_delay_that_is_not_whole_steps_says_what_to_use() -> None:
     with pytest.raises(
         ScenarioError, match=r"not a multiple of the step dt = 0.001 s.*use 0.001 s|use 0.002 s"

@@ -30,6 +30,7 @@ with no filter every method computes exactly what it did before they existed.
 from __future__ import annotations
 
 import copy
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -114,8 +115,8 @@ class System:
     @property
     def time_dependent(self) -> bool:
         """Whether the field depends on the time (a marching reference that is a function,
-        a robot that stops at some ``t > 0``)."""
-        stops = self.faults is not None and any(s.at > 0 for s in self.faults.stop)
+        a robot that stops at some finite ``t > 0``; ``at = inf`` never comes)."""
+        stops = self.faults is not None and any(0 < s.at < math.inf for s in self.faults.stop)
         return stops or (self.marching is not None and self.marching.time_dependent)
 
     @property

@@ -49,7 +49,7 @@ from ._scenario_robots import build_marching, build_robot_model
 from ._scenario_safety import build_safety
 from .controllers import LAWS, Law
 from .errors import IgnoredKeyWarning, ScenarioError, UserInputError
-from .integrators import INTEGRATORS, Integrator
+from .integrators import INTEGRATORS, FixedStepIntegrator, Integrator
 from .marching import March
 from .models import MODELS, RobotModel, SingleIntegrator
 from .sensing import SENSING_LIMIT, Faults, Sensing, Stop, delay_steps
@@ -444,4 +444,12 @@ def _sensing(
             faults.check(formation.n)
         except UserInputError as exc:
             raise fail(exc.key or "faults", str(exc)) from None
+        late = [s for s in faults.stop if 0 < s.at < math.inf]
+        if late and not isinstance(integrator, FixedStepIntegrator):
+            raise fail(
+                "simulation.integrator",
+                f"robot {late[0].robot} stops at t = {late[0].at:g} s ([faults]), so the field "
+                f"depends on time, and {integrator.name!r} steps only fields that do not: use "
+                "a fixed-step integrator (euler, rk4, implicit-euler)",
+            )
     return sensing, faults

@@ -236,8 +236,11 @@ class Filippov(Integrator):
             )
         if system.time_dependent:
             raise ParameterError(
-                "filippov steps a field that does not depend on time: give the marching "
-                "reference as a constant velocity, or use a fixed-step integrator"
+                "filippov steps a field that does not depend on time: a robot that stops "
+                "at some t > 0 ([faults]) and a marching reference that is a function of "
+                "time need a fixed-step integrator (euler, rk4, implicit-euler); or give "
+                "the reference as a constant velocity",
+                key="simulation.integrator",
             )
         start_clock = time.perf_counter()
         q0 = np.array(q0, dtype=float)
