@@ -122,6 +122,16 @@ def test_the_study_table_fits_the_terminal(
     assert "angle-restricted" in text and "…" not in text
 
 
+def test_a_quiet_study_prints_nothing_but_writes_the_same_trials(
+    study_out: tuple[Path, Path], tmp_path: Path
+) -> None:
+    path, out = study_out
+    res = invoke("study", path, "--out", tmp_path / "q", "--quiet")
+    assert res.exit_code == 0
+    assert res.output == ""  # no progress, notes, table or "wrote" line
+    assert (tmp_path / "q" / "trials.parquet").read_bytes() == (out / "trials.parquet").read_bytes()
+
+
 def test_a_wide_terminal_gets_one_line_per_group(
     study_out: tuple[Path, Path], tmp_path: Path
 ) -> None:

@@ -102,6 +102,27 @@ def test_step_verdict_names_robot_and_obstacle():
     assert system.clearance(into) == pytest.approx(-0.05, abs=1e-12)
 
 
+@pytest.mark.parametrize(
+    "name", ["distance", "angle-restricted", "squared-distance", "signed-area"]
+)
+def test_a_step_into_contact_blames_the_step_only_under_a_barrier_law(name):
+    """The paper's laws have phi infinite at contact: a step into contact is too large.
+    The comparison laws have no barrier: their flow itself can bring robots together."""
+    from formationlab.controllers import LAWS
+
+    law = LAWS[name]()
+    system = System(formation=TRIANGLE, law=law)
+    x0 = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, 0.8]])
+    into = x0 + np.array([[0.0, 0], [-0.85, 0.0], [0, 0]])  # robots 1, 2 end 0.15 < 0.2 apart
+    msg = system.step_message(x0, into, Status.COLLISION, 1.0, 1e-3)
+    assert "robots 1 and 2" in msg
+    assert law.barrier_at_contact == (name in ("distance", "angle-restricted"))
+    if law.barrier_at_contact:
+        assert "cannot touch" in msg and "reduce dt" in msg
+    else:
+        assert "no barrier at contact" in msg and "safety filter" in msg and "reduce" not in msg
+
+
 def test_no_obstacles_and_no_filter_is_todays_loop(rng):
     q = rng.uniform(-3, 3, (5, 3, 2))
     plain = System(formation=TRIANGLE, law=DistanceLaw())

@@ -8,6 +8,8 @@ collide, under either filter the points keep ``D_s + 2 l`` at every step, and th
 centre, the contact rule's swept test).
 """
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -80,3 +82,74 @@ def test_unicycle_points_keep_the_enlarged_distance(kind, colliding_unicycles):
                     duration=STEPS * DT, model=model, safety=cfg)  # fmt: skip
     assert "collision" not in set(res.outcome)
     assert np.all(res.min_clearance >= D_S - SQUARE.contact_matrix[0, 1])
+
+
+def _heading_starts(n_starts: int) -> np.ndarray:
+    """Heading-mapped unicycle states (x, y, theta) on the square, clear of D_s."""
+    rng = np.random.default_rng(11)
+    out = []
+    while len(out) < n_starts:
+        p = rng.uniform(-3.0, 3.0, (4, 2))
+        d = np.linalg.norm(p[:, None] - p[None], axis=-1) + 9 * np.eye(4)
+        if d.min() > 0.32:
+            out.append(np.column_stack([p, rng.uniform(-np.pi, np.pi, 4)]))
+    return np.stack(out)
+
+
+def test_heading_unicycles_get_a_warning_because_the_filter_does_not_hold_them():
+    """Under "heading" a unicycle turns towards its command before following it, so the
+    certificate (the command is the centres' velocity) does not hold: a warning, and a
+    run where filtered robots still touch shows why it is one."""
+    from formationlab.errors import FormationlabWarning
+
+    cfg = SafetyFilter(filter="barrier-decentralized", distance=0.3)
+    model = Unicycle(mapping="heading")
+    with pytest.warns(FormationlabWarning, match="does not follow"):
+        System(formation=SQUARE, law=SquaredDistanceLaw(), model=model, safety=cfg)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FormationlabWarning)  # near-identity: no warning
+        System(formation=SQUARE, law=SquaredDistanceLaw(), model=Unicycle(), safety=cfg)
+    with pytest.warns(FormationlabWarning):
+        res = run_batch(SQUARE, SquaredDistanceLaw(), _heading_starts(100), dt=1e-2,
+                        duration=15.0, model=model, safety=cfg)  # fmt: skip
+    assert "collision" in set(res.outcome)  # 9 of 100 when written (44 without the filter)
+
+
+def test_double_integrators_refuse_a_filter_whose_certificate_they_cannot_follow(tmp_path):
+    """A double integrator's command is a force: the filter would report its commands
+    unchanged while robots meet (seen before this check). Refused, in Python and files."""
+    from typer.testing import CliRunner
+
+    from formationlab.cli import _load_commands, app
+    from formationlab.errors import ParameterError
+    from formationlab.models import DoubleIntegrator
+
+    cfg = SafetyFilter(filter="barrier", distance=D_S)
+    with pytest.raises(ParameterError, match="command is a force") as err:
+        System(formation=SQUARE, law=SquaredDistanceLaw(), model=DoubleIntegrator(), safety=cfg)
+    assert err.value.key == "filter"
+    System(formation=SQUARE, law=SquaredDistanceLaw(), model=DoubleIntegrator(),
+           safety=SafetyFilter(filter="none"))  # fmt: skip
+    text = (
+        "[robots]\npositions = [[0, 0], [2, 0], [2, 2], [0, 2]]\n"
+        'model = "double-integrator"\n[formation]\nedges = "complete"\n'
+        "template = [[0, 0], [1, 0], [1, 1], [0, 1]]\n"
+        '[controller]\nlaw = "squared-distance"\n[simulation]\nduration = 1.0\n'
+        "[study]\ntrials = 4\n"
+    )
+    plain, filtered = tmp_path / "plain.toml", tmp_path / "filtered.toml"
+    plain.write_text(text)
+    filtered.write_text(text + '[safety]\nfilter = "barrier-decentralized"\n')
+    _load_commands()
+    cli = CliRunner()
+    for args in (
+        ["validate", str(filtered)],
+        ["run", str(filtered), "-o", str(tmp_path / "run")],
+        ["study", str(filtered), "-o", str(tmp_path / "study")],
+        ["study", str(plain), "--filter", "barrier", "-o", str(tmp_path / "study2")],
+    ):
+        res = cli.invoke(app, args)
+        assert res.exit_code == 2, res.output
+        assert "Traceback" not in res.output and "command is a force" in res.output
+    assert "safety.filter (line 14)" in cli.invoke(app, ["validate", str(filtered)]).output
+    assert not any((tmp_path / d).exists() for d in ("run", "study", "study2"))

@@ -108,6 +108,7 @@ class System:
             self.marching.check(self.formation)
         if self.filtered:
             assert self.safety is not None
+            self.safety.check_model(self.model)
             self.safety.check_contact(self.formation.contact_matrix)
         if self.obstacles:
             self.law.obstacle_repulsion()  # a law without one refuses obstacles now
@@ -434,11 +435,17 @@ class System:
         if status is Status.COLLISION:
             i, j, a_ij = self.closest_pair(x1)
             r = self.clearance(x1) + a_ij
+            head = f"the step to t = {t:g} s would bring robots {i} and {j} to r = {r:.4g} <= "
+            if self.law.barrier_at_contact:
+                return (
+                    f"{head}a_{i}{j} = {a_ij:g}; the {self.law.name} law has a barrier at "
+                    "contact (the paper's phi), so its exact flow cannot touch and the step is "
+                    f"too large: reduce dt (now {dt:g} s), e.g. to {dt / 10:g} s"
+                )
             return (
-                f"the step to t = {t:g} s would bring robots {i} and {j} to r = {r:.4g} <= "
-                f"a_{i}{j} = {a_ij:g}; under a law with a barrier at contact (the paper's phi) "
-                f"the exact flow cannot touch, so the step is too large: reduce dt (now "
-                f"{dt:g} s), e.g. to {dt / 10:g} s"
+                f"{head}a_{i}{j} = {a_ij:g}; the {self.law.name} law has no barrier at "
+                "contact, so its own flow can bring robots together (a smaller dt than "
+                f"{dt:g} s tells whether it does); a safety filter ([safety]) keeps them apart"
             )
         p = int(np.argmin(self.pair_swept_clearances(x0, x1)))
         i, j = iu[p] + 1, ju[p] + 1

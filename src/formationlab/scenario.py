@@ -295,6 +295,11 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
     except UserInputError as exc:
         raise fail(f"robots.{exc.key or 'positions'}", str(exc)) from None
     x0.setflags(write=False)
+    if safety is not None:
+        try:
+            safety.check_model(robot)
+        except UserInputError as exc:
+            raise fail(f"safety.{exc.key}", str(exc)) from None
     marching = build_marching(model.marching, formation, fail)
 
     study_laws = (model.study or {}).get("laws")

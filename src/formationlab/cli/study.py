@@ -66,7 +66,7 @@ def study(
         typer.Option(
             "--filter",
             help='Safety filter of every trial: "none", "barrier" or "barrier-decentralized" '
-            "(overrides safety.filter; the other [safety] keys apply).",
+            "(overrides safety.filter; the other \\[safety] keys apply).",
         ),
     ] = None,
     sweep: Annotated[
@@ -74,7 +74,7 @@ def study(
         typer.Option(
             "--sweep",
             help="KEY=V1,V2,... : sweep KEY over these values instead of the file's "
-            "[study.sweep] (repeat for a product, e.g. --sweep noise=0,0.01,0.02).",
+            "\\[study.sweep] (repeat for a product, e.g. --sweep noise=0,0.01,0.02).",
         ),
     ] = None,
     resume: Annotated[
@@ -82,6 +82,9 @@ def study(
     ] = False,
     force: Annotated[
         bool, typer.Option("--force", help="Replace the files of an earlier study in OUT.")
+    ] = False,
+    quiet: Annotated[
+        bool, typer.Option("--quiet", "-q", help="No progress, notes or table (warnings stay).")
     ] = False,
 ) -> None:
     """Run many random starts of a scenario's laws and count the outcomes.
@@ -101,6 +104,10 @@ def study(
     from ..io.trials import ChunkFolder
     from ..studies import parse_study
     from ..studies.runner import StudySetup, run_study
+
+    def say(message: str) -> None:
+        if not quiet:
+            err_console.print(message, highlight=False)
 
     sc = load_scenario(scenario)
     for w in sc.warnings:
@@ -126,14 +133,14 @@ def study(
     setup = StudySetup.from_scenario(sc, config)
     _, note = setup.backend
     if note:
-        err_console.print(f"note: {note}", highlight=False)
+        say(f"note: {note}")
     identity = setup.identity(seed)
     store = ChunkFolder(out, identity)
     if resume:
         if not out.is_dir():
             fail(f"nothing to resume: {out} does not exist; run without --resume")
         kept = store.check_resumable()
-        err_console.print(f"resuming: {kept} finished chunks kept in {store.folder}")
+        say(f"resuming: {kept} finished chunks kept in {store.folder}")
     else:
         from ..io import prepare_output_dir
 
@@ -142,15 +149,13 @@ def study(
             _clear_earlier_study(out, store)
         store.start()
     if sc.integrator.name != "euler":
-        err_console.print(
+        say(
             f"note: studies use the batched explicit Euler kernel (dt = {setup.dt:g}), not the "
-            f"scenario's {sc.integrator.name!r}",
-            highlight=False,
+            f"scenario's {sc.integrator.name!r}"
         )
-    err_console.print(
+    say(
         f"{len(setup.groups)} groups x {config.trials} trials, dt = {setup.dt:g}, "
-        f"duration = {setup.duration:g}, seed = {seed}",
-        highlight=False,
+        f"duration = {setup.duration:g}, seed = {seed}"
     )
     result = _run_with_progress(
         run_study,
@@ -160,9 +165,10 @@ def study(
         workers=workers,
         store=store,
         resume=resume,
-        notify=lambda msg: err_console.print(msg, highlight=False),
+        notify=say,
+        quiet=quiet,
     )
-    _write_outputs(out, sc, result, identity)
+    _write_outputs(out, sc, result, identity, quiet)
 
 
 def _sweep_option(given: list[str]) -> dict[str, list[float]]:
@@ -210,12 +216,13 @@ def _with_filter(sc: Any, name: str) -> Any:
     try:
         safety = dataclasses.replace(base, filter=name)
         safety.check_contact(sc.formation.contact_matrix)
+        safety.check_model(sc.model)
     except UserInputError as exc:
         raise UserInputError(f"--filter {name}: {exc}") from None
     return dataclasses.replace(sc, safety=safety)
 
 
-def _run_with_progress(run: Any, *args: Any, store: Any, **kwargs: Any) -> Any:
+def _run_with_progress(run: Any, *args: Any, store: Any, quiet: bool = False, **kwargs: Any) -> Any:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
     with Progress(
@@ -224,6 +231,7 @@ def _run_with_progress(run: Any, *args: Any, store: Any, **kwargs: Any) -> Any:
         MofNCompleteColumn(),
         TimeRemainingColumn(),
         console=err_console,
+        disable=quiet,
     ) as bar:
         task = bar.add_task("trials", total=None)
 
@@ -241,7 +249,9 @@ def _run_with_progress(run: Any, *args: Any, store: Any, **kwargs: Any) -> Any:
             )
 
 
-def _write_outputs(out: Path, sc: Any, result: Any, identity: dict[str, Any]) -> None:
+def _write_outputs(
+    out: Path, sc: Any, result: Any, identity: dict[str, Any], quiet: bool = False
+) -> None:
     from .. import __version__
     from ..io import atomic_write_json, atomic_write_text, save_figure
     from ..io.files import MANIFEST
@@ -264,8 +274,11 @@ def _write_outputs(out: Path, sc: Any, result: Any, identity: dict[str, Any]) ->
         MANIFEST: ["trials.parquet", "scenario.toml", *figures, "summary.json", "chunks"],
     }
     atomic_write_json(out / "summary.json", summary)
-    _print_table(summary)
-    err_console.print(f"wrote trials.parquet, summary.json and figures to {out}", highlight=False)
+    if not quiet:
+        _print_table(summary)
+        err_console.print(
+            f"wrote trials.parquet, summary.json and figures to {out}", highlight=False
+        )
 
 
 def _cells(g: dict[str, Any], outs: list[str], sep: str = " ") -> list[str]:

@@ -169,6 +169,7 @@ class AngleRestrictedLaw(Law):
     """
 
     name = "angle-restricted"
+    barrier_at_contact = True
     smooth = False
     k_c: float = 2.0
     k_a: float = 3.0

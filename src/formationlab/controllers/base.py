@@ -77,6 +77,9 @@ class Law:
     name: ClassVar[str] = ""
     #: Whether the closed loop is continuous; discontinuous laws expose switching surfaces.
     smooth: ClassVar[bool] = True
+    #: Whether every edge's potential is infinite at contact (the paper's phi, eq. 5), so
+    #: that the exact flow cannot bring two robots into contact.
+    barrier_at_contact: ClassVar[bool] = False
 
     def control(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
         """Controls ``u``, shape ``(..., n, 2)``, at positions ``q`` of shape ``(..., n, 2)``."""

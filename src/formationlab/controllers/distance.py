@@ -158,6 +158,7 @@ class DistanceLaw(Law):
     """
 
     name = "distance"
+    barrier_at_contact = True
     k_c: float = 2.0
     repulsion: Repulsion = field(default_factory=Repulsion)
 

@@ -40,6 +40,9 @@ class RobotModel:
     state_names: ClassVar[tuple[str, ...]] = ("x", "y")
     #: keys of a scenario's ``[robots]`` table that :meth:`initial_state` takes
     initial_keys: ClassVar[tuple[str, ...]] = ()
+    #: whether the law's control is a velocity command of :meth:`points` (the safety
+    #: filter certifies it as one); False for a model whose command is a force
+    command_is_velocity: ClassVar[bool] = True
 
     @classmethod
     def state_size(cls) -> int:
@@ -59,6 +62,12 @@ class RobotModel:
         (:mod:`formationlab.marching`) is scaled by it.
         """
         return 1.0
+
+    @property
+    def points_follow_command(self) -> bool:
+        """Whether :meth:`points` move with the law's command as their velocity (single
+        integrators, near-identity unicycles), the premise of the safety filter's certificate."""
+        return self.command_is_velocity
 
     @property
     def has_heading(self) -> bool:

@@ -66,6 +66,7 @@ class DoubleIntegrator(RobotModel):
     name = "double-integrator"
     state_names = ("x", "y", "vx", "vy")
     initial_keys = ("velocities",)
+    command_is_velocity = False  # u is a force: the velocity lags it
     damping: float = 2.0
     max_speed: float | None = None
 

@@ -84,6 +84,12 @@ class Unicycle(RobotModel):
             linear_gain=self.linear_gain, turn_gain=self.turn_gain, backwards=self.backwards
         )
 
+    @property
+    def points_follow_command(self) -> bool:
+        """Near-identity hand points move with the command; under ``"heading"`` a robot
+        turns towards it first."""
+        return self.mapping == NearIdentity.name
+
     def points(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         return self.transform.points(x[..., :2], x[..., 2])
 

@@ -12,6 +12,7 @@ Scenario-file form (the ``[safety]`` table)::
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
@@ -19,10 +20,11 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import ParameterError
+from ..errors import FormationlabWarning, ParameterError
 from ..validation import number, whole
 
 if TYPE_CHECKING:
+    from ..models import RobotModel
     from .obstacles import Obstacle
     from .result import FilterResult
 
@@ -123,6 +125,36 @@ class SafetyFilter:
         angle = 2.0 * np.pi * np.arange(s) / s
         normals = np.column_stack([np.cos(angle), np.sin(angle)])
         return normals, self.max_speed * math.cos(math.pi / s)
+
+    def check_model(self, model: RobotModel) -> None:
+        """Whether the filter's certificate holds for ``model``.
+
+        The filter certifies the law's command as the velocity of each robot's point
+        (:meth:`~formationlab.models.RobotModel.points`). A model whose command is a force
+        (``command_is_velocity`` False: the velocity lags it) is refused with a
+        :class:`~formationlab.errors.ParameterError`; a model whose points do not follow
+        the command (``points_follow_command`` False: heading-mapped unicycles turn first)
+        gets a :class:`~formationlab.errors.FormationlabWarning`, since robots may still
+        touch (docs/safety.md, Robot models).
+        """
+        if self.enabled and model.command_is_velocity and not model.points_follow_command:
+            warnings.warn(
+                f"the safety filter {self.filter!r} certifies the law's command as the "
+                f"velocity of each robot, which this {model.name} does not follow (it turns "
+                "towards the command first), so robots may still touch: use mapping = "
+                '"near-identity" with distance = D_s + 2 offset (docs/safety.md)',
+                FormationlabWarning,
+                stacklevel=3,
+            )
+        if self.enabled and not model.command_is_velocity:
+            raise ParameterError(
+                f"the safety filter {self.filter!r} certifies the law's command as the "
+                f"velocity of each robot, and a {model.name}'s command is a force (its "
+                "velocity lags it), so the filter would not keep the robots apart: set "
+                'safety.filter = "none", or use the single-integrator or unicycle model (a '
+                "second-order barrier certificate is not implemented)",
+                key="filter",
+            )
 
     def check_contact(self, contact: ArrayLike) -> None:
         """Raise :class:`~formationlab.errors.ParameterError` if ``D_s`` or ``D_o`` is too small.
