@@ -335,3 +335,15 @@ def test_obstacle_on_a_start_is_refused():
             duration=1.0,
             safety=SafetyFilter(filter="barrier", distance=0.1),
         )
+
+
+def test_simulate_names_a_safety_argument_it_cannot_use():
+    from formationlab.errors import ParameterError
+
+    q0 = np.array([[-1.0, -1.0], [1.0, -1.0], [0.0, 1.2]])
+    with pytest.raises(ParameterError, match="safety must be a SafetyFilter or a filter's name"):
+        fl.simulate(TRIANGLE, "distance", q0, duration=0.1, safety=3)
+    with pytest.raises(ParameterError, match="barrier"):  # a misspelt name: the filter says
+        fl.simulate(TRIANGLE, "distance", q0, duration=0.1, safety="barier")
+    run = fl.simulate(TRIANGLE, "distance", q0, duration=0.1, safety="barrier")
+    assert run.status.value == "success"

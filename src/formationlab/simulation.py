@@ -650,6 +650,12 @@ def _system(
 
     if isinstance(safety, str):
         safety = SafetyFilter(filter=safety)  # type: ignore[arg-type]
+    elif safety is not None and not isinstance(safety, SafetyFilter):
+        raise ParameterError(
+            f"safety must be a SafetyFilter or a filter's name ('barrier', "
+            f"'barrier-decentralized', 'none'), got {safety!r}",
+            key="safety",
+        )
     check_obstacle_starts(model.positions(x0), formation.diameters / 2, tuple(obstacles))
     return System(
         formation=formation, law=law, model=model, marching=marching,
