@@ -30,7 +30,6 @@ with no filter every method computes exactly what it did before they existed.
 from __future__ import annotations
 
 import copy
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -117,7 +116,7 @@ class System:
     def time_dependent(self) -> bool:
         """Whether the field depends on the time (a marching reference that is a function,
         a robot that stops at some finite ``t > 0``; ``at = inf`` never comes)."""
-        stops = self.faults is not None and any(0 < s.at < math.inf for s in self.faults.stop)
+        stops = self.faults is not None and bool(self.faults.later())
         return stops or (self.marching is not None and self.marching.time_dependent)
 
     @property

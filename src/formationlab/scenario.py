@@ -449,7 +449,7 @@ def _sensing(
             faults.check(formation.n)
         except UserInputError as exc:
             raise fail(exc.key or "faults", str(exc)) from None
-        late = [s for s in faults.stop if 0 < s.at < math.inf]
+        late = faults.later()
         if late and not isinstance(integrator, FixedStepIntegrator):
             raise fail(
                 "simulation.integrator",

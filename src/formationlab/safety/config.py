@@ -137,7 +137,9 @@ class SafetyFilter:
         gets a :class:`~formationlab.errors.FormationlabWarning`, since robots may still
         touch (docs/safety.md, Robot models).
         """
-        if self.enabled and model.command_is_velocity and not model.points_follow_command:
+        if not self.enabled:
+            return
+        if model.command_is_velocity and not model.points_follow_command:
             warnings.warn(
                 f"the safety filter {self.filter!r} certifies the law's command as the "
                 f"velocity of each robot, which this {model.name} does not follow (it turns "
@@ -146,7 +148,7 @@ class SafetyFilter:
                 FormationlabWarning,
                 stacklevel=3,
             )
-        if self.enabled and not model.command_is_velocity:
+        if not model.command_is_velocity:
             raise ParameterError(
                 f"the safety filter {self.filter!r} certifies the law's command as the "
                 f"velocity of each robot, and a {model.name}'s command is a force (its "

@@ -189,6 +189,11 @@ class Faults:
                     f"robots, numbered 1 to {n}", key="faults.stop",
                 )  # fmt: skip
 
+    def later(self) -> tuple[Stop, ...]:
+        """The stops at a finite ``t > 0``: they make the field depend on the time (a stop
+        at 0 holds the robot from the start; one at ``inf`` never comes)."""
+        return tuple(s for s in self.stop if 0 < s.at < math.inf)
+
     def stopped(self, n: int, t: float) -> NDArray[np.bool_]:
         """Which of ``n`` robots have stopped at time ``t``; ``(n,)``."""
         out = np.zeros(n, dtype=bool)
