@@ -54,7 +54,6 @@ def test_the_kernel_equals_the_driver_trial_by_trial(model, law, shape):
     )
     np.testing.assert_array_equal(a.status, b.status)
     np.testing.assert_array_equal(a.steps, b.steps)
-    np.testing.assert_array_equal(a.outcome, b.outcome)
     # a trial chattering on a switching surface (explicit Euler crosses it every step,
     # with an amplitude of order k_a dt) turns a rounding difference in one decision
     # into a difference of that order; every other trial agrees to rounding
@@ -62,6 +61,14 @@ def test_the_kernel_equals_the_driver_trial_by_trial(model, law, shape):
     sigma = lw.switching(f, b.q_final)
     chatter = np.any(np.abs(sigma) <= 10 * getattr(lw, "k_a", 0.0) * dt, axis=-1)
     smooth = ~chatter
+    np.testing.assert_array_equal(a.outcome[smooth], b.outcome[smooth])
+    # a chattering trial that never stops is still moving at the end in both; whether its
+    # chattering path fits a rigid motion (drifting, rotating) or not (not-converged) is
+    # decided by a fit of the chatter itself (measured: one square trial of near-identity
+    # unicycles, rotating on one path and not-converged on the other)
+    moving = {"not-converged", "drifting", "rotating"}
+    for x, y in zip(a.outcome[chatter], b.outcome[chatter], strict=True):
+        assert x == y or {x, y} <= moving
     # numpy's vectorised arctan2 / arctan differ from the C library's (numba) in the last
     # bit for about 7% of arguments; the heading transform's switching runs amplify that
     # ulp to about 1e-7 over a run (measured: 5e-8), the others agree to 1e-9

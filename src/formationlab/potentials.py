@@ -1,11 +1,15 @@
-"""The paper's potentials as pure functions of distances and positions.
+"""The paper's potentials as pure functions of distances and positions (numpy arrays).
 
 Arrays follow the package layout: positions ``q`` have shape ``(..., n, 2)``
 with any batch axes leading; pairwise quantities ``(..., n, n)`` are indexed
 ``[i, j]`` and triple quantities ``(..., n, n, n)`` are indexed ``[i, j, k]``.
 
+Each formula is written once, in the module of its kind of term
+(:mod:`formationlab.controllers.kinds`); this module gathers the array forms under the
+paper's names, and the collinear minimiser of eq. (18).
+
 Reference: "Formation Control of Multiple Robots Avoiding Local Minima",
-section 2.2 (eqs. 5-7) and section 3 (eqs. 8, 12-14, 23).
+section 2.2 (eqs. 5-7) and section 3 (eqs. 8, 12-14, 18, 23).
 """
 
 from __future__ import annotations
@@ -13,9 +17,13 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .geometry import cross, parity, perp
+from .controllers.kinds.khatib import dkhatib_ds, khatib
+from .controllers.kinds.log_barrier import dphi_dr, phi
+from .controllers.kinds.restriction import psi, triangle_products, upsilon
+from .geometry import cross, pair_vectors, parity, perp, scatter_rows, triple_products
 
 __all__ = [
+    "collinear_minimizer",
     "cross",
     "dkhatib_ds",
     "dphi_dr",
@@ -30,108 +38,6 @@ __all__ = [
     "triple_products",
     "upsilon",
 ]
-
-
-def phi(r: ArrayLike, d: ArrayLike, a: ArrayLike) -> NDArray[np.float64]:
-    """Combined attractive-repulsive potential ``phi_ij`` of eq. (5).
-
-    ``phi = (r - d)/(d - a) - log((r - a)/(d - a))``, defined for ``r > a``;
-    ``+inf`` at and below contact. Zero only at ``r = d`` (eq. 6).
-    """
-    r, d, a = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (r, d, a)))
-    out = np.full(r.shape, np.inf)
-    ok = r > a
-    ra, da = r[ok] - a[ok], d[ok] - a[ok]
-    out[ok] = (r[ok] - d[ok]) / da - np.log(ra / da)  # eq. (5)
-    return out
-
-
-def dphi_dr(r: ArrayLike, d: ArrayLike, a: ArrayLike) -> NDArray[np.float64]:
-    """Derivative of eq. (5): ``d phi / d r = 1/(d - a) - 1/(r - a)`` (eq. 7)."""
-    r, d, a = (np.asarray(x, dtype=float) for x in (r, d, a))
-    return 1.0 / (d - a) - 1.0 / (r - a)  # eq. (7)
-
-
-def khatib(s: ArrayLike, eta: float, s0: float) -> NDArray[np.float64]:
-    """Khatib's repulsive potential ``gamma = eta/2 (1/s - 1/s0)^2`` for ``s < s0``, else 0.
-
-    ``s`` is the clearance ``r_ij - a_ij`` between non-neighbours (the paper's
-    ``gamma_ij`` of eq. 8 cites Khatib 1986 without writing it; this is its
-    usual form). ``+inf`` at ``s <= 0``.
-    """
-    s = np.asarray(s, dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        g = 0.5 * eta * (1.0 / s - 1.0 / s0) ** 2
-    return np.where(s <= 0, np.inf, np.where(s < s0, g, 0.0))
-
-
-def dkhatib_ds(s: ArrayLike, eta: float, s0: float) -> NDArray[np.float64]:
-    """Derivative of :func:`khatib` in the clearance: ``-eta (1/s - 1/s0) / s^2`` for ``s < s0``."""
-    s = np.asarray(s, dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        g = -eta * (1.0 / s - 1.0 / s0) / s**2
-    return np.where(s < s0, g, 0.0)
-
-
-def pair_vectors(q: ArrayLike) -> NDArray[np.float64]:
-    """Relative positions ``r_ij = q_j - q_i``; ``(..., n, 2) -> (..., n, n, 2)``."""
-    q = np.asarray(q, dtype=float)
-    return q[..., None, :, :] - q[..., :, None, :]
-
-
-def triple_products(q: ArrayLike) -> NDArray[np.float64]:
-    """``c_ijk = (r_ij x r_ik) . k`` for all triples; ``(..., n, 2) -> (..., n, n, n)``.
-
-    Twice the signed area of triangle ``(i, j, k)``; invariant under cyclic
-    permutation, odd under a swap of ``j`` and ``k`` (term of eq. 14).
-    """
-    r = pair_vectors(q)
-    return cross(r[..., :, :, None, :], r[..., :, None, :, :])
-
-
-def triangle_products(q: ArrayLike, triangles: ArrayLike) -> NDArray[np.float64]:
-    """``c_abc = (r_ab x r_ac) . k`` of listed triangles; ``(..., n, 2), (t, 3) -> (..., t)``.
-
-    The one place the switching functions of eq. (14) take their triple products
-    from (``Formation.surfaces`` lists the triangles), so every path that decides
-    whether a restriction is on computes the same number, bit for bit.
-    """
-    q = np.asarray(q, dtype=float)
-    t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    a, b, c = (q[..., t[:, m], :] for m in range(3))
-    return cross(b - a, c - a)
-
-
-def scatter_rows(values: ArrayLike, rows: ArrayLike, n: int) -> NDArray[np.float64]:
-    """Sum ``values`` ``(..., m, 2)`` into ``n`` rows by ``rows`` ``(m,)``: ``(..., n, 2)``.
-
-    ``out[..., rows[p], :] += values[..., p, :]``: the sum of per-edge or per-triple
-    terms into per-robot controls, without dense pair arrays.
-    """
-    v = np.asarray(values, dtype=float)
-    idx = np.asarray(rows, dtype=np.int64)
-    batch = int(np.prod(v.shape[:-2], dtype=np.int64))
-    flat = v.reshape(batch, -1, 2)
-    where = (np.arange(batch)[:, None] * n + idx[None, :]).ravel()
-    out = np.empty((batch * n, 2))
-    for d in range(2):
-        out[:, d] = np.bincount(where, weights=flat[..., d].ravel(), minlength=batch * n)
-    return out.reshape(*v.shape[:-2], n, 2)
-
-
-def upsilon(x: ArrayLike) -> NDArray[np.float64]:
-    """Unit step ``Upsilon(x)`` of eq. (14), taking ``Upsilon(0) = 1``.
-
-    The value at 0 only matters on the switching surface, a set of measure
-    zero that the Filippov integrator treats as set-valued ``[0, 1]``.
-    """
-    return np.heaviside(np.asarray(x, dtype=float), 1.0)
-
-
-def psi(alpha: ArrayLike, c: ArrayLike, theta: float) -> NDArray[np.float64]:
-    """Angular potential ``psi_ijk = alpha c Upsilon(alpha c + theta)`` of eq. (14)."""
-    ac = np.asarray(alpha, dtype=float) * np.asarray(c, dtype=float)
-    return ac * upsilon(ac + theta)  # eq. (14)
 
 
 def _outer_root(total: float, c: float) -> float:

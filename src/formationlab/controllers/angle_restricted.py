@@ -14,12 +14,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from ..geometry import cross, perp
-from ..potentials import scatter_rows, triangle_products, upsilon
+from ..geometry import cross, perp, scatter_rows
 from ..spec import DENSE_LIMIT, Formation
 from ..validation import check_fields
 from .base import Law, ObstacleRepulsion, Repulsion, register
 from .distance import grad_phi, pair_geometry, phi_sum
+from .kinds.restriction import switching, triangle_products, upsilon
 from .terms import LOG_BARRIER, KernelTerms, build_terms
 
 __all__ = [
@@ -51,12 +51,12 @@ def switching_functions(
     """
     tris, beta, _ = formation.held_surfaces  # (beta as int8 signs or float64: the same products)
     if len(tris) <= PSI_PART:
-        return beta * triangle_products(q, tris) + theta  # eq. (14)
+        return switching(beta, triangle_products(q, tris), theta)  # eq. (14)
     q = np.asarray(q, dtype=float)
     out = np.empty((*q.shape[:-2], len(tris)))
     for a in range(0, len(tris), PSI_PART):  # in parts (the same numbers: element by element)
         part = slice(a, a + PSI_PART)
-        out[..., part] = beta[part] * triangle_products(q, tris[part]) + theta  # eq. (14)
+        out[..., part] = switching(beta[part], triangle_products(q, tris[part]), theta)  # eq. (14)
     return out
 
 

@@ -12,11 +12,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from ..geometry import pair_vectors, scatter_rows
 from ..neighbours import close_pairs, non_edges
-from ..potentials import dkhatib_ds, dphi_dr, khatib, pair_vectors, phi, scatter_rows
 from ..spec import DENSE_LIMIT, Formation
 from ..validation import check_fields
 from .base import Law, ObstacleRepulsion, Repulsion, register
+from .kinds.khatib import dkhatib_ds, khatib
+from .kinds.log_barrier import dphi_dr, phi
 from .terms import LOG_BARRIER, KernelTerms, build_terms
 
 __all__ = ["DistanceLaw", "grad_phi", "pair_geometry", "phi_sum", "repulsion_pairs"]

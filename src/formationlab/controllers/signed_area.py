@@ -42,6 +42,7 @@ from ..geometry import cross, parity, perp
 from ..spec import Formation
 from ..validation import check_fields
 from .base import Law, ObstacleRepulsion, Repulsion, register
+from .kinds.signed_area import signed_area
 from .squared_distance import (
     grad_repulsion,
     grad_squared_distance,
@@ -125,7 +126,7 @@ def signed_areas(triangles: NDArray[np.int64], q: NDArray[np.float64]) -> NDArra
     """Signed areas ``A_abc = c_abc / 2`` of ``triangles`` (t, 3); ``(..., n, 2) -> (..., t)``."""
     q = np.asarray(q, dtype=float)
     a, b, c = (q[..., triangles[:, m], :] for m in range(3))
-    return 0.5 * cross(b - a, c - a)
+    return signed_area(a[..., 0], a[..., 1], b[..., 0], b[..., 1], c[..., 0], c[..., 1])
 
 
 def grad_area_penalty(formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:

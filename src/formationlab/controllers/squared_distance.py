@@ -26,11 +26,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from ..potentials import dkhatib_ds, khatib
 from ..spec import DENSE_LIMIT, Formation
 from ..validation import check_fields
 from .base import Law, ObstacleRepulsion, Repulsion, register
 from .distance import _grad_listed, pair_geometry, repulsion_pairs
+from .kinds.khatib import dkhatib_ds, khatib
+from .kinds.squared_distance import squared_gain, squared_value
 from .terms import SQUARED, KernelTerms, build_terms
 
 __all__ = [
@@ -52,7 +53,7 @@ def grad_squared_distance(formation: Formation, q: NDArray[np.float64]) -> NDArr
     r, dist, _ = pair_geometry(q)
     adj = formation.adjacency
     d = np.where(adj, formation.distance_matrix, 0.0)
-    weight = np.where(adj, dist * dist - d * d, 0.0)  # (..., n, n)
+    weight = np.where(adj, squared_gain(dist * dist, d), 0.0)  # (..., n, n)
     return -np.einsum("...ij,...ijd->...id", weight, r)
 
 
@@ -92,7 +93,7 @@ def repulsion_sum(
 
 def _squared_slope(r: NDArray, formation: Formation, a: NDArray) -> NDArray:
     """``d/dr`` of ``1/4 (r^2 - d^2)^2``: ``(r^2 - d^2) r`` (Krick et al. 2009)."""
-    return (r * r - formation.distances**2) * r
+    return squared_gain(r * r, formation.distances) * r
 
 
 def _no_slope(r: NDArray, formation: Formation, a: NDArray) -> NDArray:
@@ -105,7 +106,7 @@ def squared_distance_sum(formation: Formation, q: NDArray[np.float64]) -> NDArra
     e = formation.edges
     diff = q[..., e[:, 1], :] - q[..., e[:, 0], :]
     r2 = np.sum(diff * diff, axis=-1)
-    return 0.25 * np.sum((r2 - formation.distances**2) ** 2, axis=-1)
+    return np.sum(squared_value(r2, formation.distances), axis=-1)
 
 
 @register

@@ -28,15 +28,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..spec import Formation
+from .kinds.edges import LOG_BARRIER, SQUARED
 
 __all__ = ["LOG_BARRIER", "PAIR_LIMIT", "SQUARED", "KernelTerms", "build_terms"]
 
 #: Largest formation for which the batch kernel's all-pairs arrays are built
 #: (``n (n - 1) / 2`` pairs); larger ones run only through the neighbour-search kernel.
 PAIR_LIMIT = 2000
-
-#: Edge potential: the paper's phi (eq. 5) or Krick et al.'s squared distance.
-LOG_BARRIER, SQUARED = 0, 1
 
 
 class KernelTerms(NamedTuple):

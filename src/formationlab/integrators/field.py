@@ -27,7 +27,15 @@ import os
 import numpy as np
 from numba import njit, prange
 
-from ..controllers.terms import LOG_BARRIER
+from ..controllers.kinds.edges import edge_gain
+from ..controllers.kinds.khatib import repulsion_gain
+from ..controllers.kinds.restriction import (
+    restriction_force,
+    switched_on,
+    switching,
+    triangle_product,
+)
+from ..controllers.kinds.signed_area import area_force, area_gain, signed_area
 
 # numba's OpenMP threads wait for work asleep rather than spinning (unless the user says
 # otherwise). A step launches two parallel passes; on a machine shared with other work a
@@ -81,27 +89,14 @@ def _edges(lo, hi, q, qp, sweep, kind, gain, edge_i, edge_j, edge_a, edge_d, fe)
         j = ej[e]
         fx[e] = q[j, 0] - q[i, 0]
         fy[e] = q[j, 1] - q[i, 1]
-    if kind == LOG_BARRIER:
-        for e in range(hi - lo):
-            dx = fx[e]
-            dy = fy[e]
-            a = ea[e]
-            r = math.sqrt(dx * dx + dy * dy)
-            c = r - a
-            g = gain * (c / (ed[e] - a) - 1.0) / (c * r)  # k_c phi'(r) / r, eqs. (7), (8)
-            fx[e] = g * dx
-            fy[e] = g * dy
-            clr[e] = c
-    else:
-        for e in range(hi - lo):
-            dx = fx[e]
-            dy = fy[e]
-            r2 = dx * dx + dy * dy
-            c = math.sqrt(r2) - ea[e]
-            g = gain * (r2 - ed[e] * ed[e])  # Krick et al. 2009
-            fx[e] = g * dx
-            fy[e] = g * dy
-            clr[e] = c
+    for e in range(hi - lo):
+        dx = fx[e]
+        dy = fy[e]
+        r2 = dx * dx + dy * dy
+        g = edge_gain(kind, r2, ed[e], ea[e], gain)  # eq. (8), or Krick et al.'s
+        fx[e] = g * dx
+        fy[e] = g * dy
+        clr[e] = math.sqrt(r2) - ea[e]
     g_min = np.inf
     w_min = np.inf
     for e in range(hi - lo):
@@ -112,7 +107,7 @@ def _edges(lo, hi, q, qp, sweep, kind, gain, edge_i, edge_j, edge_a, edge_d, fe)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
-def _pair(p, q, radius, s0, repulsion, pairs, fp):
+def _pair(p, q, radius, s0, gain, eta, pairs, fp):
     """Close pair ``p``'s Khatib repulsion on its first robot into ``fp[p]`` (zero beyond
     ``s0``); returns its clearance."""
     i = pairs[p, 0]
@@ -122,9 +117,7 @@ def _pair(p, q, radius, s0, repulsion, pairs, fp):
     dy = q[j, 1] - q[i, 1]
     r = math.sqrt(dx * dx + dy * dy)
     clr = r - a
-    g = 0.0
-    if clr < s0:  # k_r gamma'(s) / r, Khatib
-        g = repulsion * (s0 - clr) / (clr * clr * clr * r)
+    g = repulsion_gain(r, clr, gain, eta, s0)  # k_r gamma'(s) / r, Khatib
     fp[p, 0] = g * dx
     fp[p, 1] = g * dy
     return clr
@@ -143,21 +136,16 @@ def _surface(s, q, surf_a, surf_b, surf_c, surf_beta, stride, theta, on):
     """Whether surface ``s`` switches its restrictions on: eq. (14), as triangle_products
     (its ``beta`` is ``surf_beta[s * stride]``)."""
     ia, ib, ic = surf_a[s], surf_b[s], surf_c[s]
-    cab = (q[ib, 0] - q[ia, 0]) * (q[ic, 1] - q[ia, 1]) - (q[ib, 1] - q[ia, 1]) * (
-        q[ic, 0] - q[ia, 0]
-    )
-    on[s] = surf_beta[s * stride] * cab + theta >= 0.0  # Upsilon(0) = 1
+    cab = triangle_product(q[ia, 0], q[ia, 1], q[ib, 0], q[ib, 1], q[ic, 0], q[ic, 1])
+    on[s] = switched_on(switching(surf_beta[s * stride], cab, theta))  # eq. (14)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
 def _area(mm, q, area_a, area_b, area_c, area_target, gain, area_g):
     """Area triangle ``mm``'s error term of the signed-area penalty."""
     ia, ib, ic = area_a[mm], area_b[mm], area_c[mm]
-    area = 0.5 * (
-        (q[ib, 0] - q[ia, 0]) * (q[ic, 1] - q[ia, 1])
-        - (q[ib, 1] - q[ia, 1]) * (q[ic, 0] - q[ia, 0])
-    )
-    area_g[mm] = gain * 0.5 * (area - area_target[mm])
+    area = signed_area(q[ia, 0], q[ia, 1], q[ib, 0], q[ib, 1], q[ic, 0], q[ic, 1])
+    area_g[mm] = area_gain(area, area_target[mm], gain)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
@@ -189,23 +177,21 @@ def _robot(i, q, qn, qb, dt, R, p_ptr, p_rows, fe, fp, on, area_g, u):
             uy -= fp[~e, 1]
     for p in range(term_ptr[i], term_ptr[i + 1]):  # eqs. (11), (13), (23)
         if on[term_s[p]]:
-            w = term_w[p * stride]
             j, k = term_j[p], term_k[p]
-            ux += w * (q[k, 1] - q[j, 1])
-            uy -= w * (q[k, 0] - q[j, 0])
+            fx, fy = restriction_force(term_w[p * stride], q[k, 0] - q[j, 0], q[k, 1] - q[j, 1])
+            ux += fx
+            uy += fy
     for p in range(area_ptr[i], area_ptr[i + 1]):  # signed-area penalty
         mm = area_rows[p] // 3
         corner = area_rows[p] - 3 * mm
         ia, ib, ic = area_a[mm], area_b[mm], area_c[mm]
-        if corner == 0:
-            ux += area_g[mm] * (q[ic, 1] - q[ib, 1])
-            uy -= area_g[mm] * (q[ic, 0] - q[ib, 0])
-        elif corner == 1:
-            ux += area_g[mm] * (q[ia, 1] - q[ic, 1])
-            uy -= area_g[mm] * (q[ia, 0] - q[ic, 0])
-        else:
-            ux += area_g[mm] * (q[ib, 1] - q[ia, 1])
-            uy -= area_g[mm] * (q[ib, 0] - q[ia, 0])
+        if corner == 1:  # (the vertex at 0, its two others in turn)
+            ia, ib, ic = ib, ic, ia
+        elif corner == 2:
+            ia, ib, ic = ic, ia, ib
+        fx, fy = area_force(area_g[mm], q[ib, 0], q[ib, 1], q[ic, 0], q[ic, 1])
+        ux += fx
+        uy += fy
     u[i, 0] = ux
     u[i, 1] = uy
     x = q[i, 0] + dt * ux  # explicit Euler
@@ -231,7 +217,7 @@ def items_chunk(c, chunks, q, qp, sweep, L, pairs, n_pairs, fe, fp, on, area_g, 
     clearance and the least swept clearance of the chunk's edges and pairs.
     """
     kind, gain, ei, ej, ea, ed = L.kind, L.edge_gain, L.edge_i, L.edge_j, L.edge_a, L.edge_d
-    radius, s0, rep = L.radius, L.influence, L.repulsion
+    radius, s0, k_r, eta = L.radius, L.influence, L.repulsion_gain, L.eta
     sa, sb, sc, beta, theta = L.surf_a, L.surf_b, L.surf_c, L.surf_beta, L.theta
     stride = L.surf_stride
     aa, ab, ac, target, a_gain = L.area_a, L.area_b, L.area_c, L.area_target, L.area_gain
@@ -239,7 +225,7 @@ def items_chunk(c, chunks, q, qp, sweep, L, pairs, n_pairs, fe, fp, on, area_g, 
     g_min, w_min = _edges(lo, hi, q, qp, sweep, kind, gain, ei, ej, ea, ed, fe)
     lo, hi = _part(c, chunks, n_pairs)
     for p in range(lo, hi):
-        clr = _pair(p, q, radius, s0, rep, pairs, fp)
+        clr = _pair(p, q, radius, s0, k_r, eta, pairs, fp)
         g_min = min(g_min, clr)
         if clr <= sweep:
             w_min = min(w_min, _pair_swept(p, q, qp, radius, pairs))

@@ -51,7 +51,8 @@ class RunLayout(NamedTuple):
 
     kind: int  #: LOG_BARRIER or SQUARED
     edge_gain: float
-    repulsion: float  #: -k_r eta / s0: Khatib's k_r gamma'(s) = repulsion (s0 - s) / s^3
+    repulsion_gain: float  #: k_r of Khatib's repulsion
+    eta: float  #: Khatib's eta
     influence: float  #: s0
     skin: float  #: the close list's margin (module ``compiled``)
     theta: float
@@ -228,7 +229,8 @@ def run_layout(
     return RunLayout(
         kind=int(t["kind"]),
         edge_gain=float(t["edge_gain"]),
-        repulsion=-float(t["repulsion_gain"]) * float(t["repulsion_eta"]) / s0,
+        repulsion_gain=float(t["repulsion_gain"]),
+        eta=float(t["repulsion_eta"]),
         influence=s0,
         skin=0.5 * (s0 + a_max),
         theta=float(t["theta"]),

@@ -25,6 +25,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from ..controllers.kinds.khatib import khatib_prime
 from .obstacles import Circle, Obstacle
 
 __all__ = [
@@ -168,9 +169,7 @@ def repel(obs: ObstacleTerms, radius: NDArray, p: NDArray, u: NDArray) -> None:
                 continue  # gamma'(s) = 0 here: the term adds exactly 0
             delta, dx, dy = signed_distance(obs, o, p[i, 0], p[i, 1])
             s = delta - radius[i]
-            slope = 0.0
-            if s < s0:
-                slope = -obs.eta * (1.0 / s - 1.0 / s0) / (s * s)  # Khatib's gamma'(s)
+            slope = khatib_prime(s, obs.eta, s0) if s < s0 else 0.0  # Khatib's gamma'(s)
             gx += slope * dx
             gy += slope * dy
         u[i, 0] = u[i, 0] - obs.gain * gx

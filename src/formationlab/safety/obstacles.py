@@ -34,8 +34,8 @@ import numpy as np
 import shapely
 from numpy.typing import ArrayLike, NDArray
 
+from ..controllers.kinds.khatib import dkhatib_ds, khatib
 from ..errors import ObstacleError
-from ..potentials import dkhatib_ds, khatib
 
 __all__ = [
     "Circle",

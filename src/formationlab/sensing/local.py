@@ -33,8 +33,17 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from ..controllers.terms import LOG_BARRIER, KernelTerms
-from ..potentials import scatter_rows
+from ..controllers.kinds.edges import edge_gain
+from ..controllers.kinds.khatib import repulsion_gain
+from ..controllers.kinds.restriction import (
+    restriction_force,
+    switched_on,
+    switching,
+    triangle_product,
+)
+from ..controllers.kinds.signed_area import area_force, area_gain, signed_area
+from ..controllers.terms import KernelTerms
+from ..geometry import scatter_rows
 
 __all__ = ["local_controls", "rotate"]
 
@@ -59,26 +68,12 @@ def _gather(z: NDArray, obs: NDArray, tgt: NDArray) -> NDArray:
     return z[..., obs, tgt, :]
 
 
+def _xy(v: NDArray) -> tuple[NDArray, NDArray]:
+    return v[..., 0], v[..., 1]
+
+
 def _seen(seen: NDArray | None, obs: NDArray, tgt: NDArray) -> NDArray | bool:
     return True if seen is None else seen[..., obs, tgt]
-
-
-def _pair_gain(terms: KernelTerms, r2: NDArray, d: NDArray, a: NDArray) -> NDArray:
-    """``g`` of an edge seen at squared distance ``r2`` with desired ``d`` (module docstring)."""
-    if terms.kind == LOG_BARRIER:
-        r = np.sqrt(r2)
-        clr = r - a
-        return terms.edge_gain * (clr / (d - a) - 1.0) / (clr * r)  # k_c phi'(r) / r, eqs. (7), (8)
-    return terms.edge_gain * (r2 - d * d)  # Krick et al. 2009
-
-
-def _repulsion_gain(terms: KernelTerms, r2: NDArray, a: NDArray) -> NDArray:
-    """``k_r gamma'(r - a) / r``, ``gamma'(s) = -eta (1/s - 1/s0) / s^2`` (Khatib); 0 beyond s0."""
-    s0 = terms.repulsion_influence
-    r = np.sqrt(r2)
-    clr = r - a
-    g = -terms.repulsion_gain * terms.repulsion_eta / s0 * (s0 - clr) / (clr * clr * clr * r)
-    return np.where(clr < s0, g, 0.0)
 
 
 def local_controls(
@@ -128,34 +123,34 @@ def local_controls(
         )
         for side, (obs, tgt) in enumerate(((ei, ej), (ej, ei))):
             v = _gather(z, obs, tgt)
-            g = _pair_gain(t, np.sum(v * v, axis=-1), d[..., side], a)
+            g = edge_gain(t.kind, np.sum(v * v, axis=-1), d[..., side], a, t.edge_gain)  # eq. (8)
             add(obs, g[..., None] * v, _seen(seen, obs, tgt))
         other = ~t.pair_is_edge
         if t.repulsion_gain != 0 and other.any():
             pi, pj, pa = t.pair_i[other], t.pair_j[other], t.pair_contact[other]
             for obs, tgt in ((pi, pj), (pj, pi)):
                 v = _gather(z, obs, tgt)
-                g = _repulsion_gain(t, np.sum(v * v, axis=-1), pa)
+                r = np.sqrt(np.sum(v * v, axis=-1))
+                g = repulsion_gain(
+                    r, r - pa, t.repulsion_gain, t.repulsion_eta, t.repulsion_influence
+                )  # Khatib
                 add(obs, g[..., None] * v, _seen(seen, obs, tgt))
         if t.term_i.size:  # eqs. (11), (13), (14), (23), from robot i's own view
             ti, tj, tk = t.term_i, t.term_j, t.term_k
             sa, sb, sc = (x[t.term_surface] for x in (t.surface_a, t.surface_b, t.surface_c))
             pa_, pb, pc = (_gather(z, ti, s) for s in (sa, sb, sc))
-            e1, e2 = pb - pa_, pc - pa_
-            cab = e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]  # as triangle_products
-            sigma = t.surface_beta[t.term_surface] * cab + t.theta
-            w = np.where(sigma >= 0.0, t.term_weight, 0.0)  # Upsilon(0) = 1
+            cab = triangle_product(*_xy(pa_), *_xy(pb), *_xy(pc))
+            sigma = switching(t.surface_beta[t.term_surface], cab, t.theta)  # eq. (14)
             r_jk = _gather(z, ti, tk) - _gather(z, ti, tj)
-            term = w[..., None] * np.stack([r_jk[..., 1], -r_jk[..., 0]], axis=-1)
+            term = np.stack(restriction_force(t.term_weight * switched_on(sigma), *_xy(r_jk)), -1)
             add(ti, term, _seen(seen, ti, tj) & _seen(seen, ti, tk))
         if t.area_a.size:  # signed-area penalty, grad_a A_abc = 1/2 k x r_bc, per vertex
             for v_, o1, o2 in ((t.area_a, t.area_b, t.area_c), (t.area_b, t.area_c, t.area_a),
                                (t.area_c, t.area_a, t.area_b)):  # fmt: skip
                 p1, p2 = _gather(z, v_, o1), _gather(z, v_, o2)  # the vertex at 0
-                area = 0.5 * (p1[..., 0] * p2[..., 1] - p1[..., 1] * p2[..., 0])
-                g = t.area_gain * 0.5 * (area - t.area_target)
-                r12 = p2 - p1
-                term = g[..., None] * np.stack([r12[..., 1], -r12[..., 0]], axis=-1)
+                area = signed_area(0.0, 0.0, *_xy(p1), *_xy(p2))
+                g = area_gain(area, t.area_target, t.area_gain)
+                term = np.stack(area_force(g, *_xy(p1), *_xy(p2)), axis=-1)
                 add(v_, term, _seen(seen, v_, o1) & _seen(seen, v_, o2))
     if not rows:
         return np.zeros((*z.shape[:-3], n, 2))

@@ -54,7 +54,15 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ..controllers.terms import LOG_BARRIER
+from ..controllers.kinds.edges import edge_gain
+from ..controllers.kinds.khatib import repulsion_gain
+from ..controllers.kinds.restriction import (
+    restriction_force,
+    switched_on,
+    switching,
+    triangle_product,
+)
+from ..controllers.kinds.signed_area import area_force, area_gain, signed_area
 from ..status import Status
 from .kernel_trig import SMALL_TURN, atan2_poly, turn_small
 from .model_terms import DOUBLE, HEADING, NEAR_IDENTITY, SINGLE
@@ -108,32 +116,18 @@ def _controls(q, u, sigma, nact, terms):
             u[i, 0, b] = 0.0
             u[i, 1, b] = 0.0
     s0 = t.repulsion_influence
-    rep = -t.repulsion_gain * t.repulsion_eta / s0
     # (arrays are indexed directly, without views: a view costs reference counting; one
     # loop over trials per kind of pair, so that each is a plain loop)
     for p in range(t.pair_i.shape[0]):
         i = t.pair_i[p]
         j = t.pair_j[p]
         a = t.pair_contact[p]
-        if t.pair_is_edge[p] and t.kind == LOG_BARRIER:
-            inv_da = 1.0 / (t.pair_distance[p] - a)
+        if t.pair_is_edge[p]:
+            d = t.pair_distance[p]
             for b in range(nact):
                 dx = q[j, 0, b] - q[i, 0, b]
                 dy = q[j, 1, b] - q[i, 1, b]
-                r = math.sqrt(dx * dx + dy * dy)
-                clr = r - a
-                g = t.edge_gain * (clr * inv_da - 1.0) / (clr * r)  # k_c phi'(r) / r, eqs. (7), (8)
-                u[i, 0, b] += g * dx
-                u[i, 1, b] += g * dy
-                u[j, 0, b] -= g * dx
-                u[j, 1, b] -= g * dy
-        elif t.pair_is_edge[p]:
-            d2 = t.pair_distance[p] * t.pair_distance[p]
-            for b in range(nact):
-                dx = q[j, 0, b] - q[i, 0, b]
-                dy = q[j, 1, b] - q[i, 1, b]
-                r2 = dx * dx + dy * dy
-                g = t.edge_gain * (r2 - d2)  # Krick et al. 2009
+                g = edge_gain(t.kind, dx * dx + dy * dy, d, a, t.edge_gain)  # eq. (8)
                 u[i, 0, b] += g * dx
                 u[i, 1, b] += g * dy
                 u[j, 0, b] -= g * dx
@@ -143,35 +137,35 @@ def _controls(q, u, sigma, nact, terms):
                 dx = q[j, 0, b] - q[i, 0, b]
                 dy = q[j, 1, b] - q[i, 1, b]
                 r = math.sqrt(dx * dx + dy * dy)
-                clr = r - a
-                # k_r gamma'(s) / r with gamma'(s) = -eta (1/s - 1/s0) / s^2 (Khatib)
-                g = rep * (s0 - clr) / (clr * clr * clr * r) if clr < s0 else 0.0
+                g = repulsion_gain(r, r - a, t.repulsion_gain, t.repulsion_eta, s0)  # Khatib
                 u[i, 0, b] += g * dx
                 u[i, 1, b] += g * dy
                 u[j, 0, b] -= g * dx
                 u[j, 1, b] -= g * dy
-    # eqs. (11), (13), (14), (23): per switching surface sigma = beta c_abc + theta, decided
-    # as triangle_products does; each term (i, j, k) of the surface adds
-    # -w Upsilon(sigma) k x r_jk to u_i, w = 2 k_a alpha_ijk (eq. 13's pairs (j, k), (k, j))
+    # eqs. (11), (13), (14), (23): per switching surface sigma = beta c_abc + theta; each
+    # term (i, j, k) of the surface adds -w Upsilon(sigma) k x r_jk to u_i,
+    # w = 2 k_a alpha_ijk (eq. 13's pairs (j, k), (k, j))
     for sf in range(t.surface_a.shape[0]):
         ia = t.surface_a[sf]
         ib = t.surface_b[sf]
         ic = t.surface_c[sf]
         beta = t.surface_beta[sf]
         for b in range(nact):
-            cab = (q[ib, 0, b] - q[ia, 0, b]) * (q[ic, 1, b] - q[ia, 1, b]) - (
-                q[ib, 1, b] - q[ia, 1, b]
-            ) * (q[ic, 0, b] - q[ia, 0, b])
-            sigma[b] = beta * cab + t.theta
+            cab = triangle_product(
+                q[ia, 0, b], q[ia, 1, b], q[ib, 0, b], q[ib, 1, b], q[ic, 0, b], q[ic, 1, b]
+            )
+            sigma[b] = switched_on(switching(beta, cab, t.theta))  # eq. (14)
         for v in range(t.term_start[sf], t.term_start[sf + 1]):
             i = t.term_i[v]
             j = t.term_j[v]
             k = t.term_k[v]
             w0 = t.term_weight[v]
             for b in range(nact):
-                w = w0 if sigma[b] >= 0.0 else 0.0  # Upsilon(0) = 1
-                u[i, 0, b] += w * (q[k, 1, b] - q[j, 1, b])
-                u[i, 1, b] -= w * (q[k, 0, b] - q[j, 0, b])
+                fx, fy = restriction_force(
+                    w0 * sigma[b], q[k, 0, b] - q[j, 0, b], q[k, 1, b] - q[j, 1, b]
+                )  # eq. (23)
+                u[i, 0, b] += fx
+                u[i, 1, b] += fy
     for m in range(t.area_a.shape[0]):  # signed-area penalty, grad_a A_abc = 1/2 k x r_bc
         ia = t.area_a[m]
         ib = t.area_b[m]
@@ -181,14 +175,16 @@ def _controls(q, u, sigma, nact, terms):
             xa, ya = q[ia, 0, b], q[ia, 1, b]
             xb, yb = q[ib, 0, b], q[ib, 1, b]
             xc, yc = q[ic, 0, b], q[ic, 1, b]
-            area = 0.5 * ((xb - xa) * (yc - ya) - (yb - ya) * (xc - xa))
-            g = t.area_gain * 0.5 * (area - target)
-            u[ia, 0, b] += g * (yc - yb)
-            u[ia, 1, b] -= g * (xc - xb)
-            u[ib, 0, b] += g * (ya - yc)
-            u[ib, 1, b] -= g * (xa - xc)
-            u[ic, 0, b] += g * (yb - ya)
-            u[ic, 1, b] -= g * (xb - xa)
+            g = area_gain(signed_area(xa, ya, xb, yb, xc, yc), target, t.area_gain)
+            fx, fy = area_force(g, xb, yb, xc, yc)
+            u[ia, 0, b] += fx
+            u[ia, 1, b] += fy
+            fx, fy = area_force(g, xc, yc, xa, ya)
+            u[ib, 0, b] += fx
+            u[ib, 1, b] += fy
+            fx, fy = area_force(g, xa, ya, xb, yb)
+            u[ic, 0, b] += fx
+            u[ic, 1, b] += fy
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)

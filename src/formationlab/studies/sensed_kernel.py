@@ -44,7 +44,15 @@ from numpy.typing import NDArray
 
 from ..analysis import Tolerances
 from ..controllers import Law
-from ..controllers.terms import LOG_BARRIER
+from ..controllers.kinds.edges import edge_gain
+from ..controllers.kinds.khatib import repulsion_gain
+from ..controllers.kinds.restriction import (
+    restriction_force,
+    switched_on,
+    switching,
+    triangle_product,
+)
+from ..controllers.kinds.signed_area import area_force, area_gain, signed_area
 from ..dynamics import System
 from ..models import SingleIntegrator
 from ..sensing import BLOCK, Channel, Faults, Seed, Sensing
@@ -173,20 +181,10 @@ def _commands(z, seen, own, t, u):
                 continue
             vx = z[obs, tgt, 0]
             vy = z[obs, tgt, 1]
-            r2 = vx * vx + vy * vy
-            d = own[e, side]
-            a = t.edge_contact[e]
-            if t.kind == LOG_BARRIER:
-                r = math.sqrt(r2)
-                clr = r - a
-                g = t.edge_gain * (clr / (d - a) - 1.0) / (clr * r)  # k_c phi'(r) / r, eq. (8)
-            else:
-                g = t.edge_gain * (r2 - d * d)  # Krick et al. 2009
+            g = edge_gain(t.kind, vx * vx + vy * vy, own[e, side], t.edge_contact[e], t.edge_gain)
             u[obs, 0] += g * vx
             u[obs, 1] += g * vy
     if t.repulsion_gain != 0:  # Khatib's repulsion between non-neighbours, each from its end
-        s0 = t.repulsion_influence
-        rep = -t.repulsion_gain * t.repulsion_eta / s0  # (local_controls' order of operations)
         for side in range(2):
             for p in range(t.pair_i.shape[0]):
                 if t.pair_is_edge[p]:
@@ -198,10 +196,10 @@ def _commands(z, seen, own, t, u):
                 vx = z[obs, tgt, 0]
                 vy = z[obs, tgt, 1]
                 r = math.sqrt(vx * vx + vy * vy)
-                clr = r - t.pair_contact[p]
-                g = 0.0
-                if clr < s0:
-                    g = rep * (s0 - clr) / (clr * clr * clr * r)  # k_r gamma'(r - a) / r
+                g = repulsion_gain(
+                    r, r - t.pair_contact[p], t.repulsion_gain, t.repulsion_eta,
+                    t.repulsion_influence,
+                )  # fmt: skip
                 u[obs, 0] += g * vx
                 u[obs, 1] += g * vy
     for v in range(t.term_i.shape[0]):  # eqs. (11), (13), (14), (23), from robot i's view
@@ -214,17 +212,14 @@ def _commands(z, seen, own, t, u):
         ia = t.surface_a[sf]
         ib = t.surface_b[sf]
         ic = t.surface_c[sf]
-        e1x = z[i, ib, 0] - z[i, ia, 0]
-        e1y = z[i, ib, 1] - z[i, ia, 1]
-        e2x = z[i, ic, 0] - z[i, ia, 0]
-        e2y = z[i, ic, 1] - z[i, ia, 1]
-        cab = e1x * e2y - e1y * e2x  # as triangle_products
-        sigma = t.surface_beta[sf] * cab + t.theta
-        w = t.term_weight[v] if sigma >= 0.0 else 0.0  # Upsilon(0) = 1
-        rx = z[i, k, 0] - z[i, j, 0]
-        ry = z[i, k, 1] - z[i, j, 1]
-        u[i, 0] += w * ry
-        u[i, 1] += w * (-rx)
+        cab = triangle_product(z[i, ia, 0], z[i, ia, 1], z[i, ib, 0], z[i, ib, 1], z[i, ic, 0],
+                               z[i, ic, 1])  # fmt: skip
+        on = switched_on(switching(t.surface_beta[sf], cab, t.theta))  # eq. (14)
+        fx, fy = restriction_force(
+            t.term_weight[v] * on, z[i, k, 0] - z[i, j, 0], z[i, k, 1] - z[i, j, 1]
+        )  # eq. (23)
+        u[i, 0] += fx
+        u[i, 1] += fy
     for rot in range(3):  # signed-area penalty, grad_a A_abc = 1/2 k x r_bc, per vertex
         for m in range(t.area_a.shape[0]):
             a0, a1, a2 = t.area_a[m], t.area_b[m], t.area_c[m]
@@ -236,10 +231,10 @@ def _commands(z, seen, own, t, u):
                 continue
             p1x, p1y = z[a0, a1, 0], z[a0, a1, 1]
             p2x, p2y = z[a0, a2, 0], z[a0, a2, 1]
-            area = 0.5 * (p1x * p2y - p1y * p2x)
-            g = t.area_gain * 0.5 * (area - t.area_target[m])
-            u[a0, 0] += g * (p2y - p1y)
-            u[a0, 1] += g * (-(p2x - p1x))
+            area = signed_area(0.0, 0.0, p1x, p1y, p2x, p2y)  # the vertex at 0
+            fx, fy = area_force(area_gain(area, t.area_target[m], t.area_gain), p1x, p1y, p2x, p2y)
+            u[a0, 0] += fx
+            u[a0, 1] += fy
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
