@@ -65,7 +65,7 @@ def run_example(path: Path, backend: str) -> dict[str, object]:
     kwargs = dict(
         duration=duration, integrator=sc.integrator, model=sc.model, marching=sc.marching,
         obstacles=sc.obstacles, safety=sc.safety, sensing=sc.sensing, faults=sc.faults,
-        save_every=max(1, int(round(duration / dt))),
+        save_every=max(1, round(duration / dt)),
     )  # fmt: skip
     if sc.asynchronous is not None:
         from formationlab.agents import run_async

@@ -21,10 +21,10 @@ from __future__ import annotations
 
 import json
 
+import engine_reference as ref
 import numpy as np
 import pytest
 
-import engine_reference as ref
 from formationlab.controllers import LAWS
 
 RECORDED = json.loads(ref.DATA.read_text())
