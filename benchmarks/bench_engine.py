@@ -30,34 +30,43 @@ DT = 1e-3
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def minimal(q0, pi, pj, d, a, ti, tj, tk, ta, b_, c_, alpha, k_c, k_a, theta, dt, steps):
-    """Explicit Euler of eq. (11) over the trials of ``q0`` ``(n, 2, B)``, chunks of 256."""
+def minimal(q0, pi, pj, d, a, sa, sb, sc, beta, start, ti, tj, tk, w, k_c, theta, dt, steps):
+    """Explicit Euler of eq. (11) over the trials of ``q0`` ``(n, 2, B)``, chunks of 256.
+
+    Pairs ``(pi, pj)`` with desired distance ``d`` and contact ``a``; switching surfaces
+    ``beta c_abc + theta`` (one per triangle), each with its terms ``start[s]:start[s+1]``
+    ``(i, j, k)`` of weight ``w = 2 k_a alpha_ijk`` (the ordered pairs ``(j, k)``, ``(k, j)``).
+    """
     n, _, B = q0.shape
     for c in prange((B + 255) // 256):
         lo, hi = c * 256, min(B, c * 256 + 256)
         q = q0[:, :, lo:hi].copy()
         u = np.empty_like(q)
+        on = np.empty(hi - lo)
         for _ in range(steps):
             u[:] = 0.0
             for p in range(pi.size):  # eq. (8): k_c phi'(r) / r r_ij
-                i, j = pi[p], pj[p]
+                i, j, inv = pi[p], pj[p], 1.0 / (d[p] - a[p])
                 for t in range(hi - lo):
                     dx, dy = q[j, 0, t] - q[i, 0, t], q[j, 1, t] - q[i, 1, t]
                     r = math.sqrt(dx * dx + dy * dy)
-                    g = k_c * (1.0 / (d[p] - a[p]) - 1.0 / (r - a[p])) / r
+                    g = k_c * (inv - 1.0 / (r - a[p])) / r
                     u[i, 0, t] += g * dx
                     u[i, 1, t] += g * dy
                     u[j, 0, t] -= g * dx
                     u[j, 1, t] -= g * dy
-            for m in range(ti.size):  # eqs. (13), (14), (23), per ordered triple
-                i, j, k = ti[m], tj[m], tk[m]
+            for s in range(sa.size):  # eqs. (13), (14), (23)
+                ia, ib, ic = sa[s], sb[s], sc[s]
                 for t in range(hi - lo):
-                    cab = (q[b_[m], 0, t] - q[ta[m], 0, t]) * (q[c_[m], 1, t] - q[ta[m], 1, t]) - (
-                        q[b_[m], 1, t] - q[ta[m], 1, t]
-                    ) * (q[c_[m], 0, t] - q[ta[m], 0, t])
-                    w = k_a * alpha[m] if alpha[m] * cab + theta >= 0.0 else 0.0
-                    u[i, 0, t] += w * (q[k, 1, t] - q[j, 1, t])
-                    u[i, 1, t] -= w * (q[k, 0, t] - q[j, 0, t])
+                    cab = (q[ib, 0, t] - q[ia, 0, t]) * (q[ic, 1, t] - q[ia, 1, t]) - (
+                        q[ib, 1, t] - q[ia, 1, t]
+                    ) * (q[ic, 0, t] - q[ia, 0, t])
+                    on[t] = 1.0 if beta[s] * cab + theta >= 0.0 else 0.0
+                for m in range(start[s], start[s + 1]):
+                    i, j, k = ti[m], tj[m], tk[m]
+                    for t in range(hi - lo):
+                        u[i, 0, t] += w[m] * on[t] * (q[k, 1, t] - q[j, 1, t])
+                        u[i, 1, t] -= w[m] * on[t] * (q[k, 0, t] - q[j, 0, t])
             for i in range(n):
                 for t in range(hi - lo):
                     q[i, 0, t] += dt * u[i, 0, t]
@@ -65,17 +74,13 @@ def minimal(q0, pi, pj, d, a, ti, tj, tk, ta, b_, c_, alpha, k_c, k_a, theta, dt
         q0[:, :, lo:hi] = q
 
 
-def minimal_inputs(formation: fl.Formation) -> tuple:
-    """Pairs (edges: complete graphs here) and ordered restricted triples of ``formation``."""
-    e = formation.edges
-    a = 0.5 * (formation.diameters[e[:, 0]] + formation.diameters[e[:, 1]])
-    t = formation.restricted_triples
-    srt = np.sort(t, axis=1)  # the sorted triangle, c_ijk = parity c_abc
-    alpha = formation.restricted_alpha * fl.potentials.parity(t[:, 0], t[:, 1], t[:, 2])
+def minimal_inputs(formation: fl.Formation, law: fl.AngleRestrictedLaw) -> tuple:
+    """The law's pairs (complete graphs here: every pair an edge), surfaces and terms."""
+    t = law.kernel_terms(formation)
     return (
-        e[:, 0].astype(np.int64), e[:, 1].astype(np.int64), formation.distances.astype(float), a,
-        *(t[:, m].astype(np.int64) for m in range(3)),
-        *(srt[:, m].astype(np.int64) for m in range(3)), alpha.astype(float),
+        t.pair_i, t.pair_j, t.pair_distance, t.pair_contact, t.surface_a, t.surface_b,
+        t.surface_c, t.surface_beta, t.term_start, t.term_i, t.term_j, t.term_k,
+        t.term_weight,
     )  # fmt: skip
 
 
@@ -92,9 +97,9 @@ def starts(formation: fl.Formation, count: int, seed: int) -> np.ndarray:
 def compare(name: str, formation: fl.Formation, trials: int, steps: int, repeats: int) -> float:
     law = fl.AngleRestrictedLaw(k_c=2.0, k_a=3.0, theta=0.5)
     q0 = starts(formation, trials, seed=1)
-    args = minimal_inputs(formation)
+    args = minimal_inputs(formation, law)
     qm = np.ascontiguousarray(q0.transpose(1, 2, 0))
-    minimal(qm[..., :8].copy(), *args, 2.0, 3.0, 0.5, DT, 2)  # compile or load
+    minimal(qm[..., :8].copy(), *args, 2.0, 0.5, DT, 2)  # compile or load
     run_batch(formation, law, q0[:8], dt=DT, duration=2 * DT)
     ours, ref = [], []
     for _ in range(repeats):
@@ -103,7 +108,7 @@ def compare(name: str, formation: fl.Formation, trials: int, steps: int, repeats
         ours.append(int(res.steps.sum()) / (time.perf_counter() - t0))
         q = qm.copy()
         t0 = time.perf_counter()
-        minimal(q, *args, 2.0, 3.0, 0.5, DT, steps)
+        minimal(q, *args, 2.0, 0.5, DT, steps)
         ref.append(trials * steps / (time.perf_counter() - t0))
     load = "{:.2f} {:.2f} {:.2f}".format(*os.getloadavg())
     ratio = max(ours) / max(ref)

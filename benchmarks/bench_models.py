@@ -5,7 +5,7 @@ Target (issue 12): the unicycle (either transform) and the double integrator at 
 triangle (simulation 2's alpha table, k_c = 2, k_a = 3, theta = 0.5) and the square
 with both diagonals, explicit Euler dt = 1e-3, early stopping switched off (every trial
 runs every step), box starts in [-3, 3]^2 (unicycles: headings uniform on the circle),
-the same starts for every model. The kernel (``kernels.run_chunks``, as ``run_batch``
+the same starts for every model. The compiled loop (``engine.trials.run_trials``, as ``run_batch``
 calls it) runs on one thread and is timed in CPU time of the process
 (``time.process_time``), so that a cost is CPU time per trial-step and waiting for a
 shared core is not counted; the rounds interleave the models, each figure is the best of
@@ -14,7 +14,7 @@ the rounds, and the reference (single integrators) is measured in the same round
 
 A unicycle's step calls no library function in its loops over trials (its headings are
 carried from step to step and the heading transform's ``atan2`` is a rational
-approximation, :mod:`formationlab.studies.kernel_trig`); what it costs beyond a single
+approximation, :mod:`formationlab.models.trig`); what it costs beyond a single
 integrator is the third state column, the hand points or the angle, and the limits.
 
 Run ``python benchmarks/bench_models.py`` (``--quick`` for a smaller run, ``--rounds N``).
@@ -32,10 +32,10 @@ import numba
 import numpy as np
 
 import formationlab as fl
+from formationlab.analysis import Tolerances
+from formationlab.engine.trials import run_trials
 from formationlab.models import DoubleIntegrator, SingleIntegrator, Unicycle
-from formationlab.studies import kernels
 from formationlab.studies.config import BoxInitial
-from formationlab.studies.model_terms import model_terms
 from formationlab.studies.sampling import model_initial_states, trial_initial_states
 
 MODELS = {
@@ -53,21 +53,21 @@ DT = 1e-3
 
 
 def kernel_cost(formation, law, model, x0, steps) -> float:
-    """Seconds per trial-step of one kernel run of ``x0`` (no trial stops early), final states."""
-    terms = law.compiled_terms(formation).writable()
-    robots = model_terms(model)
-    b, n, k = x0.shape
-    outs = (
-        np.empty((b, n, k)), np.empty((b, n, k)), np.zeros(b, dtype=np.int64),
-        np.zeros(b, dtype=np.int8), np.full(b, np.inf), np.full(b, np.nan),
-    )  # fmt: skip
-    q_window = np.full((b, n, 2), np.nan)
+    """Seconds per trial-step of one run of ``x0`` on the compiled loop (no trial stops early)."""
     start = time.process_time()
-    kernels.run_chunks(
-        x0, CHUNK, terms, robots, DT, steps, 10, 1e-300, *outs, -1, q_window
+    run = run_trials(
+        formation,
+        law,
+        model,
+        x0,
+        dt=DT,
+        n_steps=steps,
+        check_every=10,
+        tol=Tolerances(speed=1e-300),
+        chunk=CHUNK,
     )  # speed 1e-300: no trial counts as stopped, every trial runs every step
     cpu = time.process_time() - start
-    return cpu / max(int(outs[2].sum()), 1)
+    return cpu / max(int(run.steps.sum()), 1)
 
 
 def main() -> None:

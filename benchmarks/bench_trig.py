@@ -4,7 +4,7 @@ A record of an alternative that was not taken. The batch kernel's unicycles used
 the C library's ``sincos`` once per robot and step (a call keeps its loop from being
 vectorised, and numba's vectorised transcendental functions, Intel SVML, are gone since
 numba 0.62); the kernel now carries the headings from step to step without calls and
-approximates ``atan2`` to about an ulp (``studies/kernel_trig.py``, docs/robot-models.md),
+approximates ``atan2`` to about an ulp (``models/trig.py``, docs/robot-models.md),
 which the kernel's agreement with the driver to rounding tolerates. Before that, exact
 equality with the library was the aim; this script measures the best exact alternative
 found:

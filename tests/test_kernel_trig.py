@@ -1,4 +1,4 @@
-"""The unicycle kernel's trigonometry without library calls (studies/kernel_trig.py).
+"""The unicycle kernel's trigonometry without library calls (models/trig.py).
 
 ``atan2_poly`` against numpy's ``arctan2`` over the whole range of finite arguments,
 ``turn_small`` against the library's ``cos`` and ``sin`` of headings stepped many times,
@@ -14,9 +14,9 @@ from numba import njit
 
 import formationlab as fl
 from formationlab.models import Unicycle
+from formationlab.models.trig import SMALL_TURN, atan2_poly, turn_small
 from formationlab.studies.batch import run_batch
 from formationlab.studies.config import BoxInitial
-from formationlab.studies.kernel_trig import SMALL_TURN, atan2_poly, turn_small
 from formationlab.studies.sampling import model_initial_states, trial_initial_states
 
 

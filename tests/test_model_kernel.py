@@ -97,7 +97,7 @@ def test_the_kernel_equals_the_driver_trial_by_trial(model, law, shape):
 def test_contact_of_unicycles_in_the_kernel_is_the_drivers(model, ends):
     # large steps of a stiff law: trials end in contact at the end of a step and in
     # contact along a step; near-identity unicycles decide both on the centres while the
-    # law acts on the hand points (kernels._contact), the heading transform on the centres
+    # law acts on the hand points (engine.contact), the heading transform on the centres
     f = fl.Formation.from_template([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], diameters=0.2)
     law = fl.get_law("squared-distance", k=2.0)
     q0 = trial_initial_states(f, BoxInitial(half_width=1.0), 5, IDX)

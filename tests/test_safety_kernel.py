@@ -1,4 +1,4 @@
-"""The compiled path of batches with obstacles and a safety filter (studies/safety_kernel.py).
+"""Batches with obstacles and a safety filter on the compiled loop (safety/stage.py, engine/).
 
 Held trial by trial against the numpy driver path (``run_batch(..., backend="numpy")``,
 the stepping driver with ``System.rhs``): the same outcomes, statuses and step counts,

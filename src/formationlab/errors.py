@@ -20,6 +20,7 @@ __all__ = [
     "FormationlabError",
     "FormationlabWarning",
     "IgnoredKeyWarning",
+    "MissingExtraError",
     "ObstacleError",
     "OutputError",
     "OutputExistsError",
@@ -27,6 +28,7 @@ __all__ = [
     "ScenarioError",
     "UnknownNameError",
     "UserInputError",
+    "require",
 ]
 
 
@@ -92,3 +94,23 @@ class OutputError(UserInputError, OSError):
     Also an ``OSError``, so that code catching the writer's own errors still catches it;
     the message names the folder, the reason and what to do.
     """
+
+
+class MissingExtraError(ParameterError, ImportError):
+    """A part of the package that needs an optional dependency that is not installed."""
+
+
+def require(module: str, extra: str, what: str) -> object:
+    """Import ``module`` or raise a :class:`MissingExtraError` that names the extra to install.
+
+    ``what`` says what needs it (``"the safety filters' QP solver"``).
+    """
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise MissingExtraError(
+            f"{what} needs the optional package {module!r}: install it with "
+            f'pip install "formationlab[{extra}]"'
+        ) from None

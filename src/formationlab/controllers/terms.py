@@ -1,8 +1,8 @@
 """A law as plain arrays: the data the compiled kernels step, built by each law.
 
 :meth:`Law.kernel_terms` returns a :class:`KernelTerms`, a named tuple of
-arrays and numbers that one compiled kernel
-(:mod:`formationlab.studies.kernels`) evaluates for every law it supports:
+arrays and numbers that the compiled loop (:mod:`formationlab.engine.loop`, through
+:func:`formationlab.controllers.stage.law_field`) evaluates for every law it supports:
 
 * **pairs** ``i < j`` (every pair): on an edge the edge potential (the paper's
   ``phi_ij`` of eqs. 5, 7 for ``kind = LOG_BARRIER``, or Krick et al.'s

@@ -45,13 +45,14 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
-import qpsolvers
 import scipy.sparse as sp
 from numba import njit
 from numpy.typing import NDArray
 
+from ..errors import require
 from .cell_grid import build_grid, neighbours_of
 from .config import SafetyFilter
 from .obstacle_terms import obstacle_terms
@@ -263,6 +264,7 @@ def decentralized_filter(
 
 
 def _clarabel(P, c, G, h) -> NDArray[np.float64] | None:  # type: ignore[no-untyped-def]
+    qpsolvers: Any = require("qpsolvers", "safety", "the safety filter's QP solver (Clarabel)")
     problem = qpsolvers.Problem(P, c, G, h)
     with warnings.catch_warnings():
         # qpsolvers warns on a non-solved status; the caller reads sol.found

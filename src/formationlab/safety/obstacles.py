@@ -28,14 +28,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
-import shapely
 from numpy.typing import ArrayLike, NDArray
 
 from ..controllers.kinds.khatib import dkhatib_ds, khatib
-from ..errors import ObstacleError
+from ..errors import ObstacleError, require
 
 __all__ = [
     "Circle",
@@ -124,6 +123,7 @@ class Polygon:
             raise ObstacleError(f"polygon vertices must be finite, got {v.tolist()}")
         if np.allclose(v[0], v[-1]):
             v = v[:-1]  # a closing repeat of the first vertex is tolerated
+        shapely: Any = require("shapely", "safety", "a polygon obstacle's check")
         ring = shapely.LinearRing(v) if len(v) >= 3 else None
         if ring is None or not ring.is_simple:
             raise ObstacleError(

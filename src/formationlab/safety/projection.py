@@ -7,7 +7,7 @@ enumeration (:func:`_project`: unchanged, one active row in closed form, two by 
 solve), relaxing rows with ``h < 0`` when infeasible (:func:`solve_rows`);
 :func:`unchanged_robot` tells, without building the rows, when ``u_hat`` already
 satisfies them. Compiled (numba, ``nogil``); used by :mod:`.decentralized` and by the
-compiled batch path (:mod:`formationlab.studies.safety_kernel`).
+compiled loop (:mod:`formationlab.safety.stage`).
 """
 
 from __future__ import annotations

@@ -22,10 +22,10 @@ chunks of trials, for the laws ``distance``, ``angle-restricted``,
 gives their data; and the robot models ``single-integrator``, ``unicycle``
 and ``double-integrator``) and ``"numpy"`` (the stepping driver,
 :func:`formationlab.integrators.drive`, with explicit Euler and a stop rule:
-the readable specification, for any law). With obstacles or a safety filter,
-``"numba"`` runs the compiled path of :mod:`.safety_kernel` (trial by trial the
-driver's run; the centralized filter's QP is solved exactly in the kernel, by a closed
-form for one or two active rows and a dual active-set method beyond).
+the readable specification, for any law). ``"numba"`` runs the engine's one compiled
+loop (:mod:`formationlab.engine.loop`), with obstacles and a safety filter as its stage
+(trial by trial the driver's run; the centralized filter's QP is solved exactly in the
+loop, by a closed form for one or two active rows and a dual active-set method beyond).
 
 With sensing other than the paper's or faults, ``"numba"`` runs single integrators
 on the compiled sensed path (:mod:`.sensed_kernel`: the measurement channel, every
@@ -48,6 +48,7 @@ from ..analysis import Tolerances
 from ..batch_outcomes import BatchResult, classify_batch, max_distance_errors
 from ..controllers import Law
 from ..dynamics import System
+from ..engine.trials import TrialRun, run_trials
 from ..errors import FormationError, ParameterError
 from ..integrators import Euler, StopRule, drive
 from ..integrators.base import steps_for
@@ -90,8 +91,9 @@ def batch_backend(
 ) -> tuple[Backend, str]:
     """The backend a batch runs on, and why it differs from ``backend`` ("" if it does not).
 
-    Obstacles and a safety filter have their own compiled path, :mod:`.safety_kernel`;
-    sensing and faults (``sensed``) theirs, :mod:`.sensed_kernel`, for single integrators
+    Obstacles and a safety filter are a stage of the compiled loop (:mod:`formationlab.engine`);
+    sensing and faults (``sensed``) have the compiled sensed path, :mod:`.sensed_kernel`, for
+    single integrators
     (``model``, default the paper's). Sensed batches of other robot models, or with
     obstacles or a filter, run on the numpy driver path.
     """
@@ -166,8 +168,8 @@ def run_batch(
     obstacles : sequence of Circle or Polygon
         Static obstacles (:mod:`formationlab.safety`); starts must be clear of them.
     safety : SafetyFilter, optional
-        Safety filter between the law and the robots. With obstacles or a filter the
-        batch runs on the numpy path (:func:`batch_backend`).
+        Safety filter between the law and the robots (a stage of the compiled loop;
+        with sensing, the numpy path: :func:`batch_backend`).
     sensing : Sensing, optional
         How the robots sense each other (:mod:`formationlab.sensing`); with a sensing
         model other than the paper's, or with ``faults``, single integrators run on the
@@ -194,20 +196,20 @@ def run_batch(
     sensed = (sensing is not None and not sensing.ideal) or (faults is not None and faults.any)
     backend, _ = batch_backend(backend, obstacles, safety, sensed, model)
     safe = bool(obstacles) or (safety is not None and safety.enabled)
-    if backend == "numba" and safe:
-        x, v, status, steps, mc, ns, qw, window_step = _run_safety(
-            formation, law, model, q0, float(dt), n_steps, int(check_every), tol,
-            obstacles, safety,
-        )  # fmt: skip
-    elif backend == "numba" and sensed:
+    if backend == "numba" and sensed and not safe:
         x, v, status, steps, mc, ns, qw, window_step = _run_sensed(
             formation, law, model, q0, float(dt), n_steps, int(check_every), tol,
             sensing, faults, seeds,
         )  # fmt: skip
     elif backend == "numba":
-        x, v, status, steps, mc, ns, qw, window_step = _run_numba(
-            formation, law, model, q0, float(dt), n_steps, int(check_every), tol
-        )
+        run = _run_compiled(
+            formation, law, model, q0, float(dt), n_steps, int(check_every), tol,
+            obstacles, safety if safe else None,
+        )  # fmt: skip
+        x, v, status, steps, mc, ns = (
+            run.x, run.v, run.status, run.steps, run.min_clearance, run.net_speed,
+        )  # fmt: skip
+        qw, window_step = run.q_window, run.window_step
     elif backend == "numpy":
         system = System(formation=formation, law=law, model=model, sensing=sensing, faults=faults)
         if obstacles or safety is not None:
@@ -261,39 +263,23 @@ def _check_initial(formation: Formation, q0: ArrayLike, k: int = 2) -> NDArray[n
     return q
 
 
-def _run_numba(
-    formation: Formation,
-    law: Law,
-    model: RobotModel,
-    q0: NDArray[np.float64],
-    dt: float,
-    n_steps: int,
-    check_every: int,
-    tol: Tolerances,
-) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, int]:
+def _run_compiled(
+    formation: Formation, law: Law, model: RobotModel, q0: NDArray[np.float64], dt: float,
+    n_steps: int, check_every: int, tol: Tolerances, obstacles: Sequence[Any], safety: Any,
+) -> TrialRun:  # fmt: skip
+    """The trials on the engine's compiled loop (:func:`formationlab.engine.trials.run_trials`)."""
     import numba
 
-    from . import kernels
-    from .model_terms import model_terms
+    if obstacles:
+        from ..safety import check_obstacle_starts
 
-    terms = law.compiled_terms(formation).writable()  # one signature for every law
-    robots = model_terms(model)
-    n_trials, n, k = q0.shape
-    q_out = np.empty((n_trials, n, k))
-    u_out = np.empty((n_trials, n, k))
-    steps = np.zeros(n_trials, dtype=np.int64)
-    status = np.zeros(n_trials, dtype=np.int8)
-    mc = np.full(n_trials, np.inf)
-    ns = np.full(n_trials, np.nan)
-    qw = np.full((n_trials, n, 2), np.nan)
-    window_step = n_steps - tol.drift_steps(dt)  # negative: never reached
-    chunk = _chunk_size(n_trials, numba.get_num_threads())
+        check_obstacle_starts(model.positions(q0), formation.diameters / 2, tuple(obstacles))
+    chunk = _chunk_size(q0.shape[0], numba.get_num_threads())
     with _one_chunk_at_a_time():
-        kernels.run_chunks(
-            q0, chunk, terms, robots, dt, n_steps, check_every, tol.speed,
-            q_out, u_out, steps, status, mc, ns, window_step, qw,
+        return run_trials(
+            formation, law, model, q0, dt=dt, n_steps=n_steps, check_every=check_every,
+            tol=tol, chunk=chunk, obstacles=obstacles, safety=safety,
         )  # fmt: skip
-    return q_out, u_out, status, steps, mc, ns, qw, window_step
 
 
 @contextmanager
@@ -333,20 +319,6 @@ def _run_sensed(
     with _one_chunk_at_a_time():
         return run_sensed(
             formation, law, model, q0, dt, n_steps, check_every, tol, sensing, faults, seeds
-        )
-
-
-def _run_safety(
-    formation: Formation, law: Law, model: RobotModel, q0: NDArray[np.float64], dt: float,
-    n_steps: int, check_every: int, tol: Tolerances, obstacles: Sequence[Any], safety: Any,
-) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, int]:  # fmt: skip
-    from ..safety import check_obstacle_starts
-    from .safety_kernel import run_safety
-
-    check_obstacle_starts(model.positions(q0), formation.diameters / 2, tuple(obstacles))
-    with _one_chunk_at_a_time():
-        return run_safety(
-            formation, law, model, q0, dt, n_steps, check_every, tol, obstacles, safety
         )
 
 

@@ -186,7 +186,7 @@ class StudySetup:
         Static obstacles of every trial (starts touching one are drawn again).
     safety : SafetyFilter, optional
         Safety filter of every trial. With obstacles or a filter the trials run on the
-        compiled path of :mod:`~formationlab.studies.safety_kernel`
+        compiled loop, :mod:`formationlab.engine`
         (:func:`~formationlab.studies.batch.batch_backend`).
     """
 
@@ -459,8 +459,8 @@ def _warm_kernels(tasks: list[ChunkTask], notify: Callable[[str], None] | None) 
     ][:1]  # fmt: skip
     if not first and not sensed:
         return 0.0
+    from ..engine.loop import run_chunks
     from .batch import run_batch
-    from .kernels import run_chunks
     from .sampling import trial_initial_states
     from .sensed_kernel import run_block
 

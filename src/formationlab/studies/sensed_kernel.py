@@ -18,7 +18,7 @@ setting: single integrators, explicit Euler, no obstacles, no safety filter. Per
 4. the stop rule (instantaneous or net speed, :class:`~formationlab.integrators.StopRule`)
    counts only while every robot sees all its neighbours, at this check and at the
    previous one (:meth:`Channel.informed`); then the Euler step and the contact rule
-   of :mod:`.kernels` (not finite, contact at the end, contact along the step).
+   of :mod:`formationlab.engine.contact` (not finite, contact at the end, contact along the step).
 
 The terms are added in the order ``local_controls`` adds them, and the frames' sines
 and cosines are numpy's, so a trial follows the driver's arithmetic step for step.
@@ -54,18 +54,18 @@ from ..controllers.kinds.restriction import (
 )
 from ..controllers.kinds.signed_area import area_force, area_gain, signed_area
 from ..dynamics import System
+from ..engine.contact import (
+    COLLISION,
+    CONVERGED,
+    END,
+    NON_FINITE,
+    SWEPT_MARGIN,
+    TOO_LARGE,
+    segment_clearance,
+)
 from ..models import SingleIntegrator
 from ..sensing import BLOCK, Channel, Faults, Seed, Sensing
 from ..spec import Formation
-from .kernels import (
-    _COLLISION,
-    _CONVERGED,
-    _END,
-    _NON_FINITE,
-    _SWEPT_MARGIN,
-    _TOO_LARGE,
-    segment_clearance,
-)
 
 __all__ = ["run_sensed"]
 
@@ -311,9 +311,9 @@ def _trial(b, k0, k1, t, ch, st, out, dt, n_steps, check_every, speed, window_st
                 st.qc[b, i, 1] = x[i, 1]
             st.kc[b] = k
             if still:
-                code = _CONVERGED
+                code = CONVERGED
         if code < 0 and k == n_steps:
-            code = _END
+            code = END
         if code < 0:  # explicit Euler, judged by the contact rule (System.step_verdict)
             finite = True
             disp = 0.0
@@ -338,16 +338,16 @@ def _trial(b, k0, k1, t, ch, st, out, dt, n_steps, check_every, speed, window_st
                     dy = xn[j, 1] - xn[i, 1]
                     clr = math.sqrt(dx * dx + dy * dy) - a
                     gap = min(gap, clr)
-                    if clr <= _SWEPT_MARGIN * disp:
+                    if clr <= SWEPT_MARGIN * disp:
                         x0 = x[j, 0] - x[i, 0]
                         y0 = x[j, 1] - x[i, 1]
                         swept = min(swept, segment_clearance(x0, y0, dx - x0, dy - y0, a))
             if not finite:
-                code = _NON_FINITE
+                code = NON_FINITE
             elif not gap > 0.0:
-                code = _COLLISION
+                code = COLLISION
             elif not swept > 0.0:
-                code = _TOO_LARGE
+                code = TOO_LARGE
             else:
                 st.mc[b] = min(st.mc[b], gap)
                 for i in range(n):

@@ -1,6 +1,6 @@
-"""A robot model as plain numbers: what the compiled kernel steps (:mod:`.kernels`).
+"""A robot model as plain numbers: what the compiled loop steps (:mod:`.stage`).
 
-:func:`model_terms` turns a :class:`~formationlab.models.RobotModel` the kernel
+:func:`model_terms` turns a :class:`~formationlab.models.RobotModel` the compiled loop
 implements into a :class:`ModelTerms` (no limit is ``inf``); other models run on
 the numpy backend.
 """
@@ -11,7 +11,10 @@ import math
 from typing import NamedTuple
 
 from ..errors import ParameterError
-from ..models import DoubleIntegrator, RobotModel, SingleIntegrator, Unicycle
+from .base import RobotModel
+from .double_integrator import DoubleIntegrator
+from .single_integrator import SingleIntegrator
+from .unicycle import Unicycle
 
 __all__ = ["DOUBLE", "HEADING", "KERNEL_MODELS", "NEAR_IDENTITY", "SINGLE", "ModelTerms",
            "model_terms"]  # fmt: skip

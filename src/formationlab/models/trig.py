@@ -2,7 +2,7 @@
 
 A call of ``math.cos``, ``math.sin`` or ``math.atan2`` keeps the loop that holds it from
 being vectorised and costs 20-40 ns on the machine measured (docs/robot-models.md), more
-than a single integrator's whole step per robot. The kernel (:mod:`.kernels`) therefore
+than a single integrator's whole step per robot. The compiled loop (:mod:`.stage`) therefore
 keeps every unicycle's heading as the unit vector ``h = (cos theta, sin theta)`` as well
 as the angle ``theta``, turns ``h`` after each Euler step by the step's angle (the
 difference of the two stored angles, small) with :func:`turn_small`, and needs ``atan2``

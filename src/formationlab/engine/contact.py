@@ -1,0 +1,99 @@
+"""The contact rule of the compiled loop: the twin of ``System.step_verdict``.
+
+A step is rejected when it is not finite, when it ends with a pair in contact
+(``Status.COLLISION``) or when the straight path of the step passes through contact
+(``Status.STEP_TOO_LARGE``). The swept test is computed only for pairs whose end
+clearance is below twice the largest displacement of the step (farther pairs cannot have
+met during it).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..status import Status
+
+__all__ = [
+    "COLLISION",
+    "CONVERGED",
+    "END",
+    "NON_FINITE",
+    "SWEPT_MARGIN",
+    "TOO_LARGE",
+    "contact",
+    "segment_clearance",
+]
+
+END = Status.SUCCESS.code
+CONVERGED = Status.CONVERGED.code
+COLLISION = Status.COLLISION.code
+TOO_LARGE = Status.STEP_TOO_LARGE.code
+NON_FINITE = Status.NON_FINITE.code
+#: pairs closer than this many times the largest displacement of a step get the swept test
+SWEPT_MARGIN = 2.01
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
+def segment_clearance(x0, y0, ex, ey, a):
+    """Least ``|(x0, y0) + s (ex, ey)| - a`` over ``s`` in ``[0, 1]``.
+
+    A pair's clearance along a straight step: ``(x0, y0) = q_j - q_i`` at its start,
+    ``(ex, ey)`` the change of ``q_j - q_i`` over the step, ``a = a_ij``.
+    """
+    dd = ex * ex + ey * ey
+    s = min(max(-(x0 * ex + y0 * ey) / (dd if dd > 0 else 1.0), 0.0), 1.0)
+    mx = x0 + s * ex
+    my = y0 + s * ey
+    return math.sqrt(mx * mx + my * my) - a
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
+def _swept(q, qp, i, j, b, a):
+    """Least ``r_ij - a_ij`` along the straight step ``qp -> q`` (``System.swept_clearance``)."""
+    x0 = qp[j, 0, b] - qp[i, 0, b]
+    y0 = qp[j, 1, b] - qp[i, 1, b]
+    ex = (q[j, 0, b] - q[i, 0, b]) - x0
+    ey = (q[j, 1, b] - q[i, 1, b]) - y0
+    return segment_clearance(x0, y0, ex, ey, a)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def contact(x, xp, disp, gap, swept, near, nact, terms):
+    """Clearances of the centres ``x`` for the step rule (``System.step_verdict``).
+
+    ``gap``: least ``r_ij - a_ij`` at ``x``; ``swept``: least clearance along the
+    straight step from ``xp`` to ``x`` of the pairs within ``SWEPT_MARGIN disp``
+    (``disp`` is each trial's largest displacement, 0 before the first step). Two
+    passes: every trial's least clearance, flagging in ``near`` the trials with such a
+    pair (plain arithmetic, vectorised); then the swept test of those pairs of the
+    flagged trials (rare: a pair about to touch). A call in the first loop would keep
+    it, and the law's loops if they held it, from being vectorised.
+    """
+    for b in range(nact):
+        gap[b] = np.inf
+        swept[b] = np.inf
+        near[b] = 0.0
+    for p in range(terms.pair_i.shape[0]):
+        i = terms.pair_i[p]
+        j = terms.pair_j[p]
+        a = terms.pair_contact[p]
+        for b in range(nact):
+            dx = x[j, 0, b] - x[i, 0, b]
+            dy = x[j, 1, b] - x[i, 1, b]
+            clr = math.sqrt(dx * dx + dy * dy) - a
+            gap[b] = min(gap[b], clr)
+            near[b] = 1.0 if clr <= SWEPT_MARGIN * disp[b] else near[b]
+    for b in range(nact):
+        if near[b] == 0.0:
+            continue
+        for p in range(terms.pair_i.shape[0]):
+            i = terms.pair_i[p]
+            j = terms.pair_j[p]
+            a = terms.pair_contact[p]
+            dx = x[j, 0, b] - x[i, 0, b]
+            dy = x[j, 1, b] - x[i, 1, b]
+            if math.sqrt(dx * dx + dy * dy) - a <= SWEPT_MARGIN * disp[b]:
+                swept[b] = min(swept[b], _swept(x, xp, i, j, b, a))

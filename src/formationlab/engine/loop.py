@@ -1,0 +1,295 @@
+"""The one compiled stepping loop: explicit Euler over chunks of trials, stage by stage.
+
+The compiled twin of the stepping driver (:func:`formationlab.integrators.drive`) for
+batches of trials. Every chunk of ``C`` trials keeps its states as ``(n, k, C)`` (``k``
+numbers per robot, positions first, as the robot model's state) with the trials on the
+innermost, contiguous axis, so that each loop over trials is a plain SIMD loop. Per step
+``k`` of the live trials of a chunk, the stages in order:
+
+1. **model**: the points the law acts on (:func:`formationlab.models.stage.points`;
+   unicycles' headings carried from step to step, :func:`~formationlab.models.stage.turn`);
+2. **law**: its field over every pair (:func:`formationlab.controllers.stage.law_field`,
+   the law's :class:`~formationlab.controllers.terms.KernelTerms`);
+3. **obstacles and filter** (only when the run has them), trial by trial
+   (:func:`formationlab.safety.stage.filter_command`); a trial whose QP rounding defeats
+   pauses its chunk, and the host answers (:mod:`.trials`);
+4. **model**: the state's rate from the command
+   (:func:`formationlab.models.stage.rates`);
+5. **drift window**: the positions at ``window_step`` (``Stepped.q_window``);
+6. **stop rule** (:class:`~formationlab.integrators.StopRule`): at a check, the
+   instantaneous speed (:func:`formationlab.models.stage.speed`) or the net speed since
+   the previous check at most ``speed``;
+7. **step and verdict**: the Euler step, judged by the contact rule
+   (:mod:`.contact`, and :func:`formationlab.safety.stage.obstacle_contact`): not finite,
+   contact at its end, contact along it; a rejected step is not taken;
+8. **bookkeeping**: the trials that ended are written out and swapped out of the live
+   range (compaction), so that early stopping saves work instead of masking it.
+
+Everything a chunk carries from one call to the next is in :class:`ChunkState` (so the loop
+can stop at a pause, or at the end of a block of steps, and go on), and what it returns is
+in :class:`TrialOutputs`. Chunks run in parallel (``prange``) in :func:`run_chunks`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit, prange
+from numpy.typing import NDArray
+
+from ..controllers.stage import law_field
+from ..models.stage import headings, points, rates, speed, turn
+from ..models.terms import HEADING, NEAR_IDENTITY
+from ..safety.stage import CENTRALIZED, NONE, WAIT, filter_command, filter_scratch, obstacle_contact
+from .contact import COLLISION, CONVERGED, END, NON_FINITE, SWEPT_MARGIN, TOO_LARGE, contact
+
+__all__ = [
+    "DONE",
+    "PAUSED",
+    "RUNNING",
+    "ChunkState",
+    "RunNumbers",
+    "TrialOutputs",
+    "run_chunks",
+    "step_chunk",
+]
+
+#: A chunk's status in ``ChunkState.meta[:, 4]``: running, done, or paused for QP solves.
+RUNNING, DONE, PAUSED = -1, 0, -2
+
+
+class RunNumbers(NamedTuple):
+    """The run's numbers: step, steps, stop rule, drift window."""
+
+    dt: float
+    n_steps: int
+    check_every: int
+    speed: float  #: the stop rule's speed
+    window_step: int  #: start of the drift window (negative: never)
+
+
+class ChunkState(NamedTuple):
+    """What every chunk of ``C`` trials carries from one call to the next (``G`` chunks).
+
+    ``x`` and ``xn`` are the double buffer of the states (``meta[c, 3]`` says which holds
+    the current ones); ``meta[c]`` is ``(live trials, step, step of the previous check,
+    current buffer, status, headings set)``.
+    """
+
+    x: NDArray[np.float64]  #: (G, n, k, C)
+    xn: NDArray[np.float64]  #: (G, n, k, C)
+    qc: NDArray[np.float64]  #: (G, n, 2, C) positions at the previous check
+    hc: NDArray[np.float64]  #: (G, n, C) unicycles' cos theta (else (G, 1, 1))
+    hs: NDArray[np.float64]  #: sin theta
+    hcl: NDArray[np.float64]  #: what rounding left out of them (models.stage.turn)
+    hsl: NDArray[np.float64]
+    ids: NDArray[np.int64]  #: (G, C) the trial in each slot
+    mc: NDArray[np.float64]  #: (G, C) least clearance over accepted states
+    ns: NDArray[np.float64]  #: (G, C) net speed over the last check interval
+    meta: NDArray[np.int64]  #: (G, 6)
+    need: NDArray[np.bool_]  #: (G, C) the slot's trial waits for a QP solve
+    need_p: NDArray[np.float64]  #: (G, C, n, 2) its points (centralized filter; else 1 x 1)
+    need_u: NDArray[np.float64]  #: (G, C, n, 2) its command before the filter
+    given: NDArray[np.bool_]  #: (G, C) the QP's answer is in given_u
+    given_u: NDArray[np.float64]  #: (G, C, n, 2)
+
+
+class TrialOutputs(NamedTuple):
+    """How each of ``B`` trials ended."""
+
+    x: NDArray[np.float64]  #: (B, n, k) final states
+    v: NDArray[np.float64]  #: (B, n, k) their rates
+    steps: NDArray[np.int64]  #: (B,) accepted steps
+    status: NDArray[np.int8]  #: (B,) Status.code
+    mc: NDArray[np.float64]  #: (B,) least clearance over accepted states
+    ns: NDArray[np.float64]  #: (B,) net speed over the last check interval
+    qw: NDArray[np.float64]  #: (B, n, 2) positions at the start of the drift window
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def step_chunk(c, law, model, obs, flt, st, out, run):
+    """Steps of chunk ``c`` until every trial has ended or one needs a QP (module docstring)."""
+    n = st.x.shape[1]
+    kk = st.x.shape[2]
+    C = st.x.shape[3]
+    hand = model.kind == NEAR_IDENTITY  # the law acts on points other than the centres
+    turns = hand or model.kind == HEADING  # the state has a heading
+    filtering = obs.radius.shape[0] > 0 or flt.kind != NONE
+    ids = st.ids[c]
+    mc = st.mc[c]
+    ns = st.ns[c]
+    qc = st.qc[c]
+    hc, hs, hcl, hsl = st.hc[c], st.hs[c], st.hcl[c], st.hsl[c]
+    x, xn = (st.x[c], st.xn[c]) if st.meta[c, 3] == 0 else (st.xn[c], st.x[c])
+    f = np.empty((n, kk, C))
+    u = np.empty((n, 2, C))
+    p = np.empty((n, 2, C) if hand else (1, 2, 1))  # hand points
+    scratch = np.empty(C)  # the law's surface decisions, the unicycles' speeds
+    gap = np.empty(C)  # clearance of the next state
+    swept = np.empty(C)  # least clearance along the step to it
+    near = np.empty(C)  # 1: a pair may have met during the step
+    disp = np.zeros(C)  # largest displacement of the step
+    fin = np.zeros(C)  # 0 while the step is finite
+    wide = np.empty(C)  # 1: a robot turned by more than SMALL_TURN in the step
+    code = np.full(C, -1, dtype=np.int8)  # -1: still running
+    S = filter_scratch(n if filtering else 1, obs, flt)
+    dt = run.dt
+    nact = st.meta[c, 0]
+    step = st.meta[c, 1]
+    kc = st.meta[c, 2]
+    if turns and st.meta[c, 5] == 0:  # then carried from step to step (models.stage.turn)
+        headings(x, hc, hs, hcl, hsl, nact)
+        st.meta[c, 5] = 1
+    while nact > 0:
+        k = step
+        src = x
+        if hand:
+            points(x, hc, hs, p, nact, model)
+            src = p
+        law_field(src, u, scratch, nact, law)
+        if filtering:  # obstacles' repulsion and the filter, trial by trial
+            pause = False
+            for b in range(nact):
+                given_u = st.given_u[c, b] if flt.kind == CENTRALIZED else st.given_u[0, 0]
+                answer = filter_command(src, u, b, law.radius, obs, flt, st.given[c, b], given_u, S)
+                if answer == WAIT:  # the host solves this trial's QP
+                    st.need[c, b] = True
+                    for i in range(n):
+                        st.need_p[c, b, i, 0] = S.pq[i, 0]
+                        st.need_p[c, b, i, 1] = S.pq[i, 1]
+                        st.need_u[c, b, i, 0] = S.uq[i, 0]
+                        st.need_u[c, b, i, 1] = S.uq[i, 1]
+                    pause = True
+                st.given[c, b] = False
+            if pause:  # the step is computed again, with the QPs' answers, when resumed
+                st.meta[c, 0] = nact
+                st.meta[c, 1] = step
+                st.meta[c, 2] = kc
+                st.meta[c, 4] = PAUSED
+                return
+        rates(x, hc, hs, u, f, scratch, nact, model)
+        if k == run.window_step:  # start of the drift window (the driver's q_window)
+            for b in range(nact):
+                for i in range(n):
+                    out.qw[ids[b], i, 0] = x[i, 0, b]
+                    out.qw[ids[b], i, 1] = x[i, 1, b]
+        for b in range(nact):
+            code[b] = -1
+        if k % run.check_every == 0 or k == run.n_steps:  # the stop rule
+            for b in range(nact):
+                gap[b] = 0.0  # (here: the largest squared move since the previous check)
+            if kc >= 0:
+                for i in range(n):
+                    for b in range(nact):
+                        dx = x[i, 0, b] - qc[i, 0, b]
+                        dy = x[i, 1, b] - qc[i, 1, b]
+                        gap[b] = max(gap[b], dx * dx + dy * dy)
+            for b in range(nact):
+                nan = False
+                for i in range(n):
+                    for d in range(kk):
+                        nan = nan or f[i, d, b] != f[i, d, b]
+                still = (not nan) and speed(f, b, model) <= run.speed
+                if kc >= 0:
+                    net = math.sqrt(gap[b]) / ((k - kc) * dt)
+                    ns[b] = net
+                    still = still or net <= run.speed
+                if still:
+                    code[b] = CONVERGED
+            for i in range(n):
+                for d in range(2):
+                    for b in range(nact):
+                        qc[i, d, b] = x[i, d, b]
+            kc = k
+        if k == run.n_steps:
+            for b in range(nact):
+                if code[b] < 0:
+                    code[b] = END
+        else:  # explicit Euler, judged by the contact rule (System.step_verdict)
+            for b in range(nact):
+                fin[b] = 0.0
+                disp[b] = 0.0
+            for i in range(n):
+                for b in range(nact):
+                    nx = x[i, 0, b] + dt * f[i, 0, b]
+                    ny = x[i, 1, b] + dt * f[i, 1, b]
+                    ex = nx - x[i, 0, b]
+                    ey = ny - x[i, 1, b]
+                    disp[b] = max(disp[b], ex * ex + ey * ey)
+                    xn[i, 0, b] = nx
+                    xn[i, 1, b] = ny
+                    fin[b] += (nx + ny) * 0.0  # NaN unless x and y are finite
+                for d in range(2, kk):
+                    for b in range(nact):
+                        z = x[i, d, b] + dt * f[i, d, b]
+                        xn[i, d, b] = z
+                        fin[b] += z * 0.0
+            for b in range(nact):
+                disp[b] = math.sqrt(disp[b])
+            contact(xn, x, disp, gap, swept, near, nact, law)
+            for b in range(nact):
+                if code[b] >= 0:
+                    continue
+                if fin[b] != 0.0:
+                    code[b] = NON_FINITE
+                    continue
+                if obs.radius.shape[0] > 0:
+                    end, sw = obstacle_contact(obs, law.radius, x, xn, b, SWEPT_MARGIN * disp[b],
+                                               min(mc[b], gap[b]))  # fmt: skip
+                    gap[b] = min(gap[b], end)
+                    swept[b] = min(swept[b], sw)
+                if not gap[b] > 0.0:
+                    code[b] = COLLISION
+                elif not swept[b] > 0.0:
+                    code[b] = TOO_LARGE
+                else:
+                    mc[b] = min(mc[b], gap[b])
+            if turns:  # the headings of the next states
+                turn(xn, x, hc, hs, hcl, hsl, wide, nact)
+        # trials that end here end at x (a rejected step is not taken), with the rates f
+        for b in range(nact):
+            if code[b] >= 0:
+                g = ids[b]
+                for i in range(n):
+                    for d in range(kk):
+                        out.x[g, i, d] = x[i, d, b]
+                        out.v[g, i, d] = f[i, d, b]
+                out.steps[g] = k
+                out.status[g] = code[b]
+                out.mc[g] = mc[b]
+                out.ns[g] = ns[b]
+        x, xn = xn, x  # the live trials' next states are current now
+        st.meta[c, 3] = 1 - st.meta[c, 3]
+        for b in range(nact - 1, -1, -1):  # compact the live range
+            if code[b] < 0:
+                continue
+            last = nact - 1
+            if b != last:  # the trial at `last` is running (visited already)
+                for i in range(n):
+                    for d in range(kk):
+                        x[i, d, b] = x[i, d, last]
+                    qc[i, 0, b] = qc[i, 0, last]
+                    qc[i, 1, b] = qc[i, 1, last]
+                    if turns:
+                        hc[i, b] = hc[i, last]
+                        hs[i, b] = hs[i, last]
+                        hcl[i, b] = hcl[i, last]
+                        hsl[i, b] = hsl[i, last]
+                ids[b] = ids[last]
+                mc[b] = mc[last]
+                ns[b] = ns[last]
+                code[b] = code[last]
+            nact -= 1
+        step += 1
+    st.meta[c, 0] = 0
+    st.meta[c, 4] = DONE
+
+
+@njit(cache=True, error_model="numpy", nogil=True, parallel=True)
+def run_chunks(law, model, obs, flt, st, out, run):
+    """Every running chunk until it ends or pauses, chunks in parallel."""
+    for c in prange(st.x.shape[0]):
+        if st.meta[c, 4] == RUNNING:
+            step_chunk(c, law, model, obs, flt, st, out, run)

@@ -1,0 +1,123 @@
+"""Batches of trials on the one compiled loop: the host side of :mod:`.loop`.
+
+:func:`run_trials` lays the trials out in chunks (``(n, k, C)``, the trials innermost),
+builds each stage's numbers (the law's :class:`~formationlab.controllers.terms.KernelTerms`,
+the robot model's :class:`~formationlab.models.terms.ModelTerms`, the obstacles' and the
+filter's terms), runs the chunks in parallel until every trial has ended, and answers the
+rare pauses of a centralized filter whose QP rounding defeats (Clarabel, through
+:func:`formationlab.safety.barrier_filter`, between calls). It returns a
+:class:`TrialRun`: how each trial ended, by name.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..analysis import Tolerances
+from ..controllers import Law
+from ..dynamics import System
+from ..models import RobotModel
+from ..models.terms import HEADING, NEAR_IDENTITY, model_terms
+from ..safety.obstacle_terms import obstacle_terms
+from ..safety.stage import CENTRALIZED, filter_terms
+from ..spec import Formation
+from .loop import RUNNING, ChunkState, RunNumbers, TrialOutputs, run_chunks
+
+__all__ = ["TrialRun", "run_trials"]
+
+
+class TrialRun(NamedTuple):
+    """How each of ``B`` trials ended (``run_trials``)."""
+
+    x: NDArray[np.float64]  #: (B, n, k) final states (the last accepted ones)
+    v: NDArray[np.float64]  #: (B, n, k) their rates
+    status: NDArray[np.int8]  #: (B,) Status.code
+    steps: NDArray[np.int64]  #: (B,) accepted steps
+    min_clearance: NDArray[np.float64]  #: (B,) least clearance over accepted states
+    net_speed: NDArray[np.float64]  #: (B,) net speed over the last check interval
+    q_window: NDArray[np.float64]  #: (B, n, 2) positions at the start of the drift window
+    window_step: int  #: that step (negative: never reached)
+
+
+def run_trials(
+    formation: Formation,
+    law: Law,
+    model: RobotModel,
+    q0: NDArray[np.float64],
+    *,
+    dt: float,
+    n_steps: int,
+    check_every: int,
+    tol: Tolerances,
+    chunk: int,
+    obstacles: Sequence[Any] = (),
+    safety: Any = None,
+) -> TrialRun:
+    """Step the trials ``q0`` ``(B, n, k)`` with explicit Euler on the compiled loop.
+
+    Trial by trial the stepping driver's run with a :class:`~formationlab.integrators.StopRule`
+    (``speed`` of ``tol``, every ``check_every`` steps) and the drift window of ``tol``;
+    ``chunk`` trials per chunk of parallel work.
+    """
+    from ..safety import barrier_filter
+
+    obstacles = tuple(obstacles)
+    system = System(formation=formation, law=law, model=model, obstacles=obstacles, safety=safety)
+    terms = law.compiled_terms(formation).writable()  # one signature for every law
+    robots = model_terms(model)
+    d_o, gamma = (safety.d_obstacle, safety.gamma) if safety is not None else (0.0, 0.0)
+    rep = law.obstacle_repulsion() if obstacles else None
+    obs = obstacle_terms(
+        obstacles, d_obstacle=d_o, gamma=gamma,
+        gain=rep.gain if rep else 0.0, eta=rep.repulsion.eta if rep else 1.0,
+        influence=rep.repulsion.influence if rep else 1.0,
+    )  # fmt: skip
+    flt = filter_terms(safety)
+    B, n, k = q0.shape
+    C = int(max(1, min(chunk, B)))
+    G = -(-B // C)
+    window_step = n_steps - tol.drift_steps(dt)  # negative: never reached
+    x = np.zeros((G, n, k, C))
+    ids = np.zeros((G, C), np.int64)
+    mc0 = system.clearance(q0)  # as the driver starts it
+    mc = np.full((G, C), np.inf)
+    meta = np.zeros((G, 6), np.int64)
+    for g in range(G):
+        sel = np.arange(g * C, min(B, (g + 1) * C))
+        x[g, :, :, : sel.size] = np.moveaxis(q0[sel], 0, -1)
+        ids[g, : sel.size] = sel
+        mc[g, : sel.size] = mc0[sel]
+        meta[g] = (sel.size, 0, -1, 0, RUNNING, 0)
+    turns = robots.kind in (HEADING, NEAR_IDENTITY)
+    hshape = (G, n, C) if turns else (G, 1, 1)
+    qp = (G, C, n, 2) if flt.kind == CENTRALIZED else (1, 1, n, 2)
+    st = ChunkState(
+        x=x, xn=np.zeros_like(x), qc=np.array(x[:, :, :2], order="C"),
+        hc=np.zeros(hshape), hs=np.zeros(hshape), hcl=np.zeros(hshape), hsl=np.zeros(hshape),
+        ids=ids, mc=mc, ns=np.full((G, C), np.nan), meta=meta, need=np.zeros((G, C), bool),
+        need_p=np.zeros(qp), need_u=np.zeros(qp), given=np.zeros((G, C), bool),
+        given_u=np.zeros(qp),
+    )  # fmt: skip
+    out = TrialOutputs(
+        x=np.empty((B, n, k)), v=np.full((B, n, k), np.nan), steps=np.zeros(B, np.int64),
+        status=np.zeros(B, np.int8), mc=np.full(B, np.inf), ns=np.full(B, np.nan),
+        qw=np.full((B, n, 2), np.nan),
+    )  # fmt: skip
+    numbers = RunNumbers(float(dt), int(n_steps), int(check_every), float(tol.speed),
+                         int(window_step))  # fmt: skip
+    while True:
+        run_chunks(terms, robots, obs, flt, st, out, numbers)
+        wait_g, wait_b = np.nonzero(st.need)  # chunks paused, and their slots needing a QP
+        if wait_g.size == 0:
+            break
+        res = barrier_filter(safety, st.need_p[wait_g, wait_b], st.need_u[wait_g, wait_b],
+                             obstacles)  # fmt: skip
+        st.given_u[wait_g, wait_b] = res.u
+        st.given[wait_g, wait_b] = True
+        st.need[wait_g, wait_b] = False
+        st.meta[np.unique(wait_g), 4] = RUNNING
+    return TrialRun(out.x, out.v, out.status, out.steps, out.mc, out.ns, out.qw, window_step)
