@@ -19,7 +19,14 @@ from numpy.typing import NDArray
 from ..dynamics import System
 from ..spec import Formation
 
-__all__ = ["EDGE_ERRORS_MAX", "SURFACES_MAX", "Frame", "live_header", "scene_info"]
+__all__ = [
+    "EDGE_ERRORS_MAX",
+    "SURFACES_MAX",
+    "Frame",
+    "History",
+    "live_header",
+    "scene_info",
+]
 
 #: Edges whose errors go into each frame one by one (beyond: their maximum and RMS only).
 EDGE_ERRORS_MAX = 24
@@ -43,6 +50,22 @@ class Frame:
     header: dict[str, Any]
     positions: NDArray[np.float32]
     heading: NDArray[np.float32] | None = None
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True, eq=False)
+class History:
+    """What a viewer has shown: times and positions.
+
+    Attributes
+    ----------
+    t : ndarray, shape (T,)
+        Seconds.
+    positions : ndarray, shape (T, n, 2)
+        Robot centres at those times (robot 1 is column 0).
+    """
+
+    t: NDArray[np.float64]
+    positions: NDArray[np.float64]
 
 
 def split_state(state: NDArray[np.float64], names: tuple[str, ...] = ()) -> tuple[NDArray, Any]:

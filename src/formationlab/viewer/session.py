@@ -39,7 +39,15 @@ from ..integrators.driver import Stepping
 from ..scenario import Scenario, closed_loop
 from ..status import Status
 from .export import SessionError, export_table, finish_export, plain
-from .frames import Frame, finite_or_none, live_header, scene_info, split_state, static_info
+from .frames import (
+    Frame,
+    History,
+    finite_or_none,
+    live_header,
+    scene_info,
+    split_state,
+    static_info,
+)
 
 __all__ = ["Frame", "LiveSession", "SessionError", "law_parameters"]
 
@@ -155,6 +163,13 @@ class LiveSession:
         except UserInputError as exc:
             raise SessionError(str(exc), key=exc.key) from None
         self._record()
+
+    def trajectory(self) -> History:
+        """Times ``(T,)`` and positions ``(T, n, 2)`` since the last reset (the latest
+        :data:`HISTORY_MAX` at most)."""
+        t = np.array([h[0] for h in self.history])
+        q = np.array([h[1] for h in self.history]).reshape(len(t), self.formation.n, 2)
+        return History(t=t, positions=q)
 
     def _record(self) -> None:
         if len(self.history) >= HISTORY_MAX:
