@@ -332,7 +332,7 @@ class LiveSession:
         if system.obstacles:
             clear = system.obstacle_clearances(x)
             if clear.size and clear.min() <= 0:
-                i, o = np.unravel_index(int(np.argmin(clear)), clear.shape)
+                i, o = (int(v) for v in np.unravel_index(int(np.argmin(clear)), clear.shape))
                 raise SessionError(
                     f"{what} would put robot {i + 1} on obstacle {o + 1} "
                     f"({system.obstacles[o].describe()}); drop it elsewhere"
