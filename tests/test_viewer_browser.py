@@ -179,3 +179,33 @@ def test_replay_with_the_time_slider(browser, tmp_path):
         wait_for(lambda: abs(float(attr(page, "t")) - 0.25) < 1e-9, what="frame 25 drawn")
         assert int(attr(page, "robots")) == 3
         page.close()
+
+
+def test_page_shows_headings_obstacles_filter_activity_and_reference(browser):
+    """A scenario with unicycles, an obstacle, a safety filter and marching: the page
+    draws the headings, the obstacle, rings around the robots whose commands the filter
+    changed, and the reference arrow, and says so in its status line."""
+    from pathlib import Path
+
+    from formationlab.viewer import LiveSession
+
+    path = Path(__file__).with_name("data") / "viewer-everything.toml"
+    session = LiveSession(load_scenario(path), seed=1)
+    session.set_paused(True)
+    session.step(20)
+    with serving(session) as srv:
+        page = browser.new_page(viewport={"width": 1100, "height": 720})
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(srv.url)
+        page.wait_for_selector(f"{ROOT_SEL}[data-state=ready]", timeout=15_000)
+        wait_for(lambda: attr(page, "robots") == "3", what="the first frame drawn")
+        assert attr(page, "obstacles") == "1"
+        assert attr(page, "headings") == "3"
+        assert attr(page, "filtered") == "1,2,3"
+        assert attr(page, "reference") == "0.2,0"
+        status = page.text_content(f"{ROOT_SEL} [data-role=status]")
+        assert "filter barrier-decentralized: changed robots 1, 2, 3" in status
+        assert "v_ref = (0.2" in status
+        page.close()
+        assert not errors, errors

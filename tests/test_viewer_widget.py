@@ -65,3 +65,29 @@ def test_python_changes_drive_the_run_and_reach_the_front_end(widget):
     with pytest.raises(SessionError, match="k_c"):
         v.law_params = {"k_c": -1.0}
     assert v.law_params["k_c"] == 2.0 and v.session.law.k_c == 2.0
+
+
+def test_stepped_from_python_without_a_browser(widget):
+    """step / t / positions / state / history from Python: the run of `simulate`."""
+    v = widget
+    assert v.step(25) == 25 and v.t == pytest.approx(0.025, abs=1e-12)
+    sc = v.session.scenario
+    ref = fl.simulate(sc.formation, sc.law, sc.q0, duration=0.025, integrator=sc.integrator,
+                      backend="numpy")  # fmt: skip
+    np.testing.assert_array_equal(v.positions, ref.q[-1])
+    np.testing.assert_array_equal(v.state, ref.x[-1])
+    hist = v.history
+    assert hist.positions.shape == (26, 3, 2) and hist.t.shape == (26,)
+    np.testing.assert_allclose(hist.t, ref.t, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(hist.positions, ref.q)
+    v.session.reset()
+    assert v.history.positions.shape == (1, 3, 2)
+    with pytest.raises(SessionError, match="whole number"):
+        v.step(-1)
+
+
+def test_the_front_end_bundle_has_only_a_default_render(widget):
+    """anywidget deprecates a named ``render`` export: the module's default is ``{ render }``."""
+    esm = widget._esm
+    assert "export default { render }" in esm
+    assert "export { socketModel }" in esm and "export { render" not in esm

@@ -222,10 +222,13 @@ class System:
         """Largest robot speed (:meth:`RobotModel.speed`) of states and rates ``(..., n, k)``."""
         return np.max(self.model.speed(x, v), axis=-1)
 
-    def filter_result(self, x: NDArray[np.float64]) -> FilterResult:
+    def filter_result(self, x: NDArray[np.float64], t: float | None = None) -> FilterResult:
         """What the safety filter does at states ``x`` ``(..., n, k)``: command, status, active set.
 
-        Trials of the result are the flattened batch axes of ``x``. Needs a filter.
+        Trials of the result are the flattened batch axes of ``x``. Needs a filter. The
+        filter's input is the law's control with the obstacles' repulsion; with ``t``, also
+        the marching term at ``t`` (the command the robots were given then, as in
+        :meth:`command`).
         """
         from .errors import ParameterError
 
@@ -234,6 +237,8 @@ class System:
         assert self.safety is not None
         p = self.model.points(np.asarray(x, dtype=float))
         u = self.law.control(self.formation, p)
+        if t is not None and self.marching is not None:
+            u = self.marching.command(self.formation, p, u, t, self.model.velocity_gain)
         if self.obstacles:
             u = self._repelled(p, u)
         return self.safety.apply(p, u, obstacles=self.obstacles)

@@ -28,6 +28,7 @@ __all__ = [
     "ScenarioError",
     "UnknownNameError",
     "UserInputError",
+    "ViewerWarning",
     "require",
 ]
 
@@ -86,6 +87,10 @@ class FormationlabWarning(UserWarning):
 
 class IgnoredKeyWarning(FormationlabWarning):
     """A parameter that belongs to another law, integrator or model, so it has no effect."""
+
+
+class ViewerWarning(FormationlabWarning):
+    """The live viewer shows a stand-in for something it cannot step (the message says what)."""
 
 
 class OutputError(UserInputError, OSError):

@@ -19,6 +19,9 @@ takes it); a key none has is an error with a suggestion. The tables' pydantic
 models are in :mod:`formationlab._scenario_models`.
 
 This module reads no files: :func:`formationlab.io.scenario.load_scenario` does.
+:func:`closed_loop` (:mod:`formationlab._scenario_loop`) is the one way from a scenario
+to the :class:`~formationlab.dynamics.System` it describes; :func:`run_scenario` runs it
+as ``formationlab run`` does.
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ from ._scenario_build import (
     restrictions_on_at_target,
     stem,
 )
+from ._scenario_loop import closed_loop, run_scenario
 from ._scenario_models import SECTIONS, ScenarioModel
 from ._scenario_parts import build_entry
 from ._scenario_robots import build_marching, build_robot_model
@@ -56,7 +60,14 @@ from .sensing import SENSING_LIMIT, Faults, Sensing, Stop, delay_steps
 from .spec import Formation
 from .validation import line_of, validation_error
 
-__all__ = ["SECTIONS", "Scenario", "ScenarioModel", "parse_scenario"]
+__all__ = [
+    "SECTIONS",
+    "Scenario",
+    "ScenarioModel",
+    "closed_loop",
+    "parse_scenario",
+    "run_scenario",
+]
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

@@ -50,7 +50,7 @@ from .validation import whole
 if TYPE_CHECKING:
     from .safety import Obstacle, SafetyFilter, SafetyRecord
 
-__all__ = ["LIST_LIMIT", "SimulationResult", "simulate"]
+__all__ = ["LIST_LIMIT", "SimulationResult", "build_system", "run_system", "simulate"]
 
 #: Most edges (robots, surfaces) whose values a run's summary lists one by one; beyond,
 #: summary statistics and counts (the per-edge values go to a table file).
@@ -504,9 +504,34 @@ def simulate(
     law, integrator = resolve(LAWS, law), resolve(INTEGRATORS, integrator or Euler(dt=1e-3))
     robot = resolve(MODELS, model or SingleIntegrator())
     x0 = initial_state(formation, robot, q0, **initial)
-    system = _system(formation, law, robot, x0, marching, obstacles, safety)
-    if sensing is not None or faults is not None:
-        system = dataclasses.replace(system, sensing=sensing, faults=faults)
+    system = build_system(
+        formation, law, robot, x0, marching=marching, obstacles=obstacles, safety=safety,
+        sensing=sensing, faults=faults,
+    )  # fmt: skip
+    return run_system(
+        system, integrator, x0, duration=duration, save_every=save_every, progress=progress,
+        interruptible=interruptible, backend=backend,
+    )  # fmt: skip
+
+
+def run_system(
+    system: System,
+    integrator: Integrator,
+    x0: NDArray[np.float64],
+    *,
+    duration: float,
+    save_every: int = 1,
+    progress: Callable[[float], None] | None = None,
+    interruptible: bool = False,
+    backend: Literal["auto", "numpy", "numba"] = "auto",
+) -> SimulationResult:
+    """Run a closed loop built by :func:`build_system` from its validated start ``x0``.
+
+    The second half of :func:`simulate` (its arguments mean the same); a scenario's loop
+    (:func:`formationlab.scenario.closed_loop`) runs through it too.
+    """
+    save_every = whole(save_every, "save_every")
+    law, robot = system.law, system.model
     terms = compiled_terms(system, integrator) if backend != "numpy" else None
     if backend == "numba" and terms is None:
         raise ParameterError(
@@ -634,18 +659,37 @@ def initial_state(
     return x0
 
 
-def _system(
+def build_system(
     formation: Formation,
     law: Law,
     model: RobotModel,
     x0: NDArray[np.float64],
-    marching: March | None,
-    obstacles: Sequence[Obstacle],
-    safety: SafetyFilter | str | None,
+    *,
+    marching: March | None = None,
+    obstacles: Sequence[Obstacle] = (),
+    safety: SafetyFilter | str | None = None,
+    sensing: Sensing | None = None,
+    faults: Faults | None = None,
 ) -> System:
-    """The closed loop, with obstacles and filter validated against the start ``x0``."""
+    """The closed loop of every part, with obstacles and filter validated against ``x0``.
+
+    The one builder of a :class:`System` from its parts: :func:`simulate`, a scenario's
+    :func:`~formationlab.scenario.closed_loop` and the asynchronous runner call it.
+
+    Parameters
+    ----------
+    formation, law, model
+        Robots and graph, control law, robot model.
+    x0 : ndarray, shape (n, k)
+        The validated start (:func:`initial_state`); the obstacles must be clear of it.
+    marching, obstacles, safety, sensing, faults
+        As for :func:`simulate`; ``safety`` may be a filter's name.
+    """
     if not obstacles and (safety is None or safety == "none"):
-        return System(formation=formation, law=law, model=model, marching=marching)
+        return System(
+            formation=formation, law=law, model=model, marching=marching, sensing=sensing,
+            faults=faults,
+        )  # fmt: skip
     from .safety import SafetyFilter, check_obstacle_starts
 
     if isinstance(safety, str):
@@ -659,5 +703,5 @@ def _system(
     check_obstacle_starts(model.positions(x0), formation.diameters / 2, tuple(obstacles))
     return System(
         formation=formation, law=law, model=model, marching=marching,
-        obstacles=tuple(obstacles), safety=safety,
+        obstacles=tuple(obstacles), safety=safety, sensing=sensing, faults=faults,
     )  # fmt: skip

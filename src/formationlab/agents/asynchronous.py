@@ -56,7 +56,7 @@ from ..integrators.base import steps_for
 from ..models import MODELS, RobotModel, SingleIntegrator
 from ..registry import resolve
 from ..sensing import Channel, Faults, Sensing, local_controls, rotate
-from ..simulation import SimulationResult, initial_state
+from ..simulation import SimulationResult, build_system, initial_state
 from ..spec import Formation
 from ..status import Status
 from ..validation import nonnegative, positive, whole
@@ -324,7 +324,7 @@ async def arun(
     n = formation.n
     T = _periods(periods, n, dt)
     x0 = initial_state(formation, robot, q0, **initial)
-    system = System(formation=formation, law=law, model=robot, faults=faults)
+    system = build_system(formation, law, robot, x0, faults=faults)
     # the synchronous channel's frames and mismatch; its delay is the bus's here
     channel = Channel(dataclasses.replace(sensing, delay=0.0, seed=int(seed)), formation, law,
                       robot, [int(seed)], dt)  # fmt: skip

@@ -77,11 +77,10 @@ except ImportError as exc:  # pragma: no cover - the extra is installed where te
     ) from exc
 
 from ..analysis import Tolerances, classify, distance_errors
-from ..dynamics import System
 from ..errors import FormationError, ParameterError
 from ..models import DoubleIntegrator, Unicycle
 from ..models.transforms import NearIdentity, heading_vectors
-from ..scenario import Scenario, parse_scenario
+from ..scenario import Scenario, closed_loop, parse_scenario
 from ..sensing import Channel, Faults, Seed, Sensing, rotate
 from ..simulation import initial_state
 from ..status import Status
@@ -180,11 +179,7 @@ class FormationEnv(ParallelEnv):
         self.tolerances = tolerances or Tolerances()
         self.dt = float(dt)
         self.n_steps = max(1, round(float(scenario.duration) / self.dt))
-        self.system = System(
-            formation=self.formation, law=scenario.law, model=model,
-            marching=scenario.marching, obstacles=scenario.obstacles, safety=scenario.safety,
-            sensing=sensing, faults=faults,
-        )  # fmt: skip
+        self.system = closed_loop(scenario, sensing=sensing, faults=faults)
         self.terms = scenario.law.compiled_terms(self.formation)  # the law's local form
         # unicycles are driven by (v, omega): through the near-identity transform, which
         # is exactly invertible, the model's own limits and kinematics step them

@@ -136,12 +136,11 @@ def _run(
     ``summary.json`` before the figures (which a Ctrl-C or a failure may stop), so that
     nothing that comes after can lose a finished simulation.
     """
-    from .. import simulate
     from ..io.files import earlier_files, prepare_output_dir, remove_stale
 
     folder = prepare_output_dir(out, force=force)
     earlier = earlier_files(folder, EARLIER_PATTERNS) if force else []
-    result = _simulate(simulate, sc, save_every, quiet)
+    result = _simulate(sc, save_every, quiet)
     interrupted = result.status == "interrupted"
     summary, written = _write_data(folder, sc, scenario, result, save_every, quiet)
     try:
@@ -313,21 +312,16 @@ def _sensing_words(sc: Any) -> str:
     return out
 
 
-def _simulate(simulate: Any, sc: Any, save_every: int, quiet: bool) -> Any:
-    """Run ``sc`` with a progress bar on a terminal (long runs only)."""
+def _simulate(sc: Any, save_every: int, quiet: bool) -> Any:
+    """Run ``sc`` (its closed loop: :func:`formationlab.scenario.run_scenario`) with a
+    progress bar on a terminal (long runs only)."""
+    from ..scenario import run_scenario
+
     steps = sc.duration / getattr(sc.integrator, "dt", 1e-3)
     show = not quiet and err_console.is_terminal and steps * sc.n**2 > 2e5
     kwargs = {
-        "duration": sc.duration,
-        "integrator": sc.integrator,
         "save_every": save_every,
         "interruptible": True,  # Ctrl-C: keep the states so far (status "interrupted")
-        "model": sc.model,
-        "marching": sc.marching,
-        "obstacles": sc.obstacles,
-        "safety": sc.safety,
-        "sensing": sc.sensing,
-        "faults": sc.faults,
     }
     if sc.asynchronous is not None:  # every robot its own task (agents.run_async)
         from ..agents import run_async
@@ -342,7 +336,7 @@ def _simulate(simulate: Any, sc: Any, save_every: int, quiet: bool) -> Any:
             sensing=sc.sensing, faults=sc.faults, model=sc.model, save_every=save_every,
         )  # fmt: skip
     if not show:
-        return simulate(sc.formation, sc.law, sc.x0, **kwargs)
+        return run_scenario(sc, **kwargs)
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
     columns = (
@@ -353,13 +347,7 @@ def _simulate(simulate: Any, sc: Any, save_every: int, quiet: bool) -> Any:
     )
     with Progress(*columns, console=err_console, transient=True) as bar:
         task = bar.add_task(sc.name, total=sc.duration)
-        return simulate(
-            sc.formation,
-            sc.law,
-            sc.x0,
-            progress=lambda t: bar.update(task, completed=t),
-            **kwargs,
-        )
+        return run_scenario(sc, progress=lambda t: bar.update(task, completed=t), **kwargs)
 
 
 @command(

@@ -34,6 +34,10 @@ hold their commands over it (a digital controller); otherwise their sensed comma
 evaluated at every stage of the scheme. Only explicit schemes (``explicit = True``) step
 a sensed system.
 
+The loop's body is :class:`Stepping` (one call of :meth:`Stepping.step` per step, holding
+the channel, the step ``k``, the stop rule's last check and what was saved): ``drive`` loops
+over it, and the live viewer pulls it one step at a time.
+
 Saving every ``save_every`` steps keeps ``(t, x, v)`` of every live trial, and
 always a trial's last state. Counts in ``stats`` are integers.
 """
@@ -44,7 +48,6 @@ import functools
 import time
 from collections.abc import Callable
 from contextlib import nullcontext
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Concatenate, ParamSpec, TypeVar
 
 import numpy as np
@@ -54,11 +57,12 @@ from ..dynamics import SensedView, System
 from ..errors import ParameterError
 from ..status import Status
 from .diagnostics import SwitchMonitor
+from .stepped import Stepped, StopRule
 
 if TYPE_CHECKING:
     from .base import FixedStepIntegrator
 
-__all__ = ["Stepped", "StopRule", "drive"]
+__all__ = ["Stepped", "Stepping", "StopRule", "drive"]
 
 P = ParamSpec("P")
 R = TypeVar("R")
@@ -66,86 +70,6 @@ R = TypeVar("R")
 Progress = Callable[[float], None]
 #: the progress callback is called at least this often (seconds of wall time)
 PROGRESS_EVERY_S = 0.5
-
-
-@dataclass(frozen=True, kw_only=True)
-class StopRule:
-    """When a trial counts as stopped (module docstring).
-
-    Parameters
-    ----------
-    speed : float
-        Stopped when the instantaneous or the net speed is at most this.
-    check_every : int
-        Test every this many steps (and at the last step).
-    """
-
-    speed: float
-    check_every: int = 1
-
-
-@dataclass(frozen=True, kw_only=True, eq=False)
-class Stepped:
-    """What :func:`drive` returns: final states, statuses and saved steps of ``B`` trials.
-
-    Attributes
-    ----------
-    x, v : ndarray, shape (B, n, k)
-        Last accepted state of each trial and the velocity of the step that
-        left it (for a rejected step, the rejected step's velocity).
-    steps : ndarray of int64, shape (B,)
-        Accepted steps of each trial.
-    status : ndarray of int8, shape (B,)
-        :attr:`Status.code` of how each trial ended.
-    message : list of str
-        Why each trial ended, in words (says what to change when it failed).
-    min_clearance : ndarray, shape (B,)
-        Least ``r_ij - a_ij`` over every accepted state.
-    net_speed : ndarray, shape (B,)
-        Net speed over the last check interval (NaN before the second check
-        or without a stop rule).
-    q_window : ndarray, shape (B, n, 2)
-        Positions at step ``window_step`` (NaN for trials that had ended by then,
-        and for all without ``window``).
-    window_step : int
-        ``n_steps - window`` (-1 without ``window``; negative: no positions kept).
-    saved : list
-        Blocks ``(k, trials, x, v)`` saved at step ``k``; see :meth:`trajectory`.
-    stats : dict
-        ``steps``, ``rhs_evaluations``, ``wall_time_s``, ``step_cost_s``, the
-        scheme's counters and, with ``diagnostics``, the switching diagnostics
-        of the first trial.
-    dt : float
-        The step.
-    """
-
-    x: NDArray[np.float64]
-    v: NDArray[np.float64]
-    steps: NDArray[np.int64]
-    status: NDArray[np.int8]
-    message: list[str]
-    min_clearance: NDArray[np.float64]
-    net_speed: NDArray[np.float64]
-    q_window: NDArray[np.float64]
-    window_step: int
-    saved: list[tuple[int, NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]]
-    stats: dict[str, Any] = field(default_factory=dict)
-    dt: float = 0.0
-
-    def statuses(self) -> list[Status]:
-        """The :class:`Status` of every trial."""
-        return [Status.from_code(c) for c in self.status]
-
-    def trajectory(self, b: int = 0) -> tuple[NDArray, NDArray, NDArray]:
-        """Saved times ``(T,)``, states and velocities ``(T, n, k)`` of trial ``b``."""
-        ks, xs, vs = [], [], []
-        for k, ids, x, v in self.saved:
-            hit = np.flatnonzero(ids == b)
-            if hit.size:
-                ks.append(k)
-                xs.append(x[hit[0]])
-                vs.append(v[hit[0]])
-        return np.asarray(ks, dtype=float) * self.dt, np.asarray(xs), np.asarray(vs)
 
 
 def _holding_formation(
@@ -161,6 +85,221 @@ def _holding_formation(
             return fn(system, *args, **kw)
 
     return run
+
+
+class Stepping:
+    """The body of :func:`drive`, one step at a time: a closed loop that can be pulled.
+
+    Holds what a run carries from step to step: the live trials and their states, the
+    step ``k`` (time ``t0 + k dt``, the marching reference's time), the measurement
+    channel of a sensed system, the stop rule's last check, the saved blocks. Each call
+    of :meth:`step` is one pass of the loop described in the module docstring;
+    :func:`drive` loops over it, and the live viewer calls it once per step.
+
+    Parameters
+    ----------
+    system, stepper, x0, n_steps, save_every, stop, window, diagnostics, seeds
+        As for :func:`drive`.
+    t0 : float
+        Time of ``x0`` (default 0: ``t_k = k dt`` exactly, as :func:`drive`).
+
+    Attributes
+    ----------
+    k : int
+        The step of the states of the live trials (their time is ``t0 + k dt``).
+    live : ndarray of intp, shape (L,)
+        The trials still running; ``x`` their states ``(L, n, k)``.
+    """
+
+    def __init__(
+        self,
+        system: System,
+        stepper: FixedStepIntegrator,
+        x0: NDArray[np.float64],
+        *,
+        n_steps: int,
+        save_every: int | None = None,
+        stop: StopRule | None = None,
+        window: int | None = None,
+        diagnostics: bool = False,
+        seeds: Any = None,
+        t0: float = 0.0,
+    ) -> None:
+        self.system, self.stepper, self.n_steps = system, stepper, int(n_steps)
+        self.save_every, self.stop, self.t0 = save_every, stop, float(t0)
+        self.dt = dt = float(stepper.dt)
+        x = np.array(x0, dtype=float)
+        B = x.shape[0]
+        self.channel = None
+        if getattr(system, "sensed", False):  # (duck-typed systems of the tests have none)
+            if not getattr(stepper, "explicit", False):
+                raise ParameterError(
+                    f"[sensing] needs an explicit fixed-step integrator (euler or rk4): a robot "
+                    f"measures once per step and holds its command; {stepper.name!r} is not one",
+                    key="simulation.integrator",
+                )
+            self.channel = system.channel(seeds, dt, B)
+            if self.channel.B != B:
+                raise ParameterError(f"drive: {self.channel.B} seeds for {B} trials")
+        self.sampled = self.channel is not None and self.channel.sensing.sampled
+        self.x_out, self.v_out = np.empty_like(x), np.full_like(x, np.nan)
+        self.steps = np.zeros(B, dtype=np.int64)
+        self.status = np.full(B, Status.SUCCESS.code, dtype=np.int8)
+        self.message = [""] * B
+        self.min_clear = system.clearance(x)
+        self.net = np.full(B, np.nan)
+        self.q_window = np.full((B, *x.shape[1:-1], 2), np.nan)
+        self.window_step = -1 if window is None else self.n_steps - int(window)
+        self.saved: list[
+            tuple[int, NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]
+        ] = []
+        self.live, self.x = np.arange(B), x
+        self.xc, self.kc = x[..., :2].copy(), -1  # positions at the previous check, its step
+        self.seen_c = np.ones(B, dtype=bool)  # whether each trial's robots saw everyone then
+        self.monitor = SwitchMonitor(sigma0=system.sigma(x[0]), t0=self.t0) if diagnostics else None
+        self.counters: dict[str, float] = {}
+        self.evaluations = 0
+        self.k = 0  # the step of the states x of the live trials
+        self.v: NDArray[np.float64] | None = None  # the velocity of the last step taken
+
+    @property
+    def done(self) -> bool:
+        """Whether every trial has ended."""
+        return self.live.size == 0
+
+    def time(self, k: int) -> float:
+        """``t0 + k dt`` (``k dt`` exactly for ``t0 = 0``)."""
+        return self.t0 + k * self.dt
+
+    def _finish(
+        self, which: NDArray[np.bool_], code: Status, k: int, xk: NDArray, vk: NDArray
+    ) -> None:
+        ids = self.live[which]
+        self.x_out[ids], self.v_out[ids] = xk[which], vk[which]
+        self.steps[ids], self.status[ids] = k, code.code
+
+    def step(self, hold: dict[int, NDArray[np.float64]] | None = None) -> bool:
+        """One pass of the loop: step ``k`` of the live trials; False once every trial ended.
+
+        ``hold`` maps 0-based robots to the state rows they are held at (a person
+        dragging them in the viewer): the step's new states get these rows before the
+        step is judged. ``drive`` holds none.
+        """
+        system, stepper, dt, k, x, live = (
+            self.system,
+            self.stepper,
+            self.dt,
+            self.k,
+            self.x,
+            self.live,
+        )
+        channel, stop, n_steps = self.channel, self.stop, self.n_steps
+        here = system
+        if channel is not None:
+            u_local = channel.local(*channel.observe(x, live, k), live) if self.sampled else None
+            here = system.bound(SensedView(channel, live, u_local))
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            x_new, v = stepper.advance(here, x, dt, self.counters, self.time(k))  # step_verdict
+        for i, row in (hold or {}).items():
+            x_new[:, i] = row
+        self.evaluations += live.size
+        self.v = v
+        if k == self.window_step:
+            self.q_window[live] = x[..., :2]
+        ending = np.zeros(live.size, dtype=bool)
+        clear = None
+        if stop is not None and (k % stop.check_every == 0 or k == n_steps):
+            q = x[..., :2]
+            still = system.speed(x, v) <= stop.speed
+            if self.kc >= 0:
+                d = q - self.xc
+                net = self.net
+                net[live] = np.sqrt(np.max(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1], -1))
+                net[live] /= (k - self.kc) * dt
+                still |= net[live] <= stop.speed
+            if channel is not None:  # robots that wait for a measurement are not at rest
+                informed = channel.informed(x, live)
+                still &= informed & self.seen_c
+                self.seen_c = informed
+            self.xc, self.kc = q.copy(), k
+            self._finish(still, Status.CONVERGED, k, x, v)
+            ending |= still
+        if k == n_steps:
+            self._finish(~ending, Status.SUCCESS, k, x, v)
+            ending[:] = True
+        else:
+            verdict, clear = system.step_verdict(x, x_new)
+            verdict[ending] = 0
+            for code in np.unique(verdict[verdict > 0]) if verdict.any() else ():
+                bad = verdict == code
+                self._finish(bad, Status.from_code(code), k, x, v)
+                for r in np.flatnonzero(bad):
+                    self.message[live[r]] = system.step_message(
+                        x[r], x_new[r], Status.from_code(code), self.time(k + 1), dt
+                    )
+            ending |= verdict > 0
+        if self.save_every is not None:
+            sel = np.ones(live.size, bool) if k % self.save_every == 0 else ending
+            if sel.any():
+                self.saved.append((k, live[sel], x[sel].copy(), v[sel].copy()))
+        keep = ~ending
+        if not keep.any():
+            self.live = live[keep]
+            return False
+        self.live, self.x, self.xc, self.k = live[keep], x_new[keep], self.xc[keep], k + 1
+        self.seen_c = self.seen_c[keep]
+        assert clear is not None  # a trial that goes on had its step judged
+        self.min_clear[self.live] = np.minimum(self.min_clear[self.live], clear[keep])
+        if self.monitor is not None and self.live.size and self.live[0] == 0:
+            self.monitor.record(self.time(k + 1), system.sigma(self.x[0]))
+        return True
+
+    def move(self, x: NDArray[np.float64]) -> None:
+        """Replace the states ``(L, n, k)`` of the live trials between two steps.
+
+        A person moving robots (the viewer's drag and perturbation); the stop rule's last
+        check and the channel's history are kept.
+        """
+        self.x = np.array(x, dtype=float).reshape(self.x.shape)
+
+    def interrupt(self) -> None:
+        """Stop every live trial with :attr:`Status.INTERRUPTED` at its current state."""
+        ids, x, system = self.live, self.x, self.system
+        if not ids.size:
+            return
+        t = self.time(self.k)
+        if self.channel is None:
+            v_now = system.rhs(x, t)
+        else:  # what the robots would do with exact measurements: the step was not taken
+            v_now = system.bound(SensedView(self.channel, ids)).rhs(x, t)
+        self.x_out[ids], self.v_out[ids], self.status[ids] = x, v_now, Status.INTERRUPTED.code
+        self.steps[ids] = self.k
+        if self.save_every is not None and (not self.saved or self.saved[-1][0] != self.k):
+            self.saved.append((self.k, ids, x.copy(), v_now))
+        self.live = ids[:0]
+
+    def result(self, wall: float) -> Stepped:
+        """The :class:`Stepped` of the trials so far (``wall``: seconds of wall time taken)."""
+        dt, steps, status, message = self.dt, self.steps, self.status, self.message
+        done = int(steps.sum())
+        for b in range(len(message)):
+            if not message[b]:
+                message[b] = _message(Status.from_code(status[b]), int(steps[b]), dt)
+        counters = self.counters
+        stats: dict[str, Any] = {
+            "steps": done,
+            "rhs_evaluations": int(self.evaluations * self.stepper.evaluations_per_step)
+            + int(counters.pop("extra_rhs_evaluations", 0)),
+            "wall_time_s": wall,
+            "step_cost_s": wall / max(done, 1),
+            **(self.monitor.stats() if self.monitor is not None else {}),
+            **{key: int(value) for key, value in counters.items()},
+        }
+        return Stepped(
+            x=self.x_out, v=self.v_out, steps=steps, status=status, message=message,
+            min_clearance=self.min_clear, net_speed=self.net, q_window=self.q_window,
+            window_step=self.window_step, saved=self.saved, stats=stats, dt=dt,
+        )  # fmt: skip
 
 
 @_holding_formation
@@ -179,6 +318,8 @@ def drive(
     seeds: Any = None,
 ) -> Stepped:
     """Step the trials ``x0`` ``(B, n, k)`` for up to ``n_steps`` steps of ``stepper.dt``.
+
+    The loop over :meth:`Stepping.step` (the body, one step at a time).
 
     Parameters
     ----------
@@ -207,134 +348,24 @@ def drive(
     seeds : sequence of int or tuple of int, optional
         With sensing, the seed of each trial's channel (default: the sensing's ``seed``).
     """
-    dt = float(stepper.dt)
-    x = np.array(x0, dtype=float)
-    B = x.shape[0]
-    channel = None
-    if getattr(system, "sensed", False):  # (duck-typed systems of the tests have no sensing)
-        if not getattr(stepper, "explicit", False):
-            raise ParameterError(
-                f"[sensing] needs an explicit fixed-step integrator (euler or rk4): a robot "
-                f"measures once per step and holds its command; {stepper.name!r} is not one",
-                key="simulation.integrator",
-            )
-        channel = system.channel(seeds, dt, B)
-        if channel.B != B:
-            raise ParameterError(f"drive: {channel.B} seeds for {B} trials")
-    sampled = channel is not None and channel.sensing.sampled
-    x_out, v_out = np.empty_like(x), np.full_like(x, np.nan)
-    steps = np.zeros(B, dtype=np.int64)
-    status = np.full(B, Status.SUCCESS.code, dtype=np.int8)
-    message = [""] * B
-    min_clear = system.clearance(x)
-    net = np.full(B, np.nan)
-    q_window = np.full((B, *x.shape[1:-1], 2), np.nan)
-    window_step = -1 if window is None else n_steps - int(window)
-    saved: list[tuple[int, NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]] = []
-    live = np.arange(B)
-    xc, kc = x[..., :2].copy(), -1  # positions at the previous check, its step
-    seen_c = np.ones(B, dtype=bool)  # whether each trial's robots saw everyone then
-    monitor = SwitchMonitor(sigma0=system.sigma(x[0]), t0=0.0) if diagnostics else None
-    counters: dict[str, float] = {}
+    run = Stepping(
+        system, stepper, x0, n_steps=n_steps, save_every=save_every, stop=stop,
+        window=window, diagnostics=diagnostics, seeds=seeds,
+    )  # fmt: skip
     start = last_report = time.perf_counter()
     report = max(1, n_steps // 100)
-    evaluations = 0
-
-    def finish(which: NDArray[np.bool_], code: Status, k: int, xk: NDArray, vk: NDArray) -> None:
-        ids = live[which]
-        x_out[ids], v_out[ids], steps[ids], status[ids] = xk[which], vk[which], k, code.code
-
-    now = 0  # the step of the states x of the live trials
     try:
-        for k in range(n_steps + 1):
-            here = system
-            if channel is not None:
-                u_local = channel.local(*channel.observe(x, live, k), live) if sampled else None
-                here = system.bound(SensedView(channel, live, u_local))
-            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-                x_new, v = stepper.advance(here, x, dt, counters, k * dt)  # judged by step_verdict
-            evaluations += live.size
-            if k == window_step:
-                q_window[live] = x[..., :2]
-            ending = np.zeros(live.size, dtype=bool)
-            if stop is not None and (k % stop.check_every == 0 or k == n_steps):
-                q = x[..., :2]
-                still = system.speed(x, v) <= stop.speed
-                if kc >= 0:
-                    d = q - xc
-                    net[live] = np.sqrt(np.max(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1], -1))
-                    net[live] /= (k - kc) * dt
-                    still |= net[live] <= stop.speed
-                if channel is not None:  # robots that wait for a measurement are not at rest
-                    informed = channel.informed(x, live)
-                    still &= informed & seen_c
-                    seen_c = informed
-                xc, kc = q.copy(), k
-                finish(still, Status.CONVERGED, k, x, v)
-                ending |= still
-            if k == n_steps:
-                finish(~ending, Status.SUCCESS, k, x, v)
-                ending[:] = True
-            else:
-                verdict, clear = system.step_verdict(x, x_new)
-                verdict[ending] = 0
-                for code in np.unique(verdict[verdict > 0]) if verdict.any() else ():
-                    bad = verdict == code
-                    finish(bad, Status.from_code(code), k, x, v)
-                    for r in np.flatnonzero(bad):
-                        message[live[r]] = system.step_message(
-                            x[r], x_new[r], Status.from_code(code), (k + 1) * dt, dt
-                        )
-                ending |= verdict > 0
-            if save_every is not None:
-                sel = np.ones(live.size, bool) if k % save_every == 0 else ending
-                if sel.any():
-                    saved.append((k, live[sel], x[sel].copy(), v[sel].copy()))
-            keep = ~ending
-            if not keep.any():
-                break
-            live, x, xc, now = live[keep], x_new[keep], xc[keep], k + 1
-            seen_c = seen_c[keep]
-            min_clear[live] = np.minimum(min_clear[live], clear[keep])
-            if monitor is not None and live.size and live[0] == 0:
-                monitor.record((k + 1) * dt, system.sigma(x[0]))
+        while run.step():
             if progress is not None and (
-                (k + 1) % report == 0 or time.perf_counter() - last_report > PROGRESS_EVERY_S
+                run.k % report == 0 or time.perf_counter() - last_report > PROGRESS_EVERY_S
             ):
-                progress((k + 1) * dt)
+                progress(run.time(run.k))
                 last_report = time.perf_counter()
     except KeyboardInterrupt:
         if not interruptible:
             raise
-        ids = live
-        if ids.size:
-            if channel is None:
-                v_now = system.rhs(x, now * dt)
-            else:  # what the robots would do with exact measurements: the step was not taken
-                v_now = system.bound(SensedView(channel, ids)).rhs(x, now * dt)
-            x_out[ids], v_out[ids], status[ids] = x, v_now, Status.INTERRUPTED.code
-            steps[ids] = now
-            if save_every is not None and (not saved or saved[-1][0] != now):
-                saved.append((now, ids, x.copy(), v_now))
-    wall = time.perf_counter() - start
-    done = int(steps.sum())
-    for b in range(B):
-        if not message[b]:
-            message[b] = _message(Status.from_code(status[b]), int(steps[b]), dt)
-    stats: dict[str, Any] = {
-        "steps": done,
-        "rhs_evaluations": int(evaluations * stepper.evaluations_per_step)
-        + int(counters.pop("extra_rhs_evaluations", 0)),
-        "wall_time_s": wall,
-        "step_cost_s": wall / max(done, 1),
-        **(monitor.stats() if monitor is not None else {}),
-        **{key: int(value) for key, value in counters.items()},
-    }
-    return Stepped(
-        x=x_out, v=v_out, steps=steps, status=status, message=message,
-        min_clearance=min_clear, net_speed=net, q_window=q_window,
-        window_step=window_step, saved=saved, stats=stats, dt=dt,
-    )  # fmt: skip
+        run.interrupt()
+    return run.result(time.perf_counter() - start)
 
 
 def _message(status: Status, steps: int, dt: float) -> str:

@@ -3,8 +3,9 @@
 The front end is plain JavaScript without a build step. Its parts
 (``scene.js``: drawing the formation; ``plots.js``: the live plots; ``ui.js``:
 controls, transport and the render loop) are concatenated at run time into one
-ES module that exports ``render`` (the anywidget entry point) and
-``socketModel`` (the websocket transport of the stand-alone page).
+ES module whose default export is ``{ render }`` (the anywidget entry point; anywidget
+deprecates a named ``render`` export) and which exports ``socketModel`` (the websocket
+transport of the stand-alone page) by name.
 """
 
 from __future__ import annotations
@@ -27,5 +28,5 @@ def read_asset(name: str) -> str:
 def bundle() -> str:
     """The page's script: the parts, then the module's exports."""
     parts = [f"// ---- {name}\n{read_asset(name)}" for name in SCRIPT_PARTS]
-    exports = "export { render, socketModel };\nexport default { render };\n"
+    exports = "export { socketModel };\nexport default { render };\n"
     return "\n".join([*parts, exports])

@@ -8,6 +8,13 @@ before it is parsed. Robot numbers are 1-based.
 Server -> page: JSON objects (``info``, ``error``, ``notice``, ``export``) and
 frames. A frame is a JSON header plus binary buffers (positions as float32,
 ``x0 y0 x1 y1 ...``; headings, when the model has them, as a second buffer).
+``info`` describes the closed loop once (:func:`formationlab.viewer.frames.scene_info`:
+``obstacles`` as circles ``{kind, center, radius}`` and polygons ``{kind, vertices}``,
+``safety`` (the filter's name or null), ``marching``, ``model``, ``state_names``,
+``sensing``, ``faults``); a frame's header carries, besides ``t``, ``V``, the errors and
+the ``active`` surfaces, ``filtered`` (the 1-based robots whose command the safety filter
+changed, null without a filter), ``filter_status`` and ``reference`` (the marching
+reference velocity ``[vx, vy]`` or null) (:func:`formationlab.viewer.frames.live_header`).
 On a websocket both go in one binary message, see :func:`encode_binary`; in the
 notebook widget the buffers are the widget message's own buffers.
 """

@@ -14,20 +14,17 @@ import numpy as np
 
 from ..errors import UserInputError
 from ..scenario import Scenario, parse_scenario
-from .session import (
+from .export import SessionError, export_table, finish_export
+from .frames import (
     EDGE_ERRORS_MAX,
-    SERIES_MAX,
     SURFACES_MAX,
     Frame,
-    SessionError,
-    _error_fields,
-    _export_table,
-    _finish_export,
-    _finite_or_none,
-    _split_state,
-    _static_info,
-    law_parameters,
+    error_fields,
+    finite_or_none,
+    split_state,
+    static_info,
 )
+from .session import SERIES_MAX, law_parameters
 
 __all__ = ["ReplaySession"]
 
@@ -57,6 +54,11 @@ class ReplaySession:
         self.t = np.asarray(dataset["time"].values, dtype=float)
         self.q = np.asarray(dataset["q"].values, dtype=float)
         n = self.q.shape[1]
+        #: the full states ``(T, n, k)`` when the run stored them (else the positions)
+        self.x = np.asarray(dataset["x"].values, dtype=float) if "x" in dataset else self.q
+        self.state_names: tuple[str, ...] = (
+            tuple(str(v) for v in dataset["state"].values) if "x" in dataset else ()
+        )
         self.V = (
             np.asarray(dataset["V"].values, float)
             if "V" in dataset
@@ -90,7 +92,7 @@ class ReplaySession:
 
     def info(self) -> dict[str, Any]:
         if self.scenario is not None and self.scenario.n == self.n:
-            static = _static_info(self.scenario.formation, self.name)
+            static = static_info(self.scenario.formation, self.name)
         else:
             static = {
                 "name": self.name,
@@ -108,7 +110,7 @@ class ReplaySession:
         err = self.err[sl]
         series: dict[str, Any] = {
             "t": self.t[sl].tolist(),
-            "V": [_finite_or_none(v) for v in self.V[sl]],
+            "V": [finite_or_none(v) for v in self.V[sl]],
             "err_max": np.max(np.abs(err), axis=-1).tolist() if err.shape[-1] else [],
         }
         if static["edge_errors"]:
@@ -128,11 +130,11 @@ class ReplaySession:
 
     def frame(self) -> Frame:
         k = self.index
-        pos, heading = _split_state(self.q[k])
+        pos, heading = split_state(self.x[k], self.state_names)
         header: dict[str, Any] = {
             "t": float(self.t[k]),
-            "V": _finite_or_none(self.V[k]),
-            **_error_fields(self.err[k]),
+            "V": finite_or_none(self.V[k]),
+            **error_fields(self.err[k]),
             "active": None
             if self.sigma is None
             else (np.flatnonzero(self.sigma[k] >= 0) + 1).tolist(),
@@ -188,8 +190,8 @@ class ReplaySession:
         """The run's scenario with the positions of the frame shown now."""
         if self.scenario is None:
             raise SessionError("this run stores no scenario, so there is nothing to export")
-        raw = _export_table(self.scenario, self.q[self.index], float(self.t[self.index]))
-        return _finish_export(self.scenario.name, raw, float(self.t[self.index]))
+        raw = export_table(self.scenario, self.x[self.index], float(self.t[self.index]))
+        return finish_export(self.scenario.name, raw, float(self.t[self.index]))
 
     def _read_only(self, what: str) -> SessionError:
         return SessionError(f"a replay cannot {what}; run `formationlab view SCENARIO` to steer")

@@ -1,12 +1,18 @@
 """The live simulation behind the viewer: a run that a person steers.
 
-:class:`LiveSession` owns the state of one closed loop and steps it with the
-package's public stepping API (``System``, ``integrator.step``, ``law.control``,
-``law.potential``, ``law.switching``); every call into the package that the
-viewer makes is in this module, so that new robot models (states with more
-than positions) are adapted here only. :class:`ReplaySession` plays back the
-stored trajectory of ``formationlab run`` (``trajectory.nc``, read by
-:func:`formationlab.io.netcdf.load_trajectory`).
+:class:`LiveSession` owns one closed loop and steps it the way every run of the package
+is stepped: the scenario's whole closed loop (:func:`formationlab.scenario.closed_loop`:
+robot model, marching, obstacles, safety filter, sensing, faults) advanced one step at a
+time by the stepping driver's body (:class:`formationlab.integrators.driver.Stepping`:
+the time ``t_k = k dt``, the measurement channel, the contact rule
+``System.step_verdict`` and its messages). From a reset, ``step(k)`` gives the states
+``simulate(..., backend="numpy")`` saves. A person may change the state between steps
+(drag, perturb): a dragged robot is held where the pointer is, before the step is judged.
+What the live view cannot honour is refused by name (:class:`SessionError`) or, for a
+substitute it shows instead (a ``filippov`` integrator shown with ``implicit-euler``),
+warned about (:class:`~formationlab.errors.ViewerWarning`).
+:class:`ReplaySession` (:mod:`.replay`) plays back the stored trajectory of
+``formationlab run``.
 
 Both speak the same small interface, used by :mod:`formationlab.viewer.controller`:
 ``info()`` (what does not change from frame to frame), ``frame()`` (the state
@@ -17,56 +23,44 @@ them; the arrays inside are 0-based.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import time
+import warnings
 from typing import Any
 
 import numpy as np
-import tomli_w
 from numpy.typing import NDArray
 
 from ..controllers import LAWS, Law, get_law
 from ..dynamics import System
-from ..errors import UserInputError
+from ..errors import UserInputError, ViewerWarning
 from ..integrators import FixedStepIntegrator, Integrator, get_integrator
-from ..scenario import Scenario, parse_scenario
-from ..spec import Formation
+from ..integrators.driver import Stepping
+from ..scenario import Scenario, closed_loop
+from ..status import Status
+from .export import SessionError, export_table, finish_export, plain
+from .frames import (
+    Frame,
+    History,
+    finite_or_none,
+    live_header,
+    scene_info,
+    split_state,
+    static_info,
+)
 
 __all__ = ["Frame", "LiveSession", "SessionError", "law_parameters"]
 
 #: Integrators the live view can step; the event-driven ``filippov`` is shown as implicit Euler.
 LIVE_INTEGRATORS = ("euler", "rk4", "implicit-euler")
-#: Edges whose errors go into each frame one by one (beyond: their maximum and RMS only).
-EDGE_ERRORS_MAX = 24
-#: Surfaces whose on/off state goes into each frame (beyond: none, no switching lines drawn).
-SURFACES_MAX = 400
 #: Least wall time between two evaluations of V when one costs more than 4 ms.
 V_EVERY_S = 0.1
 #: Most replay samples of V and the errors sent for the plots.
 SERIES_MAX = 2000
-
-
-class SessionError(UserInputError):
-    """A command the session cannot carry out (the message says why and what to do)."""
-
-
-@dataclasses.dataclass(frozen=True, kw_only=True)
-class Frame:
-    """One state as the page draws it.
-
-    Attributes
-    ----------
-    header : dict
-        JSON-ready: ``t``, ``V``, error summary, active surfaces, status, ...
-    positions : ndarray of float32, shape (n, 2)
-    heading : ndarray of float32, shape (n,), optional
-        Robot headings in radians, for models whose state has them.
-    """
-
-    header: dict[str, Any]
-    positions: NDArray[np.float32]
-    heading: NDArray[np.float32] | None = None
+#: Steps a live run may take (it has no end: a person stops it).
+LIVE_STEPS = 2**62
+#: Most ``(t, positions)`` samples :attr:`LiveSession.history` keeps (the oldest go first).
+HISTORY_MAX = 100_000
 
 
 def law_parameters(law: Law) -> dict[str, float]:
@@ -84,67 +78,24 @@ def _law_catalogue() -> dict[str, dict[str, float]]:
     return {name: law_parameters(cls()) for name, cls in sorted(LAWS.items())}
 
 
-def _split_state(state: NDArray[np.float64]) -> tuple[NDArray, NDArray | None]:
-    """Positions ``(n, 2)`` and headings ``(n,)`` (or None) of a state.
-
-    The single integrator's state is the positions; a model whose state carries
-    headings (a unicycle: ``(n, 3)``, x, y, heading) is split here.
-    """
-    if state.shape[-1] == 3:
-        return state[..., :2], state[..., 2]
-    return state, None
-
-
-def _distance_errors(formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``r_ij - d_ij`` per edge, shape ``(m,)``."""
-    e = formation.edges
-    r = np.linalg.norm(q[e[:, 1]] - q[e[:, 0]], axis=-1)
-    return r - formation.distances
-
-
-def _error_fields(err: NDArray[np.float64]) -> dict[str, Any]:
-    out: dict[str, Any] = {
-        "err_max": float(np.max(np.abs(err))) if err.size else 0.0,
-        "err_rms": float(np.sqrt(np.mean(err * err))) if err.size else 0.0,
-    }
-    if err.size <= EDGE_ERRORS_MAX:
-        out["errors"] = [float(x) for x in err]
-    return out
-
-
-def _finite_or_none(v: float) -> float | None:
-    return float(v) if np.isfinite(v) else None
-
-
-def _static_info(formation: Formation, name: str) -> dict[str, Any]:
-    """What the page draws besides the positions: diameters, graph, switching surfaces."""
-    tris, beta, _ = formation.surfaces
-    surfaces = None
-    if len(tris) <= SURFACES_MAX:
-        surfaces = {"triangles": (tris + 1).tolist(), "beta": [float(b) for b in beta]}
-    return {
-        "name": name,
-        "n": formation.n,
-        "diameters": [float(d) for d in formation.diameters],
-        "edges": (formation.edges + 1).tolist(),
-        "distances": [float(d) for d in formation.distances],
-        "surfaces": surfaces,
-        "edge_errors": len(formation.edges) <= EDGE_ERRORS_MAX,
-    }
-
-
 class LiveSession:
     """A live run of a scenario that the page steers.
 
     Parameters
     ----------
     scenario : Scenario
-        What to run; its law, integrator and initial positions are the start.
+        What to run: its whole closed loop, its integrator and its initial state.
     seed : int, optional
         Seed of the random perturbations (``numpy.random.default_rng``).
     step_budget_s : float
         Wall time one :meth:`advance` may spend stepping (at least one step is
         taken), so that the page keeps its frame rate when steps are slow.
+
+    Raises
+    ------
+    SessionError
+        For a scenario with ``[asynchronous]`` (each robot its own task: not a loop of
+        common steps), naming the table.
     """
 
     mode = "live"
@@ -152,19 +103,22 @@ class LiveSession:
     def __init__(
         self, scenario: Scenario, *, seed: int | None = None, step_budget_s: float = 0.015
     ) -> None:
+        if scenario.asynchronous is not None:
+            raise SessionError(
+                "[asynchronous]: every robot updates on its own clock, which the live view "
+                "cannot step frame by frame; remove [asynchronous] to watch the synchronous "
+                "loop, or run it with `formationlab run`"
+            )
         self.scenario = scenario
         self.formation = scenario.formation
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self.step_budget_s = step_budget_s
         self.notices: list[str] = []
-        self.law: Law = scenario.law
         self.integrator: FixedStepIntegrator = self._live_integrator(scenario.integrator)
-        self.system = System(formation=self.formation, law=self.law)
+        self.system: System = closed_loop(scenario)
         self.speed = 1.0
         self.paused = False
-        self.q = np.array(scenario.q0, dtype=float)
-        self.t = 0.0
         self.steps = 0
         self.status = "running"
         self.message = ""
@@ -172,62 +126,106 @@ class LiveSession:
         self._pin_at: NDArray[np.float64] | None = None
         self._debt = 0.0
         self._V: tuple[Any, float, float, float] | None = None
+        self.history: list[tuple[float, NDArray[np.float64]]] = []
+        self._start(np.array(scenario.x0, dtype=float), 0.0)
 
-    # ------------------------------------------------------------------ package calls
+    # ------------------------------------------------------------------ the loop
+
+    @property
+    def law(self) -> Law:
+        """The law in force."""
+        return self.system.law
+
+    @property
+    def state(self) -> NDArray[np.float64]:
+        """The state now, ``(n, k)`` (``model.state_names``: positions first)."""
+        run = self._run
+        return run.x[0] if run.live.size else run.x_out[0]
+
+    @property
+    def positions(self) -> NDArray[np.float64]:
+        """Robot centres now, ``(n, 2)`` (robot 1 is row 0)."""
+        return self.system.positions(self.state)
+
+    q = positions
+
+    @property
+    def t(self) -> float:
+        """Simulated time now, seconds."""
+        return self._run.time(self._run.k)
+
+    def _start(self, x: NDArray[np.float64], t: float) -> None:
+        """Step on from the state ``x`` ``(n, k)`` at time ``t`` (a new pass of the driver)."""
+        try:
+            self._run = Stepping(
+                self.system, self.integrator, x[None], n_steps=LIVE_STEPS, t0=t
+            )  # the sensing's own seed, as simulate's run
+        except UserInputError as exc:
+            raise SessionError(str(exc), key=exc.key) from None
+        self._record()
+
+    def trajectory(self) -> History:
+        """Times ``(T,)`` and positions ``(T, n, 2)`` since the last reset (the latest
+        :data:`HISTORY_MAX` at most)."""
+        t = np.array([h[0] for h in self.history])
+        q = np.array([h[1] for h in self.history]).reshape(len(t), self.formation.n, 2)
+        return History(t=t, positions=q)
+
+    def _record(self) -> None:
+        if len(self.history) >= HISTORY_MAX:
+            del self.history[: HISTORY_MAX // 10]
+        self.history.append((self.t, self.positions.copy()))
 
     def _live_integrator(self, integrator: Integrator) -> FixedStepIntegrator:
         if isinstance(integrator, FixedStepIntegrator):
             return integrator
         dt = float(getattr(integrator, "dt", 1e-3))
-        self.notices.append(
-            f"the live view steps with a fixed step: integrator {integrator.name!r} is shown "
-            f"as implicit-euler (dt = {dt:g} s), which slides on the surfaces like it"
+        text = (
+            f"[simulation] integrator = {integrator.name!r}: the live view steps with a fixed "
+            f"step, so it shows implicit-euler (dt = {dt:g} s), which slides on the surfaces "
+            "like it; `formationlab run` runs the scenario's own"
         )
+        warnings.warn(text, ViewerWarning, stacklevel=4)
+        self.notices.append(text)
         out = get_integrator("implicit-euler", dt=dt)
         assert isinstance(out, FixedStepIntegrator)  # registry invariant, not user input
         return out
 
     def _one_step(self) -> bool:
         """Take one step; False (and paused, with a message) if the step is refused."""
-        dt = self.integrator.dt
-        q_new = np.asarray(self.integrator.step(self.system, self.q, dt), dtype=float)
+        run = self._run
+        hold = None
         if self.pinned is not None and self._pin_at is not None:
-            q_new[self.pinned] = self._pin_at
-        if not np.all(np.isfinite(q_new)):
-            return self._stop(
-                "non-finite",
-                f"the step from t = {self.t:g} s produced NaN "
-                f"positions; reduce dt (now {dt:g} s) and reset",
-            )
-        if self.system.swept_clearance(self.q, q_new) <= 0:
-            return self._stop(
-                "step-collision",
-                f"the step from t = {self.t:g} s would bring "
-                f"two robots into contact; reduce dt (now {dt:g} s), or drag "
-                "them apart, and run on",
-            )
-        self.q = q_new
-        self.t += dt
-        self.steps += 1
-        return True
+            hold = {self.pinned: self._pin_at}
+        if run.step(hold):
+            self.steps += 1
+            self._record()
+            return True
+        # the contact rule refused the step (System.step_verdict): stay at the last
+        # accepted state, ready to run on from it
+        status, message = Status.from_code(run.status[0]), run.message[0]
+        self._start(run.x_out[0].copy(), run.time(int(run.steps[0])))
+        self.history.pop()
+        return self._stop(str(status), message)
 
     def _stop(self, status: str, message: str) -> bool:
         self.status, self.message, self.paused = status, message, True
         return False
 
+    def _moved(self, x: NDArray[np.float64]) -> None:
+        """The state changed between steps (a drag or a perturbation)."""
+        self._run.move(x[None])
+        if self.status != "running":
+            self.status, self.message = "running", ""
+
     def frame(self) -> Frame:
         """The state now."""
-        q = self.q
-        pos, heading = _split_state(q)
-        V = self._lyapunov(q)
-        sigma = np.asarray(self.law.switching(self.formation, q))
+        x = self.state
+        pos, heading = split_state(x, type(self.system.model).state_names)
         header: dict[str, Any] = {
             "t": self.t,
-            "V": _finite_or_none(V),
-            **_error_fields(_distance_errors(self.formation, pos)),
-            "active": (np.flatnonzero(sigma >= 0) + 1).tolist()
-            if sigma.size <= SURFACES_MAX
-            else None,
+            "V": finite_or_none(self._lyapunov(x)),
+            **live_header(self.system, x, self.t),
             "steps": self.steps,
             "paused": self.paused,
             "status": self.status,
@@ -242,32 +240,33 @@ class LiveSession:
             heading=None if heading is None else heading.astype(np.float32),
         )
 
-    def _lyapunov(self, q: NDArray[np.float64]) -> float:
-        """``V`` now; for large formations (where it costs more than a few milliseconds)
-        recomputed at most every :data:`V_EVERY_S` seconds of wall time, so that it does not
-        halve the frame rate (the plot then gets ~10 values a second)."""
-        key = (self.steps, self.t, self.law, q[0, 0], q[-1, -1])
+    def _lyapunov(self, x: NDArray[np.float64]) -> float:
+        """``V`` now (the system's: with the obstacles' repulsion); for large formations
+        (where it costs more than a few milliseconds) recomputed at most every
+        :data:`V_EVERY_S` seconds of wall time, so that it does not halve the frame rate."""
+        key = (self.steps, self.t, self.law, x[0, 0], x[-1, -1])
         now = time.perf_counter()
         cached = self._V
         fresh = cached is not None and cached[0] == key
         if fresh or (cached is not None and cached[2] > 0.004 and now - cached[3] < V_EVERY_S):
             assert cached is not None
             return cached[1]
-        V = float(np.asarray(self.law.potential(self.formation, q)))
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            V = float(np.asarray(self.system.potential(x)))
         self._V = (key, V, time.perf_counter() - now, now)
         return V
 
     def info(self) -> dict[str, Any]:
-        """What the page needs once: the formation, the choices of laws and integrators."""
+        """What the page needs once: the formation, the closed loop's parts, the choices."""
         return {
             "mode": self.mode,
-            **_static_info(self.formation, self.scenario.name),
+            **static_info(self.formation, self.scenario.name),
+            **scene_info(self.system),
             "law": {"name": self.law.name, "params": law_parameters(self.law)},
             "laws": _law_catalogue(),
             "integrator": {"name": self.integrator.name, "dt": self.integrator.dt},
             "integrators": list(LIVE_INTEGRATORS),
-            "models": ["single-integrator"],
-            "model": self.system.model.name,
+            "models": [self.system.model.name],
             "notices": list(self.notices),
         }
 
@@ -313,11 +312,12 @@ class LiveSession:
         self.speed = float(speed)
 
     def reset(self) -> None:
-        """Back to the scenario's initial positions at t = 0 (law and integrator as chosen)."""
-        self.q = np.array(self.scenario.q0, dtype=float)
-        self.t, self.steps, self._debt = 0.0, 0, 0.0
+        """Back to the scenario's initial state at t = 0 (law and integrator as chosen)."""
+        self.steps, self._debt = 0, 0.0
         self.status, self.message = "running", ""
         self.pinned = self._pin_at = None
+        self.history.clear()
+        self._start(np.array(self.scenario.x0, dtype=float), 0.0)
 
     # ------------------------------------------------------------------ interaction
 
@@ -326,12 +326,33 @@ class LiveSession:
             raise SessionError(f"robot {robot} does not exist; robots are 1..{self.formation.n}")
         return robot - 1
 
+    def _check_clear(self, x: NDArray[np.float64], what: str) -> None:
+        """Refuse a state with robots in contact, or a robot touching an obstacle."""
+        system = self.system
+        if system.obstacles:
+            clear = system.obstacle_clearances(x)
+            if clear.size and clear.min() <= 0:
+                i, o = (int(v) for v in np.unravel_index(int(np.argmin(clear)), clear.shape))
+                raise SessionError(
+                    f"{what} would put robot {i + 1} on obstacle {o + 1} "
+                    f"({system.obstacles[o].describe()}); drop it elsewhere"
+                )
+
     def drag(self, robot: int, x: float, y: float) -> None:
-        """Move robot ``robot`` (1-based) to ``(x, y)`` and hold it there until :meth:`release`."""
+        """Move robot ``robot`` (1-based) to ``(x, y)`` and hold it there until :meth:`release`.
+
+        The robot's other state (heading) is kept; a double integrator's velocity is
+        set to zero while it is held.
+        """
         i = self._robot(robot)
-        q = self.q.copy()
-        q[i] = (x, y)
+        state = self.state.copy()
+        state[i, :2] = (x, y)
+        names = type(self.system.model).state_names
+        for c, name in enumerate(names):
+            if name in ("vx", "vy"):
+                state[i, c] = 0.0
         f = self.formation
+        q = self.system.positions(state)
         others = np.arange(f.n) != i
         gap = np.linalg.norm(q[others] - q[i], axis=-1) - f.contact_matrix[i, others]
         if np.min(gap) <= 0:
@@ -339,29 +360,25 @@ class LiveSession:
             raise SessionError(
                 f"robot {robot} at ({x:.3g}, {y:.3g}) would overlap robot {j}; drop it elsewhere"
             )
-        self.q = q
-        self.pinned, self._pin_at = i, q[i].copy()
-        if self.status != "running":
-            self.status, self.message = "running", ""
+        self._check_clear(state, f"robot {robot} at ({x:.3g}, {y:.3g})")
+        self.pinned, self._pin_at = i, state[i].copy()
+        self._moved(state)
 
     def release(self) -> None:
         """Let the dragged robot move under its control again."""
         self.pinned = self._pin_at = None
 
     def perturb(self, scale: float) -> None:
-        """Add a Gaussian displacement of standard deviation ``scale`` to every robot."""
-        f = self.formation
-        iu, ju = np.triu_indices(f.n, k=1)
+        """Add a Gaussian displacement of standard deviation ``scale`` to every robot's position."""
         for _ in range(50):
-            q = self.q + self.rng.normal(0.0, scale, size=self.q.shape)
-            gap = np.linalg.norm(q[ju] - q[iu], axis=-1) - f.contact_matrix[iu, ju]
-            if gap.size == 0 or np.min(gap) > 0:
-                self.q = q
-                if self.status != "running":
-                    self.status, self.message = "running", ""
+            state = self.state.copy()
+            state[:, :2] += self.rng.normal(0.0, scale, size=(self.formation.n, 2))
+            if self.system.clearance(state) > 0:
+                self._moved(state)
                 return
         raise SessionError(
-            f"50 random perturbations of size {scale:g} all made robots overlap; use a smaller one"
+            f"50 random perturbations of size {scale:g} all made robots overlap or touch an "
+            "obstacle; use a smaller one"
         )
 
     def set_law(self, name: str, params: dict[str, float] | None = None) -> None:
@@ -387,8 +404,25 @@ class LiveSession:
                 f"{', '.join(known)}"
             )
         law = law.with_params(**params) if params else law
-        self.law = law
-        self.system = System(formation=self.formation, law=law)
+        try:  # the closed loop's own checks (a law without obstacle repulsion, ...)
+            system = dataclasses.replace(self.system, law=law)
+        except UserInputError as exc:
+            raise SessionError(f"law {law.name!r} cannot run this scenario: {exc}") from None
+        self._restart(system, self.integrator)
+
+    def _restart(self, system: System, integrator: FixedStepIntegrator) -> None:
+        """Step on from the state now with another law or integrator (a new driver pass:
+        a sensing channel starts afresh)."""
+        old = (self.system, self.integrator)
+        x, t = self.state.copy(), self.t
+        self.system, self.integrator = system, integrator
+        try:
+            self._start(x, t)
+        except SessionError:
+            self.system, self.integrator = old
+            raise
+        self.history.pop()  # the same state, already recorded
+        self._debt = 0.0
 
     def set_integrator(self, name: str, dt: float) -> None:
         """Step with ``name`` (``euler``, ``rk4``, ``implicit-euler``) and step ``dt``."""
@@ -401,12 +435,15 @@ class LiveSession:
             )
         integ = get_integrator(name, dt=dt)
         assert isinstance(integ, FixedStepIntegrator)  # the three live ones are fixed-step
-        self.integrator = integ
-        self._debt = 0.0
+        self._restart(self.system, integ)
 
     def export_scenario(self) -> tuple[str, str]:
-        """The current state as a scenario file: ``(file name, TOML text)``, validated."""
-        raw = _export_table(self.scenario, self.q, self.t)
+        """The current state as a scenario file: ``(file name, TOML text)``, validated.
+
+        Every table of the scenario is kept (:mod:`formationlab.viewer.export`); the law
+        and the integrator are those in force.
+        """
+        raw = export_table(self.scenario, self.state, self.t)
         raw["controller"] = {
             "law": self.law.name,
             **{
@@ -414,34 +451,11 @@ class LiveSession:
                 for k, v in self.scenario.raw.get("controller", {}).items()
                 if k == "alpha_values"
             },
-            **_plain(dataclasses.asdict(self.law)),
+            **plain(dataclasses.asdict(self.law)),
         }
         raw["simulation"] = {
             "integrator": self.integrator.name,
-            **_plain(dataclasses.asdict(self.integrator)),
+            **plain(dataclasses.asdict(self.integrator)),
             "duration": self.scenario.duration,
         }
-        return _finish_export(self.scenario.name, raw, self.t)
-
-
-def _plain(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {k: _plain(v) for k, v in obj.items()}
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj
-
-
-def _export_table(scenario: Scenario, q: NDArray[np.float64], t: float) -> dict[str, Any]:
-    raw = copy.deepcopy(scenario.raw)
-    raw.setdefault("robots", {})["positions"] = [[float(x), float(y)] for x, y in q]
-    raw["name"] = f"{scenario.name}-t{t:.3f}".replace(".", "_")
-    text = f"state of {scenario.name!r} at t = {t:.6g} s, exported from the viewer"
-    raw["description"] = f"{scenario.description} ({text})" if scenario.description else text
-    return raw
-
-
-def _finish_export(name: str, raw: dict[str, Any], t: float) -> tuple[str, str]:
-    text = tomli_w.dumps(raw)
-    parse_scenario(text, source="<export>")  # never hand out a file that does not validate
-    return f"{name}-t{t:.3f}.toml".replace(" ", "_"), text
+        return finish_export(self.scenario.name, raw, self.t)

@@ -8,6 +8,8 @@ buffers). The state a notebook user may read or set is mirrored in traitlets:
 ``t``, ``paused``, ``speed``, ``law``, ``law_params``, ``integrator``, ``dt``,
 ``status``; setting one from Python applies it to the run (and is validated
 like a message from the page), and every message from the page updates them.
+Without a browser: ``step(n)`` steps the run, ``positions`` ``(n, 2)``, ``state``
+``(n, k)`` and ``history`` (times and positions since the last reset) read it.
 Works in JupyterLab, Jupyter Notebook 7 and VS Code notebooks (anywidget).
 """
 
@@ -25,6 +27,7 @@ from numpy.typing import NDArray
 from ..scenario import Scenario
 from .assets import bundle, read_asset
 from .controller import Controller, Reply
+from .frames import History
 from .session import LiveSession, SessionError
 from .sources import open_session
 
@@ -48,6 +51,7 @@ class Viewer(anywidget.AnyWidget):  # type: ignore[misc]
     >>> import formationlab as fl                                      # doctest: +SKIP
     >>> v = fl.Viewer("examples/paper-simulation-2.toml"); v           # doctest: +SKIP
     >>> v.law_params = {"k_a": 5.0}; v.positions                       # doctest: +SKIP
+    >>> v.step(100); v.t, v.state.shape, v.history.positions.shape     # doctest: +SKIP
     """
 
     _esm = traitlets.Unicode(bundle()).tag(sync=True)
@@ -84,8 +88,45 @@ class Viewer(anywidget.AnyWidget):  # type: ignore[misc]
 
     @property
     def positions(self) -> NDArray[np.float64]:
-        """Positions now, shape ``(n, 2)`` (robot 1 is row 0)."""
-        return np.array(self.session.frame().positions, dtype=float)
+        """Positions now, shape ``(n, 2)`` (robot 1 is row 0), in float64."""
+        s = self.session
+        if isinstance(s, LiveSession):
+            return np.array(s.positions)
+        return np.array(s.x[s.index, :, :2])
+
+    @property
+    def state(self) -> NDArray[np.float64]:
+        """The robot model's state now, shape ``(n, k)`` (``state_names``: positions first)."""
+        s = self.session
+        return np.array(s.state if isinstance(s, LiveSession) else s.x[s.index])
+
+    @property
+    def history(self) -> History:
+        """The times ``(T,)`` and positions ``(T, n, 2)`` stepped since the last reset (live),
+        or the saved run (replay)."""
+        s = self.session
+        if isinstance(s, LiveSession):
+            return s.trajectory()
+        return History(t=np.array(s.t), positions=np.array(s.x[..., :2]))
+
+    def step(self, count: int = 1) -> int:
+        """Take ``count`` steps of the live run now (paused or not); returns how many.
+
+        Fewer when the contact rule refuses a step (:attr:`status` then says which).
+
+        Raises
+        ------
+        SessionError
+            For a replay (it plays a saved run; move its cursor with the slider).
+        """
+        s = self.session
+        if not isinstance(s, LiveSession):
+            raise SessionError("a replay cannot step; it plays the saved run (use the slider)")
+        if isinstance(count, bool) or not isinstance(count, int | np.integer) or count < 0:
+            raise SessionError(f"step takes a whole number of steps >= 0, got {count!r}")
+        done = s.step(int(count))
+        self._sync()
+        return done
 
     # ------------------------------------------------------------------ front end -> Python
 

@@ -1,6 +1,8 @@
-// Drawing the formation on a 2-D canvas: robots (discs of their diameters, optional
-// headings), the graph's edges, the active restrictions and their switching lines s
-// (eq. 26 of the paper: parallel to r_jk at distance theta / |r_jk|).
+// Drawing the formation on a 2-D canvas: obstacles (circles, polygons), robots (discs of
+// their diameters, headings when the robot model has them), the graph's edges, the active
+// restrictions and their switching lines s (eq. 26 of the paper: parallel to r_jk at
+// distance theta / |r_jk|), the robots whose commands the safety filter changed (rings) and
+// the marching reference velocity (an arrow from the centroid).
 // Robot numbers in `info` and frames are 1-based; arrays here are 0-based.
 
 const FLV_COLORS = {
@@ -14,7 +16,68 @@ const FLV_COLORS = {
   line: "#e08a00",
   active: "rgba(224, 138, 0, 0.10)",
   heading: "#0b2e4f",
+  obstacle: "rgba(90, 96, 105, 0.35)",
+  obstacleEdge: "#5a6069",
+  filtered: "#c2185b",
+  reference: "#2e7d32",
 };
+
+// Static obstacles of `info.obstacles` (world coordinates); returns how many were drawn.
+function flvDrawObstacles(ctx, view, obstacles) {
+  if (!obstacles || !obstacles.length) return 0;
+  const path = new Path2D();
+  for (const o of obstacles) {
+    if (o.kind === "circle") {
+      const [x, y] = view.px(o.center[0], o.center[1]);
+      const r = o.radius * view.scale;
+      path.moveTo(x + r, y);
+      path.arc(x, y, r, 0, 2 * Math.PI);
+    } else {
+      o.vertices.forEach(([vx, vy], k) => {
+        const [x, y] = view.px(vx, vy);
+        if (k === 0) path.moveTo(x, y);
+        else path.lineTo(x, y);
+      });
+      path.closePath();
+    }
+  }
+  ctx.fillStyle = FLV_COLORS.obstacle;
+  ctx.fill(path);
+  ctx.strokeStyle = FLV_COLORS.obstacleEdge;
+  ctx.lineWidth = 1.2;
+  ctx.stroke(path);
+  return obstacles.length;
+}
+
+// The marching reference v_ref as an arrow from the robots' centroid; true when drawn.
+function flvDrawReference(ctx, view, pos, v) {
+  const n = pos.length / 2;
+  const speed = Math.hypot(v[0], v[1]);
+  if (!n || !(speed > 0)) return false;
+  let cx = 0, cy = 0;
+  for (let i = 0; i < n; i++) {
+    cx += pos[2 * i] / n;
+    cy += pos[2 * i + 1] / n;
+  }
+  const [x0, y0] = view.px(cx, cy);
+  const L = Math.min(80, Math.max(24, 2 * speed * view.scale)); // 2 s of motion, clamped
+  const ux = v[0] / speed, uy = -v[1] / speed;
+  const x1 = x0 + L * ux, y1 = y0 + L * uy;
+  ctx.strokeStyle = FLV_COLORS.reference;
+  ctx.fillStyle = FLV_COLORS.reference;
+  ctx.lineWidth = 2;
+  ctx.beginPath();
+  ctx.moveTo(x0, y0);
+  ctx.lineTo(x1, y1);
+  ctx.stroke();
+  ctx.beginPath();
+  ctx.moveTo(x1, y1);
+  ctx.lineTo(x1 - 8 * ux + 4 * uy, y1 - 8 * uy - 4 * ux);
+  ctx.lineTo(x1 - 8 * ux - 4 * uy, y1 - 8 * uy + 4 * ux);
+  ctx.closePath();
+  ctx.fill();
+  return true;
+}
 
 // World (y up) <-> canvas pixels (y down).
 class FlvView {
@@ -128,13 +191,17 @@ function flvSwitchingLine(pos, a, b, c, beta, theta) {
   return [px - ext * ux, py - ext * uy, px + (L + ext) * ux, py + (L + ext) * uy];
 }
 
-// Draw one frame; returns the number of robots drawn.
+// Draw one frame; returns the number of robots drawn. What else was drawn goes into
+// `opts.drawn`: obstacles, headings, filtered (robots ringed), reference (arrow or not).
 function flvDrawScene(ctx, view, info, frame, opts) {
   const pos = frame.pos;
   const n = pos.length / 2;
+  const drawn = { obstacles: 0, headings: 0, filtered: 0, reference: false };
+  opts.drawn = drawn;
   ctx.fillStyle = FLV_COLORS.background;
   ctx.fillRect(0, 0, view.w, view.h);
   if (opts.grid) flvGrid(ctx, view);
+  drawn.obstacles = flvDrawObstacles(ctx, view, info.obstacles);
 
   // graph
   const edges = info.edges;
@@ -219,7 +286,24 @@ function flvDrawScene(ctx, view, info, frame, opts) {
     ctx.arc(x, y, r, 0, 2 * Math.PI);
     ctx.fill();
   }
+  const filtered = frame.header.filtered;
+  if (filtered && filtered.length) {
+    ctx.strokeStyle = FLV_COLORS.filtered;
+    ctx.lineWidth = 2;
+    ctx.beginPath();
+    for (const r1 of filtered) {
+      const i = r1 - 1;
+      const [x, y] = view.px(pos[2 * i], pos[2 * i + 1]);
+      const r = Math.max(4, (diam[i] / 2) * view.scale) + 3;
+      ctx.moveTo(x + r, y);
+      ctx.arc(x, y, r, 0, 2 * Math.PI);
+    }
+    ctx.stroke();
+    drawn.filtered = filtered.length;
+  }
+  if (frame.header.reference) drawn.reference = flvDrawReference(ctx, view, pos, frame.header.reference);
   if (frame.heading) {
+    drawn.headings = n;
     ctx.strokeStyle = FLV_COLORS.heading;
     ctx.lineWidth = 1.5;
     ctx.beginPath();

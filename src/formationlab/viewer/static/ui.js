@@ -278,14 +278,24 @@ function render({ model, el }) {
       if (out || small) view.fit(b, w, h);
     }
     const theta = info.law && info.law.params && "theta" in info.law.params ? info.law.params.theta : null;
-    const count = flvDrawScene(ctx, view, info, latest, {
-      grid: true, lines: ui.lines.checked, labels: ui.labels.checked, theta,
-    });
+    const opts = { grid: true, lines: ui.lines.checked, labels: ui.labels.checked, theta };
+    const count = flvDrawScene(ctx, view, info, latest, opts);
     const hd = latest.header;
     const V = hd.V === null ? "—" : flvFmt(hd.V);
+    const parts = [];
+    if (info.safety) {
+      parts.push(`filter ${info.safety}: ` + (hd.filtered && hd.filtered.length
+        ? `changed robot${hd.filtered.length > 1 ? "s" : ""} ${hd.filtered.join(", ")}` : "idle"));
+    }
+    if (hd.reference) parts.push(`v_ref = (${flvFmt(hd.reference[0])}, ${flvFmt(hd.reference[1])})`);
     ui.status.textContent = `t = ${hd.t.toFixed(3)} s   V = ${V}   max|r-d| = ${flvFmt(hd.err_max)}` +
+      (parts.length ? "   " + parts.join("   ") : "") +
       `   ${ui.root.dataset.fps} fps` + (hd.status !== "running" && hd.status !== "replay" ? `   [${hd.status}]` : "");
     ui.root.dataset.robots = String(count);
+    ui.root.dataset.obstacles = String(opts.drawn.obstacles);
+    ui.root.dataset.headings = String(opts.drawn.headings);
+    ui.root.dataset.filtered = (hd.filtered || []).join(",");
+    ui.root.dataset.reference = opts.drawn.reference ? hd.reference.join(",") : "";
     ui.root.dataset.t = String(hd.t);
     for (const [c, s, title, labels, cursor] of [
       [ui.plotV, seriesV, "Lyapunov function V", null],

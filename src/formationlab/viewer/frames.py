@@ -1,0 +1,185 @@
+"""What the page draws of a closed loop: the static scene and one frame's numbers.
+
+:func:`scene_info` describes what does not change from frame to frame (robots, graph,
+switching surfaces, obstacles, the safety filter, marching, the robot model, sensing,
+faults); :func:`live_header` the numbers of one state of a
+:class:`~formationlab.dynamics.System` (``V``, distance errors at the law's points,
+active surfaces, the robots whose commands the safety filter changed, the marching
+reference). Robot and obstacle numbers that leave this module are 1-based.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..dynamics import System
+from ..spec import Formation
+
+__all__ = [
+    "EDGE_ERRORS_MAX",
+    "SURFACES_MAX",
+    "Frame",
+    "History",
+    "live_header",
+    "scene_info",
+]
+
+#: Edges whose errors go into each frame one by one (beyond: their maximum and RMS only).
+EDGE_ERRORS_MAX = 24
+#: Surfaces whose on/off state goes into each frame (beyond: none, no switching lines drawn).
+SURFACES_MAX = 400
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Frame:
+    """One state as the page draws it.
+
+    Attributes
+    ----------
+    header : dict
+        JSON-ready: ``t``, ``V``, error summary, active surfaces, status, ...
+    positions : ndarray of float32, shape (n, 2)
+    heading : ndarray of float32, shape (n,), optional
+        Robot headings in radians, for models whose state has them.
+    """
+
+    header: dict[str, Any]
+    positions: NDArray[np.float32]
+    heading: NDArray[np.float32] | None = None
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True, eq=False)
+class History:
+    """What a viewer has shown: times and positions.
+
+    Attributes
+    ----------
+    t : ndarray, shape (T,)
+        Seconds.
+    positions : ndarray, shape (T, n, 2)
+        Robot centres at those times (robot 1 is column 0).
+    """
+
+    t: NDArray[np.float64]
+    positions: NDArray[np.float64]
+
+
+def split_state(state: NDArray[np.float64], names: tuple[str, ...] = ()) -> tuple[NDArray, Any]:
+    """Positions ``(..., n, 2)`` and headings ``(..., n)`` (or None) of a state.
+
+    ``names`` are the model's ``state_names``; without them a state of three numbers
+    per robot (a saved unicycle run: x, y, heading) counts as one with headings.
+    """
+    if "theta" in names:
+        return state[..., :2], state[..., names.index("theta")]
+    if not names and state.shape[-1] == 3:
+        return state[..., :2], state[..., 2]
+    return state[..., :2], None
+
+
+def distance_errors(formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``r_ij - d_ij`` per edge, shape ``(m,)``."""
+    e = formation.edges
+    r = np.linalg.norm(q[e[:, 1]] - q[e[:, 0]], axis=-1)
+    return r - formation.distances
+
+
+def error_fields(err: NDArray[np.float64]) -> dict[str, Any]:
+    """The frame's error summary: ``err_max``, ``err_rms``, and ``errors`` for few edges."""
+    out: dict[str, Any] = {
+        "err_max": float(np.max(np.abs(err))) if err.size else 0.0,
+        "err_rms": float(np.sqrt(np.mean(err * err))) if err.size else 0.0,
+    }
+    if err.size <= EDGE_ERRORS_MAX:
+        out["errors"] = [float(x) for x in err]
+    return out
+
+
+def finite_or_none(v: float) -> float | None:
+    return float(v) if np.isfinite(v) else None
+
+
+def static_info(formation: Formation, name: str) -> dict[str, Any]:
+    """What the page draws besides the positions: diameters, graph, switching surfaces."""
+    tris, beta, _ = formation.surfaces
+    surfaces = None
+    if len(tris) <= SURFACES_MAX:
+        surfaces = {"triangles": (tris + 1).tolist(), "beta": [float(b) for b in beta]}
+    return {
+        "name": name,
+        "n": formation.n,
+        "diameters": [float(d) for d in formation.diameters],
+        "edges": (formation.edges + 1).tolist(),
+        "distances": [float(d) for d in formation.distances],
+        "surfaces": surfaces,
+        "edge_errors": len(formation.edges) <= EDGE_ERRORS_MAX,
+    }
+
+
+def obstacle_shapes(obstacles: Any) -> list[dict[str, Any]]:
+    """The obstacles as the page draws them: ``{"kind": "circle", "center", "radius"}`` or
+    ``{"kind": "polygon", "vertices"}``, obstacle 1 first."""
+    out: list[dict[str, Any]] = []
+    for o in obstacles:
+        if hasattr(o, "radius"):
+            out.append({"kind": "circle", "center": [float(c) for c in o.center],
+                        "radius": float(o.radius)})  # fmt: skip
+        else:
+            out.append({"kind": "polygon", "vertices": np.asarray(o.vertices).tolist()})
+    return out
+
+
+def scene_info(system: System) -> dict[str, Any]:
+    """The closed loop's parts the page shows: obstacles, filter, marching, model, sensing."""
+    from ..marching import Marching
+
+    march = system.marching
+    marching = None
+    if march is not None:
+        marching = {
+            "kind": "reference" if isinstance(march, Marching) else "motion-parameters",
+            "leader": getattr(march, "leader", None),
+        }
+    return {
+        "obstacles": obstacle_shapes(system.obstacles),
+        "safety": system.safety.filter if system.filtered else None,  # type: ignore[union-attr]
+        "marching": marching,
+        "model": system.model.name,
+        "state_names": list(type(system.model).state_names),
+        "sensing": system.sensing.describe() if system.sensing is not None else None,
+        "faults": system.faults.describe() if system.faults is not None else None,
+    }
+
+
+def live_header(system: System, x: NDArray[np.float64], t: float) -> dict[str, Any]:
+    """The numbers of the state ``x`` ``(n, k)`` at time ``t`` that change every frame.
+
+    ``errors`` and the summary at the law's points; ``active`` the 1-based surfaces whose
+    restriction is on (``System.sigma >= 0``; None beyond :data:`SURFACES_MAX`);
+    ``filtered`` the 1-based robots whose command the safety filter changed
+    (:meth:`System.filter_result` at ``t``; None without a filter) and ``filter_status``;
+    ``reference`` the marching reference velocity ``v_ref(t)`` (None without one).
+    """
+    from ..marching import Marching
+
+    formation = system.formation
+    p = system.model.points(x)
+    sigma = np.asarray(system.sigma(x))
+    out: dict[str, Any] = {
+        **error_fields(distance_errors(formation, p)),
+        "active": (np.flatnonzero(sigma >= 0) + 1).tolist() if sigma.size <= SURFACES_MAX else None,
+        "filtered": None,
+        "filter_status": None,
+        "reference": None,
+    }
+    if system.filtered and np.all(np.isfinite(x)):
+        res = system.filter_result(x, t)
+        out["filtered"] = (np.flatnonzero(res.active) + 1).tolist()
+        out["filter_status"] = res.worst.name.lower()
+    if isinstance(system.marching, Marching):
+        out["reference"] = [float(v) for v in system.marching.reference(t)]
+    return out
