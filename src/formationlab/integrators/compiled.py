@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 
 from ..controllers.terms import KernelTerms
 from ..dynamics import System
+from ..engine.contact import COLLISION, NON_FINITE, TOO_LARGE
 from ..errors import ParameterError
 from ..status import Status
 from ..verlet import build_close_list, list_holds, pair_rows
@@ -58,10 +59,6 @@ __all__ = [
     "run_compiled",
     "run_euler_compiled",
 ]
-
-_COLLISION = Status.COLLISION.code
-_TOO_LARGE = Status.STEP_TOO_LARGE.code
-_NON_FINITE = Status.NON_FINITE.code
 
 #: From this many robots a run measures numba's threads against one thread and keeps the
 #: faster; below, one thread (a parallel pass costs microseconds to start).
@@ -285,9 +282,9 @@ def _run(
         g = W.least[:chunks, 0].min()
         if k > k0:  # the step rule of System.step_verdict
             if not g > 0.0:
-                status = _COLLISION
+                status = COLLISION
             elif not W.least[:chunks, 1].min() > 0.0:
-                status = _TOO_LARGE
+                status = TOO_LARGE
             if status:  # end at the last accepted state, with the velocity it was left with
                 if saved == 0 or k_out[saved - 1] != k - 1:
                     k_out[saved] = k - 1
@@ -317,7 +314,7 @@ def _run(
         k += 1
         largest = W.moves[:chunks, 0].max()
         if not math.isfinite(largest):  # not finite: judged before the list sees it
-            status = _NON_FINITE
+            status = NON_FINITE
             if saved == 0 or k_out[saved - 1] != k - 1:
                 k_out[saved] = k - 1
                 _keep(x_out, v_out, saved, qp, u, L.perm)

@@ -112,7 +112,12 @@ def rates(x, hc, hs, u, f, vel, nact, model):
     vmax = model.max_speed
     wmax = model.max_turn_rate
     limited = vmax < np.inf or wmax < np.inf  # no limit: no scaling (limit_unicycle)
-    if model.kind == SINGLE:
+    if model.kind == SINGLE and not limited:  # f = u (the same numbers as a scale of 1)
+        for i in range(n):
+            for d in range(2):
+                for b in range(nact):
+                    f[i, d, b] = u[i, d, b]
+    elif model.kind == SINGLE:
         for i in range(n):
             for b in range(nact):
                 ux = u[i, 0, b]
