@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 from ..controllers.stage import law_field
 from ..models.stage import headings, points, rates, speed, turn
 from ..models.terms import HEADING, NEAR_IDENTITY
-from ..safety.stage import CENTRALIZED, NONE, WAIT, filter_command, filter_scratch, obstacle_contact
+from ..safety.stage import CENTRALIZED, WAIT, filter_command, filter_scratch, obstacle_contact
 from .contact import COLLISION, CONVERGED, END, NON_FINITE, SWEPT_MARGIN, TOO_LARGE, contact
 
 __all__ = [
@@ -110,13 +110,18 @@ class TrialOutputs(NamedTuple):
 
 @njit(cache=True, error_model="numpy", nogil=True)
 def step_chunk(c, law, model, obs, flt, st, out, run):
-    """Steps of chunk ``c`` until every trial has ended or one needs a QP (module docstring)."""
+    """Steps of chunk ``c`` until every trial has ended or one needs a QP (module docstring).
+
+    ``obs`` and ``flt`` are the run's obstacle and filter terms, or both None when it has
+    neither obstacles nor a filter: numba then compiles this function without the safety
+    stage (a ``None`` argument prunes the branches that test it), so a run compiles only
+    what it uses.
+    """
     n = st.x.shape[1]
     kk = st.x.shape[2]
     C = st.x.shape[3]
     hand = model.kind == NEAR_IDENTITY  # the law acts on points other than the centres
     turns = hand or model.kind == HEADING  # the state has a heading
-    filtering = obs.radius.shape[0] > 0 or flt.kind != NONE
     ids = st.ids[c]
     mc = st.mc[c]
     ns = st.ns[c]
@@ -134,7 +139,8 @@ def step_chunk(c, law, model, obs, flt, st, out, run):
     fin = np.zeros(C)  # 0 while the step is finite
     wide = np.empty(C)  # 1: a robot turned by more than SMALL_TURN in the step
     code = np.full(C, -1, dtype=np.int8)  # -1: still running
-    S = filter_scratch(n if filtering else 1, obs, flt)
+    if obs is not None:
+        S = filter_scratch(n, obs, flt)
     dt = run.dt
     nact = st.meta[c, 0]
     step = st.meta[c, 1]
@@ -149,7 +155,7 @@ def step_chunk(c, law, model, obs, flt, st, out, run):
             points(x, hc, hs, p, nact, model)
             src = p
         law_field(src, u, scratch, nact, law)
-        if filtering:  # obstacles' repulsion and the filter, trial by trial
+        if obs is not None:  # obstacles' repulsion and the filter, trial by trial
             pause = False
             for b in range(nact):
                 given_u = st.given_u[c, b] if flt.kind == CENTRALIZED else st.given_u[0, 0]
@@ -235,11 +241,13 @@ def step_chunk(c, law, model, obs, flt, st, out, run):
                 if fin[b] != 0.0:
                     code[b] = NON_FINITE
                     continue
-                if obs.radius.shape[0] > 0:
-                    end, sw = obstacle_contact(obs, law.radius, x, xn, b, SWEPT_MARGIN * disp[b],
-                                               min(mc[b], gap[b]))  # fmt: skip
-                    gap[b] = min(gap[b], end)
-                    swept[b] = min(swept[b], sw)
+                if obs is not None:
+                    if obs.radius.shape[0] > 0:
+                        reach = SWEPT_MARGIN * disp[b]
+                        floor = min(mc[b], gap[b])
+                        end, sw = obstacle_contact(obs, law.radius, x, xn, b, reach, floor)
+                        gap[b] = min(gap[b], end)
+                        swept[b] = min(swept[b], sw)
                 if not gap[b] > 0.0:
                     code[b] = COLLISION
                 elif not swept[b] > 0.0:

@@ -23,7 +23,7 @@ from ..dynamics import System
 from ..models import RobotModel
 from ..models.terms import HEADING, NEAR_IDENTITY, model_terms
 from ..safety.obstacle_terms import obstacle_terms
-from ..safety.stage import CENTRALIZED, filter_terms
+from ..safety.stage import CENTRALIZED, NONE, filter_terms
 from ..spec import Formation
 from .loop import RUNNING, ChunkState, RunNumbers, TrialOutputs, run_chunks
 
@@ -77,6 +77,8 @@ def run_trials(
         influence=rep.repulsion.influence if rep else 1.0,
     )  # fmt: skip
     flt = filter_terms(safety)
+    # (None, None): no safety stage (the loop is then compiled without it)
+    stage = (obs, flt) if obstacles or flt.kind != NONE else (None, None)
     B, n, k = q0.shape
     C = int(max(1, min(chunk, B)))
     G = -(-B // C)
@@ -110,7 +112,7 @@ def run_trials(
     numbers = RunNumbers(float(dt), int(n_steps), int(check_every), float(tol.speed),
                          int(window_step))  # fmt: skip
     while True:
-        run_chunks(terms, robots, obs, flt, st, out, numbers)
+        run_chunks(terms, robots, *stage, st, out, numbers)
         wait_g, wait_b = np.nonzero(st.need)  # chunks paused, and their slots needing a QP
         if wait_g.size == 0:
             break
