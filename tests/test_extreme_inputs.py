@@ -1,0 +1,77 @@
+"""Extreme but finite inputs: a clear error or an honest status, never an abort.
+
+Positions around 1e154 (whose squared distances overflow), 1e150 and 1e-150, huge gains
+and zero diameters through the compiled single run and the command line. The command
+runs as a subprocess: an out-of-bounds write in compiled code ends the process with
+SIGABRT (status -6 here), which no in-process test can observe.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from _scenarios import triangle
+
+import formationlab as fl
+from formationlab.errors import FormationError
+
+TEMPLATE = [[0.0, 0.0], [1.0, 0.0], [0.5, np.sqrt(3) / 2]]
+START = np.array([[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]])
+LAW = fl.AngleRestrictedLaw(k_c=2.0, k_a=3.0, theta=0.5)
+CLI = [sys.executable, "-c", "from formationlab.cli import main; main()"]
+
+
+def run(formation, law, q0):
+    with np.errstate(all="ignore"):
+        return fl.simulate(
+            formation, law, q0, duration=0.05, integrator=fl.Euler(dt=1e-3), backend="numba"
+        )
+
+
+def test_positions_around_1e154_end_non_finite_on_the_command_line(tmp_path: Path) -> None:
+    text = triangle("far", "1.0").replace(
+        "positions = [[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]",
+        "positions = [[-3e154, -3e154], [3e154, -3e154], [0.0, 3e154]]",
+    )
+    assert "3e154" in text
+    scenario = tmp_path / "far.toml"
+    scenario.write_text(text)
+    out = tmp_path / "out"
+    proc = subprocess.run(
+        [*CLI, "run", str(scenario), "--out", str(out), "-q"],
+        capture_output=True, text=True, timeout=600, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 1, proc.stderr  # was -6 (SIGABRT: munmap_chunk(): invalid pointer)
+    assert "Traceback" not in proc.stderr
+    error = [ln for ln in proc.stderr.splitlines() if ln.startswith("error:")]
+    assert len(error) == 1 and "the velocity at t = 0 s is not finite, whatever dt" in error[0]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "non-finite"
+
+
+def test_positions_around_1e154_and_huge_gains_end_non_finite() -> None:
+    f = fl.Formation.from_template(TEMPLATE, diameters=0.2)
+    far = run(f, LAW, START * 1e154)
+    strong = run(f, fl.AngleRestrictedLaw(k_c=1e300, k_a=1e300, theta=0.5), START)
+    for res in (far, strong):
+        assert res.status == "non-finite"
+        assert np.all(np.isfinite(res.q))  # the last finite state is kept
+    assert "not finite, whatever dt" in far.message
+
+
+def test_large_positions_and_zero_diameters_run() -> None:
+    wide = run(fl.Formation.from_template(TEMPLATE, diameters=0.2), LAW, START * 1e150)
+    assert wide.status == "success" and np.all(np.isfinite(wide.q))
+    points = run(fl.Formation.from_template(TEMPLATE, diameters=0.0), LAW, START)
+    assert points.status == "success" and np.all(np.isfinite(points.q))
+
+
+def test_tiny_positions_are_refused_as_overlapping() -> None:
+    f = fl.Formation.from_template(TEMPLATE, diameters=0.2)
+    with pytest.raises(FormationError, match="robots 1 and 2 overlap in the initial positions"):
+        run(f, LAW, START * 1e-150)
