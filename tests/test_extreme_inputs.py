@@ -33,25 +33,42 @@ def run(formation, law, q0):
         )
 
 
-def test_positions_around_1e154_end_non_finite_on_the_command_line(tmp_path: Path) -> None:
-    text = triangle("far", "1.0").replace(
-        "positions = [[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]",
-        "positions = [[-3e154, -3e154], [3e154, -3e154], [0.0, 3e154]]",
-    )
-    assert "3e154" in text
-    scenario = tmp_path / "far.toml"
+def test_huge_gains_end_non_finite_on_the_command_line(tmp_path: Path) -> None:
+    # the first step is not finite; the close list was then built from it: a scenario
+    # around 1e154 (now refused by validate) ended in SIGABRT (munmap_chunk) this way
+    text = triangle("strong", "1.0").replace("k_c = 2.0", "k_c = 1e300")
+    assert "1e300" in text
+    scenario = tmp_path / "strong.toml"
     scenario.write_text(text)
     out = tmp_path / "out"
     proc = subprocess.run(
         [*CLI, "run", str(scenario), "--out", str(out), "-q"],
         capture_output=True, text=True, timeout=600, check=False,
     )  # fmt: skip
-    assert proc.returncode == 1, proc.stderr  # was -6 (SIGABRT: munmap_chunk(): invalid pointer)
+    assert proc.returncode == 1, proc.stderr  # not -6 (SIGABRT)
     assert "Traceback" not in proc.stderr
     error = [ln for ln in proc.stderr.splitlines() if ln.startswith("error:")]
-    assert len(error) == 1 and "the velocity at t = 0 s is not finite, whatever dt" in error[0]
+    assert len(error) == 1 and "produced NaN or infinite positions" in error[0]
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "non-finite"
+
+
+def test_positions_beyond_1e150_are_refused_by_validate(tmp_path: Path) -> None:
+    text = triangle("far", "1.0").replace(
+        "positions = [[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]",
+        "positions = [[-3e154, -3e154], [3e154, -3e154], [0.0, 3e154]]",
+    )
+    scenario = tmp_path / "far.toml"
+    scenario.write_text(text)
+    proc = subprocess.run(
+        [*CLI, "validate", str(scenario)], capture_output=True, text=True, timeout=600, check=False
+    )
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert proc.stderr.strip() == (
+        f"error: {scenario}: robots.positions (line 3): positions has coordinates up to 3e+154, "
+        "beyond 1e+150: squared distances would overflow double precision; scale the scenario "
+        "(positions, distances, diameters) to moderate numbers"
+    )
 
 
 def test_positions_around_1e154_and_huge_gains_end_non_finite() -> None:

@@ -203,6 +203,43 @@ class Scenario:
         return self.error(key, str(exc).removeprefix(f"{key}: "))
 
 
+#: nesting of arrays and inline tables beyond which a scenario is refused by name (a
+#: scenario's deepest value, a list of pairs, is two deep)
+_DEEP = 32
+
+
+def _too_deep(text: str, source: str) -> str:
+    """The message for TOML nested too deep to parse: the key and line where it gets deep."""
+    depth, quote, table, key, where = 0, "", "", "", ""
+    for number, row in enumerate(text.splitlines(), start=1):
+        if depth == 0 and not quote:
+            head = row.split("=", 1)[0].strip()
+            if row.lstrip().startswith("[") and "=" not in row:
+                table = row.strip().strip("[]").strip()
+            elif "=" in row and head and not head.startswith("#"):
+                key = f"{table}.{head}" if table else head
+        for i, c in enumerate(row):
+            if quote:
+                quote = "" if c == quote and row[i - 1 : i] != "\\" else quote
+            elif c == "#":
+                break  # a comment
+            elif c in "\"'":
+                quote = c
+            elif c in "[{" and (depth or "=" in row[:i]):
+                depth += 1
+                if depth > _DEEP:
+                    where = f"{key} (line {number})" if key else f"line {number}"
+                    break
+            elif c in "]}" and depth:
+                depth -= 1
+        if where:
+            break
+    return (
+        f"{source}: {where or 'a value'}: arrays or tables nested more than {_DEEP} deep, "
+        "too deep to read; positions are a list of pairs, [[x, y], ...]"
+    )
+
+
 def _fields(cls: type) -> set[str]:
     return {f.name for f in dataclasses.fields(cls) if f.init}
 
@@ -237,6 +274,8 @@ def parse_scenario(text_or_dict: str | Mapping[str, Any], source: str = "<string
             raise ScenarioError(
                 f"{source}: TOML syntax error: {exc}; see https://toml.io for the syntax"
             ) from None
+        except RecursionError:  # arrays or tables nested thousands deep
+            raise ScenarioError(_too_deep(text, source)) from None
     else:
         raw = _plain(dict(text_or_dict))
         try:
