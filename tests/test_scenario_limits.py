@@ -14,9 +14,11 @@ import pytest
 from _scenarios import triangle
 from typer.testing import CliRunner
 
+import formationlab as fl
 from formationlab import resources
 from formationlab.cli import _load_commands, app
 from formationlab.errors import ScenarioError
+from formationlab.integrators.base import steps_for
 from formationlab.scenario import parse_scenario
 
 _load_commands()
@@ -104,3 +106,44 @@ def test_validate_prints_one_line_and_exits_2(tmp_path: Path) -> None:
     assert res.exit_code == 2 and "Traceback" not in res.output
     errors = [ln for ln in res.stderr.splitlines() if ln.startswith("error:")]
     assert len(errors) == 1 and "robots.positions (line 3)" in errors[0]
+
+
+# ------------------------------------------------------------ accepted nonsense
+
+
+def test_a_step_longer_than_the_duration_is_refused() -> None:
+    text = triangle("long-step", "10.0").replace("dt = 1e-3", "dt = 20.0")
+    assert refusal(text) == (
+        "s.toml: simulation.dt (line 17): dt = 20 s is longer than the duration, 10 s: its one "
+        "step would end past the duration; use dt <= duration (e.g. dt = 0.01)"
+    )
+
+
+def test_a_duration_that_is_not_whole_steps_is_rounded_with_a_warning() -> None:
+    text = triangle("odd", "10.0").replace("dt = 1e-3", "dt = 0.3")
+    sc = parse_scenario(text, source="s.toml")
+    assert sc.duration == pytest.approx(9.9, rel=1e-12)  # 33 steps (it ran 34, to 10.2 s)
+    assert (
+        "s.toml: simulation.duration (line 18): 10 s is not a whole number of steps of "
+        "dt = 0.3 s; running 33 steps, to t = 9.9 s (set the duration to a multiple of dt to "
+        "choose)"
+    ) in sc.warnings
+    assert steps_for(sc.duration, 0.3) == 33  # what the run takes
+    exact = parse_scenario(triangle("whole", "1.5"))  # 1500 steps of 1e-3: no warning
+    assert exact.duration == 1.5 and not [w for w in exact.warnings if "whole number" in w]
+
+
+def test_an_alpha_table_no_triangle_realises_is_refused() -> None:
+    # alpha_123 = alpha_312 = alpha_213 = +1: (2, 1, 3) is a swap of (1, 2, 3), so its alpha
+    # must have the opposite sign (eq. (3)); the paper's tables (+, +, -) pass
+    text = triangle("bad-alpha", "1.0").replace("[2, 1, 3, -1.0]]", "[2, 1, 3, 1.0]]")
+    assert refusal(text) == (
+        "s.toml: formation.alpha (line 9): alpha_123 = +1 and alpha_213 = +1 contradict: "
+        "(2, 1, 3) is a swap of (1, 2, 3), so no triangle realises both signs (eq. (3) of the "
+        "paper); give alpha_213 the sign -1"
+    )
+    parse_scenario(triangle("paper", "1.0"))  # simulation 2's table
+    with pytest.raises(fl.FormationError, match="alpha_123 = -1 and alpha_231 = \\+1"):
+        fl.Formation.from_alpha_table(
+            {(1, 2, 3): -1, (2, 3, 1): 1}, n=3, distances=1.0
+        )  # a cyclic permutation must keep the sign

@@ -390,6 +390,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
             _warnings.warn(message, IgnoredKeyWarning, stacklevel=3)
     sensing, faults = _sensing(model, formation, integrator, fail)
     asynchronous = _asynchronous(model, formation, integrator, fail)
+    duration = _whole_steps(float(sim.duration), integrator, text, source, fail, warnings)
     return Scenario(
         name=model.name or stem(source),
         text=text,
@@ -398,7 +399,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         formation=formation,
         law=law,
         integrator=integrator,
-        duration=float(sim.duration),
+        duration=duration,
         q0=q0,
         raw=raw,
         controller=given,
@@ -414,6 +415,39 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         faults=faults,
         asynchronous=asynchronous,
     )
+
+
+def _whole_steps(
+    duration: float, integrator: Integrator, text: str, source: str, fail: Any, warnings: list[str]
+) -> float:
+    """The duration as a whole number of steps of a fixed-step integrator's ``dt``.
+
+    A ``dt`` longer than the duration is refused (the one step would end past it); a
+    duration that is not a multiple of ``dt`` is rounded to the nearest one, with a warning
+    (the run used to take one more step and end past the duration).
+    """
+    dt = getattr(integrator, "dt", None)
+    if not isinstance(dt, float | int) or isinstance(dt, bool):
+        return duration
+    if dt > duration * (1.0 + 1e-9):
+        raise fail(
+            "simulation.dt",
+            f"dt = {dt:g} s is longer than the duration, {duration:g} s: its one step would end "
+            f"past the duration; use dt <= duration (e.g. dt = {duration / 1000:g})",
+        )
+    steps = round(duration / dt)
+    rounded = steps * dt
+    if abs(rounded - duration) > 1e-9 * duration:
+        line = line_of(text, "simulation.duration")
+        at = f" (line {line})" if line else ""
+        message = (
+            f"{source}: simulation.duration{at}: {duration:g} s is not a whole number of steps "
+            f"of dt = {dt:g} s; running {steps:,} steps, to t = {rounded:g} s (set the "
+            f"duration to a multiple of dt to choose)"
+        )
+        warnings.append(message)
+        return rounded
+    return duration
 
 
 def _asynchronous(

@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import FormationError
+from .geometry import parity
 from .graph import as_edges, complete_edges, edges_connected, is_rigid
 from .orientation import alpha_from_shape, both_orders, neighbour_triples, switching_surfaces
 
@@ -110,6 +111,36 @@ def _per_item(value: float | ArrayLike, count: int, what: str, per: str) -> NDAr
     if not np.all(np.isfinite(arr)):
         raise FormationError(f"{what} must be finite numbers, got {arr.tolist()}", key=what)
     return arr
+
+
+def _realisable_signs(
+    turns: dict[tuple[int, ...], tuple[tuple[int, int, int], float]],
+    ijk: tuple[int, int, int],
+    value: float,
+) -> None:
+    """Refuse an alpha whose sign no triangle can share with an earlier one of the same robots.
+
+    The sign of ``alpha_ijk`` is the way the triangle ``i, j, k`` turns: kept by a cyclic
+    permutation of ``i, j, k`` and flipped by a swap (eq. (3), and the angle sum (4) of a
+    triangle). ``turns`` holds, per robot set, the first entry and its sign in sorted order.
+    """
+    i, j, k = ijk
+    sign = math.copysign(1.0, value) * float(parity(i, j, k))
+    robots = tuple(sorted(ijk))
+    first = turns.setdefault(robots, (ijk, sign))
+    if first[1] != sign:
+        (a, b, c), s0 = first
+        label, other = "".join(str(x + 1) for x in ijk), f"{a + 1}{b + 1}{c + 1}"
+        v0 = math.copysign(1.0, s0 * float(parity(a, b, c)))
+        want = -math.copysign(1.0, value)
+        raise FormationError(
+            f"alpha_{other} = {v0:+g} and alpha_{label} = {math.copysign(1.0, value):+g} "
+            f"contradict: ({', '.join(str(x + 1) for x in ijk)}) is "
+            + ("a cyclic permutation" if parity(a, b, c) == parity(i, j, k) else "a swap")
+            + f" of ({a + 1}, {b + 1}, {c + 1}), so no triangle realises both signs "
+            f"(eq. (3) of the paper); give alpha_{label} the sign {want:+g}",
+            key="alpha",
+        )
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -415,6 +446,7 @@ class Formation:
         rows = table.items() if isinstance(table, Mapping) else ((r[:3], r[3]) for r in table)
         alpha = np.zeros((n, n, n))
         given = np.zeros((n, n, n), bool)
+        turns: dict[tuple[int, ...], tuple[tuple[int, int, int], float]] = {}
         for key, value in rows:
             if len(key) != 3:
                 raise FormationError(
@@ -439,6 +471,7 @@ class Formation:
                         key="alpha",
                     )
                 alpha[a, b, c], given[a, b, c] = w, True
+            _realisable_signs(turns, (i, j, k), v)
         return cls(
             diameters=base.diameters,
             edges=base.edges,
