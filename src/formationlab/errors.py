@@ -20,6 +20,7 @@ __all__ = [
     "FormationlabError",
     "FormationlabWarning",
     "IgnoredKeyWarning",
+    "MissingExtraError",
     "ObstacleError",
     "OutputError",
     "OutputExistsError",
@@ -27,6 +28,7 @@ __all__ = [
     "ScenarioError",
     "UnknownNameError",
     "UserInputError",
+    "require_extra",
 ]
 
 
@@ -68,6 +70,34 @@ class UnknownNameError(ParameterError, KeyError):
 
 class ObstacleError(UserInputError):
     """An obstacle is not valid, or it overlaps a robot's start."""
+
+
+class MissingExtraError(UserInputError):
+    """An optional part of formationlab is needed but not installed; the message names the
+    extra to install (``pip install "formationlab[safety]"``)."""
+
+    def __init__(self, message: str, *, extra: str, key: str | None = None) -> None:
+        super().__init__(message, key=key)
+        self.extra = extra
+
+
+def require_extra(extra: str, modules: tuple[str, ...], what: str) -> None:
+    """Raise :class:`MissingExtraError` if a module of the extra ``extra`` cannot be imported.
+
+    ``what`` names what needs it, as the start of a sentence ("safety filters and
+    obstacles").
+    """
+    import importlib
+
+    for name in modules:
+        try:
+            importlib.import_module(name)
+        except ImportError:
+            raise MissingExtraError(
+                f"{what} need the optional part {extra!r}, which is not installed (no module "
+                f'{name!r}): pip install "formationlab[{extra}]"',
+                extra=extra,
+            ) from None
 
 
 class ScenarioError(UserInputError):

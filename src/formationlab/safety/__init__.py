@@ -10,6 +10,7 @@ point of unicycles. See ``docs/safety.md``.
 This package depends on ``potentials`` and ``errors`` only, so laws and models can use it.
 """
 
+from . import _extra  # noqa: F401 - first: without the safety extra, an error naming it
 from .barrier import (
     BarrierConstraints,
     QPSolution,
