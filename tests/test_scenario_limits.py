@@ -20,6 +20,7 @@ from formationlab.cli import _load_commands, app
 from formationlab.errors import ScenarioError
 from formationlab.integrators.base import steps_for
 from formationlab.scenario import parse_scenario
+from formationlab.spec import check_alpha_signs
 
 _load_commands()
 
@@ -144,6 +145,4 @@ def test_an_alpha_table_no_triangle_realises_is_refused() -> None:
     )
     parse_scenario(triangle("paper", "1.0"))  # simulation 2's table
     with pytest.raises(fl.FormationError, match="alpha_123 = -1 and alpha_231 = \\+1"):
-        fl.Formation.from_alpha_table(
-            {(1, 2, 3): -1, (2, 3, 1): 1}, n=3, distances=1.0
-        )  # a cyclic permutation must keep the sign
+        check_alpha_signs([[1, 2, 3, -1.0], [2, 3, 1, 1.0]])  # a cyclic permutation keeps it

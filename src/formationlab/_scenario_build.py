@@ -20,7 +20,7 @@ from .errors import UserInputError
 from .graph import edges_connected
 from .graphs import build_edges, nearest_gap, overlapping_pairs
 from .realisability import realisability_problems
-from .spec import AlphaValues, Formation
+from .spec import AlphaValues, Formation, check_alpha_signs
 from .templates import lattice
 from .validation import coordinates
 
@@ -127,6 +127,7 @@ def build_formation(
                 one_based=not built,
             )
         elif orientation == "table":
+            check_alpha_signs(frm.alpha or [])
             formation = Formation.from_alpha_table(
                 frm.alpha or [],
                 n=n,

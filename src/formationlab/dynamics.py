@@ -46,6 +46,7 @@ from .models import RobotModel, SingleIntegrator
 from .sensing import Channel, Faults, Seed, Sensing
 from .spec import DENSE_LIMIT, Formation
 from .status import Status
+from .validation import COORDINATE_LIMIT
 
 if TYPE_CHECKING:  # the safety package needs the optional "safety" extra at run time
     from .safety import FilterResult, Obstacle, SafetyFilter
@@ -421,10 +422,11 @@ class System:
     ) -> str:
         if status is Status.NON_FINITE:
             head = f"the step to t = {t:g} s produced NaN or infinite positions"
-            if np.all(np.isfinite(x1 - x0)):
-                return f"{head}; reduce dt (now {dt:g} s), e.g. to {dt / 10:g} s"
-            # the velocity itself was not finite: no dt helps
             size = float(np.max(np.abs(self.positions(x0))))
+            if size <= COORDINATE_LIMIT and np.all(np.isfinite(self.rhs(x0, t - dt))):
+                return f"{head}; reduce dt (now {dt:g} s), e.g. to {dt / 10:g} s"
+            # the velocity at the last accepted state is not finite, or its squared
+            # distances overflow: no dt helps
             return (
                 f"{head}: the velocity at t = {t - dt:g} s is not finite, whatever dt (the "
                 f"largest coordinate is {size:.3g}; squared distances overflow beyond about "

@@ -113,34 +113,37 @@ def _per_item(value: float | ArrayLike, count: int, what: str, per: str) -> NDAr
     return arr
 
 
-def _realisable_signs(
-    turns: dict[tuple[int, ...], tuple[tuple[int, int, int], float]],
-    ijk: tuple[int, int, int],
-    value: float,
-) -> None:
-    """Refuse an alpha whose sign no triangle can share with an earlier one of the same robots.
+def check_alpha_signs(rows: Iterable[Sequence[float]]) -> None:
+    """Refuse an alpha table whose signs no triangle realises (rows ``[i, j, k, alpha]``).
 
     The sign of ``alpha_ijk`` is the way the triangle ``i, j, k`` turns: kept by a cyclic
     permutation of ``i, j, k`` and flipped by a swap (eq. (3), and the angle sum (4) of a
-    triangle). ``turns`` holds, per robot set, the first entry and its sign in sorted order.
+    triangle), so two entries on the same three robots must agree. The scenario loader
+    checks its tables so; :meth:`Formation.from_alpha_table` accepts any table (the laws
+    refuse what they cannot follow).
     """
-    i, j, k = ijk
-    sign = math.copysign(1.0, value) * float(parity(i, j, k))
-    robots = tuple(sorted(ijk))
-    first = turns.setdefault(robots, (ijk, sign))
-    if first[1] != sign:
-        (a, b, c), s0 = first
-        label, other = "".join(str(x + 1) for x in ijk), f"{a + 1}{b + 1}{c + 1}"
-        v0 = math.copysign(1.0, s0 * float(parity(a, b, c)))
-        want = -math.copysign(1.0, value)
-        raise FormationError(
-            f"alpha_{other} = {v0:+g} and alpha_{label} = {math.copysign(1.0, value):+g} "
-            f"contradict: ({', '.join(str(x + 1) for x in ijk)}) is "
-            + ("a cyclic permutation" if parity(a, b, c) == parity(i, j, k) else "a swap")
-            + f" of ({a + 1}, {b + 1}, {c + 1}), so no triangle realises both signs "
-            f"(eq. (3) of the paper); give alpha_{label} the sign {want:+g}",
-            key="alpha",
-        )
+    turns: dict[tuple[int, ...], tuple[tuple[int, int, int], float]] = {}
+    for row in rows:
+        if len(row) != 4 or not math.isfinite(float(row[3])) or float(row[3]) == 0:
+            continue  # (from_alpha_table says what is wrong with the row)
+        i, j, k = (int(x) for x in row[:3])
+        if len({i, j, k}) != 3:
+            continue
+        value = float(row[3])
+        sign = math.copysign(1.0, value) * float(parity(i, j, k))
+        first = turns.setdefault(tuple(sorted((i, j, k))), ((i, j, k), sign))
+        if first[1] != sign:
+            (a, b, c), s0 = first
+            label, other = f"{i}{j}{k}", f"{a}{b}{c}"
+            v0 = s0 * float(parity(a, b, c))
+            how = "a cyclic permutation" if parity(a, b, c) == parity(i, j, k) else "a swap"
+            raise FormationError(
+                f"alpha_{other} = {v0:+g} and alpha_{label} = {math.copysign(1.0, value):+g} "
+                f"contradict: ({i}, {j}, {k}) is {how} of ({a}, {b}, {c}), so no triangle "
+                f"realises both signs (eq. (3) of the paper); give alpha_{label} the sign "
+                f"{-math.copysign(1.0, value):+g}",
+                key="alpha",
+            )
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -446,7 +449,6 @@ class Formation:
         rows = table.items() if isinstance(table, Mapping) else ((r[:3], r[3]) for r in table)
         alpha = np.zeros((n, n, n))
         given = np.zeros((n, n, n), bool)
-        turns: dict[tuple[int, ...], tuple[tuple[int, int, int], float]] = {}
         for key, value in rows:
             if len(key) != 3:
                 raise FormationError(
@@ -471,7 +473,6 @@ class Formation:
                         key="alpha",
                     )
                 alpha[a, b, c], given[a, b, c] = w, True
-            _realisable_signs(turns, (i, j, k), v)
         return cls(
             diameters=base.diameters,
             edges=base.edges,
