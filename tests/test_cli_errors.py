@@ -331,3 +331,30 @@ def test_equilibria_from_a_damaged_study_names_the_file(scenario: Path, tmp_path
     assert line.startswith(
         f"error: cannot read {study / 'trials.parquet'} as a study's trials table: "
     )
+
+
+@pytest.mark.parametrize("module", ["qpsolvers", "shapely"])
+@pytest.mark.parametrize("command", ["validate", "run"])
+def test_a_scenario_that_needs_the_safety_extra_says_which_to_install(
+    tmp_path: Path, command: str, module: str
+) -> None:
+    # the plain install: the safety extra's modules cannot be imported (None in sys.modules)
+    import subprocess
+    import sys
+
+    child = f"import sys; sys.modules[{module!r}] = None\nfrom formationlab.cli import main; main()"
+    example = Path(__file__).parents[1] / "examples" / "ten-robots-gap.toml"
+    out = tmp_path / "out"
+    args = [command, str(example)] + (["--out", str(out)] if command == "run" else [])
+    proc = subprocess.run(
+        [sys.executable, "-c", child, *args], capture_output=True, text=True, timeout=300,
+        check=False,
+    )  # fmt: skip
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr and "ModuleNotFoundError" not in proc.stderr
+    assert proc.stderr.strip() == (
+        f"error: {example}: [safety] (line 54): safety filters and obstacles need the optional "
+        f"part 'safety', which is not installed (no module {module!r}): "
+        'pip install "formationlab[safety]"'
+    )
+    assert not out.exists()

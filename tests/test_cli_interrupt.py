@@ -262,3 +262,84 @@ def test_the_progress_callback_comes_at_least_twice_a_second() -> None:
     assert res.status == "interrupted"
     gaps = np.diff([begin, *wall])
     assert len(wall) >= 5 and np.max(gaps) < 1.0, gaps
+
+
+def _read_until(proc: subprocess.Popen[str], marker: str) -> list[str]:
+    """The lines of stderr up to the first that holds ``marker``."""
+    assert proc.stderr is not None
+    seen = []
+    for line in proc.stderr:
+        seen.append(line)
+        if marker in line:
+            return seen
+    raise AssertionError(f"{marker!r} never printed: {''.join(seen)}")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_during_a_long_compiled_run_keeps_the_run_so_far(tmp_path: Path, sig) -> None:
+    # explicit Euler's compiled loop (2e8 steps, minutes): a Ctrl-C inside numba code ended
+    # in SystemError ("returned a result with an exception set"), exit 1 and no files
+    scenario = tmp_path / "long.toml"
+    scenario.write_text(SCENARIO.replace("DURATION", "20000.0").replace("dt = 1e-3", "dt = 1e-4"))
+    out = tmp_path / "out"
+    proc = start(["run", str(scenario), "--out", str(out), "--save-every", "10000"], group=False)
+    seen = _read_until(proc, "running (at t = ")  # printed by the loop's first progress call
+    proc.send_signal(sig)
+    _, rest = proc.communicate(timeout=120)
+    err = "".join(seen) + rest
+    assert proc.returncode == 128 + sig, err
+    assert "Traceback" not in err and "SystemError" not in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "interrupted"
+    t_end = summary["final_time"]
+    assert 0 < t_end < 20000.0
+    assert (
+        f"error: interrupted by the user at t = {t_end:g} s; the results up to then are in" in err
+    )
+    with xr.open_dataset(out / "trajectory.nc", engine="h5netcdf") as ds:
+        assert ds.attrs["status"] == "interrupted"
+        t = ds["time"].values
+    # every 10,000th step (1 s), and the state the run had reached when it stopped
+    assert t[-1] == pytest.approx(t_end, abs=0)
+    np.testing.assert_allclose(t[:-1], np.arange(len(t) - 1) * 1.0, rtol=0, atol=1e-9)
+    assert set(summary["manifest"]) == {p.name for p in out.iterdir()}
+
+
+#: the console script, started with an import that waits (for the signal) on its stdin in
+#: the middle of the package's import, before the command line's own handling is in place
+_PAUSED_START = """\
+import importlib.abc, runpy, sys
+
+class Pause(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path, target=None):
+        if name == "formationlab.analysis":
+            print("paused in the package import", file=sys.stderr, flush=True)
+            sys.stdin.readline()
+        return None
+
+sys.meta_path.insert(0, Pause())
+sys.argv = sys.argv[1:]
+runpy.run_path(sys.argv[0], run_name="__main__")
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_while_the_command_starts_prints_no_traceback(tmp_path: Path, sig) -> None:
+    script = Path(sys.executable).with_name("formationlab")
+    assert script.is_file(), f"{script}: the console script (pip install -e .)"
+    scenario = tmp_path / "s.toml"
+    scenario.write_text(SCENARIO.replace("DURATION", "1.0"))
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _PAUSED_START, str(script), "run", str(scenario), "--out",
+         str(tmp_path / "out")],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        preexec_fn=_default_sigint,
+    )  # fmt: skip
+    seen = _read_until(proc, "paused in the package import")
+    proc.send_signal(sig)
+    _, rest = proc.communicate(timeout=120)
+    err = "".join(seen) + rest
+    assert proc.returncode == 128 + sig, err
+    assert "Traceback" not in err
+    assert [ln for ln in err.splitlines() if ln.startswith("error:")] == ["error: interrupted"]
+    assert not (tmp_path / "out").exists()

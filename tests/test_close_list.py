@@ -260,3 +260,37 @@ def test_a_law_whose_kernel_terms_take_no_pairs_keyword_still_runs_compiled():
     b = fl.simulate(f, fl.DistanceLaw(), q0, duration=0.5)
     assert a.stats["backend"] == "numba"
     np.testing.assert_array_equal(a.q, b.q)
+
+
+EXTREME = {
+    "far apart (1e154)": [[-3e154, -3e154], [3e154, -3e154], [0.0, 3e154], [0.0, 3e154 + 1.0]],
+    "extent beyond floats": [[-1e308, 0.0], [1e308, 0.0], [0.0, 0.0], [0.05, 0.0]],
+    "thin and huge": [[0.0, 0.0], [1e300, 0.0], [0.0, 0.5], [0.3, 0.5]],
+    "NaN": [[np.nan, 0.0], [0.0, 0.0], [0.0, 0.3], [5.0, 5.0]],
+    "infinite": [[np.inf, 0.0], [0.0, -np.inf], [0.0, 0.3], [0.0, 0.0]],
+}
+
+
+@pytest.mark.parametrize("kind", list(EXTREME))
+def test_the_cell_grid_stays_in_bounds_for_huge_or_non_finite_positions(kind):
+    # The cell of a coordinate around 1e154 (the first Euler step of a scenario placed
+    # there) was an integer conversion beyond int64: a negative cell count, writes out of
+    # the grid's bounds and an abort (munmap_chunk) when the run's memory was freed.
+    from formationlab.verlet import _bin
+
+    q = np.array(EXTREME[kind])
+    n = len(q)
+    cell_of, items = np.zeros(n, np.int32), np.zeros(n, np.int32)
+    start = np.full(4 * n + 17, -7, np.int32)
+    nx, ny = _bin(q, 0.5, cell_of, items, start)[:2]
+    assert nx >= 1 and ny >= 1 and nx * ny <= start.size - 1
+    assert np.all((cell_of >= 0) & (cell_of < nx * ny))
+    assert sorted(items.tolist()) == list(range(n))  # each robot in exactly one cell
+    # the pairs between finite robots are still exactly those within reach
+    finite = np.isfinite(q).all(axis=1)
+    pairs, _, _ = close_list(q, 0.1, 0.5)
+    radius = np.full(n, 0.1)
+    with np.errstate(over="ignore"):  # (1e308 - -1e308: infinitely far)
+        expected = brute(np.where(finite[:, None], q, 0.0), radius, 0.5, np.zeros((0, 2), int))
+    expected = [tuple(p) for p in expected.tolist() if finite[p[0]] and finite[p[1]]]
+    assert [tuple(p) for p in pairs.tolist() if finite[p[0]] and finite[p[1]]] == expected

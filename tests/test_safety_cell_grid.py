@@ -66,3 +66,29 @@ def test_batched_sparse_filter_equals_one_by_one(rng):
         assert one.active.tolist() == res.active[t].tolist()
         mine = res.active_pairs[res.active_pairs[:, 0] == t, 1:]
         assert mine.tolist() == one.active_pairs[:, 1:].tolist()
+
+
+@pytest.mark.parametrize(
+    "q",
+    [
+        [[-3e154, -3e154], [3e154, -3e154], [0.0, 3e154], [0.0, 3e154 + 1.0]],
+        [[-1e308, 0.0], [1e308, 0.0], [0.0, 0.0], [0.5, 0.0]],
+        [[0.0, 0.0], [1e300, 0.0], [0.0, 0.5], [0.3, 0.5]],
+        [[np.nan, 0.0], [0.0, 0.0], [0.0, 0.3], [np.inf, 5.0]],
+    ],
+    ids=["1e154", "extent-beyond-floats", "thin-and-huge", "non-finite"],
+)
+def test_the_grid_stays_in_bounds_for_huge_or_non_finite_positions(q):
+    # a cell index from a coordinate around 1e154 was an integer conversion beyond int64
+    q = np.array(q)
+    x0, y0, side, nx, ny, start, order = build_grid(q, 1.3)
+    assert 1 <= nx * ny <= 4 * len(q) + 16 and side >= 1.3
+    assert start[-1] == len(q) and sorted(order.tolist()) == list(range(len(q)))
+    out = np.empty(len(q), np.int64)
+    finite = np.isfinite(q).all(axis=1)
+    for i in np.flatnonzero(finite):
+        deg = neighbours_of(i, q, 1.3 * 1.3, x0, y0, side, nx, ny, start, order, out)
+        with np.errstate(over="ignore"):  # (1e308 - -1e308: infinitely far)
+            far = np.hypot(*(q[finite] - q[i]).T)
+        near = [j for j, r in zip(np.flatnonzero(finite), far, strict=True) if j != i and r <= 1.3]
+        assert out[:deg].tolist() == near

@@ -14,7 +14,10 @@ repulsion, and the angle-restricted sliding-mode law) and goes beyond it.
 
 from importlib.metadata import PackageNotFoundError, version
 
-from . import _numba_cache  # noqa: F401 - checks numba's cache before any kernel is imported
+from . import (
+    _command_start,  # noqa: F401 - Ctrl-C while the command starts: no traceback
+    _numba_cache,  # noqa: F401 - checks numba's cache before any kernel is imported
+)
 from .analysis import OUTCOMES, Tolerances, classify, distance_errors, triangle_orientation
 from .controllers import LAWS, AngleRestrictedLaw, DistanceLaw, Law, Repulsion, get_law
 from .dynamics import SingleIntegrator, System

@@ -20,8 +20,9 @@ from .errors import UserInputError
 from .graph import edges_connected
 from .graphs import build_edges, nearest_gap, overlapping_pairs
 from .realisability import realisability_problems
-from .spec import AlphaValues, Formation
+from .spec import AlphaValues, Formation, check_alpha_signs
 from .templates import lattice
+from .validation import coordinates
 
 __all__ = [
     "FIXED",
@@ -126,6 +127,7 @@ def build_formation(
                 one_based=not built,
             )
         elif orientation == "table":
+            check_alpha_signs(frm.alpha or [])
             formation = Formation.from_alpha_table(
                 frm.alpha or [],
                 n=n,
@@ -191,12 +193,18 @@ def initial_positions(rob: Any, formation: Formation, fail: Fail) -> NDArray[np.
     start = rob.positions
     if not isinstance(start, StartAround):
         try:
-            return formation.check_positions(np.asarray(start, dtype=float))
+            q0 = np.asarray(start, dtype=float)
+            coordinates(q0, "positions")
+            return formation.check_positions(q0)
         except UserInputError as exc:
             raise fail("robots.positions", str(exc)) from None
     assert formation.template is not None  # build_formation requires it
     rng = np.random.default_rng(start.seed)
     q0 = formation.template + rng.normal(scale=start.sigma, size=formation.template.shape)
+    try:
+        coordinates(q0, f"the start drawn around the template (sigma = {start.sigma:g})")
+    except UserInputError as exc:
+        raise fail("robots.positions", str(exc)) from None
     pairs = overlapping_pairs(q0, formation.diameters)
     if len(pairs):
         i, j = pairs[0]

@@ -9,6 +9,7 @@ of :class:`~formationlab.Formation`; the law's and the integrator's keys by
 from __future__ import annotations
 
 import math
+import unicodedata
 from typing import Any, Literal
 
 import numpy as np
@@ -411,6 +412,18 @@ class ScenarioModel(BaseModel):
     sensing: SensingModel | None = None
     faults: FaultsModel | None = None
     asynchronous: AsynchronousModel | None = None
+
+    @field_validator("name", "description")
+    @classmethod
+    def _printable(cls, v: str | None) -> str | None:
+        """No control characters (a NUL cannot be written to the results' files): tabs and,
+        in the description, newlines are allowed."""
+        bad = [c for c in v or "" if unicodedata.category(c) == "Cc" and c not in "\t\n"]
+        if bad:
+            raise ValueError(
+                f"must be printable text, got the control character {bad[0]!r} in {v!r}; remove it"
+            )
+        return v
 
 
 #: The keys each table accepts (the fixed ones; laws and integrators add theirs).

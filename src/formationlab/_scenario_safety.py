@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import ScenarioError, UserInputError
+from .errors import MissingExtraError, ScenarioError, UserInputError
 from .spec import Formation
 from .validation import line_of
 
@@ -63,7 +63,15 @@ def build_safety(
     """
     if not obstacles and safety is None:
         return (), None
-    from .safety import SafetyFilter, clearances, obstacle_from_mapping
+    from .safety import SafetyFilter, check_extra, clearances, obstacle_from_mapping
+
+    try:
+        check_extra()
+    except MissingExtraError as exc:
+        table = "safety" if safety is not None else "obstacles"
+        line = line_of(text, table) or _obstacle_line(text, 0)
+        at = f" (line {line})" if line else ""
+        raise ScenarioError(f"{source}: [{table}]{at}: {exc}", key=table) from None
 
     def where(key: str, line: int | None) -> str:
         return f"{source}: {key}" + (f" (line {line})" if line else "")

@@ -71,10 +71,12 @@ __all__ = [
 ]
 
 Outcome = Literal[
-    "desired", "mirror", "incorrect", "collision", "drifting", "rotating", "not-converged"
-]
+    "desired", "mirror", "incorrect", "collision", "drifting", "rotating", "not-converged",
+    "diverged",
+]  # fmt: skip
 OUTCOMES: tuple[Outcome, ...] = (
-    "desired", "mirror", "incorrect", "collision", "drifting", "rotating", "not-converged"
+    "desired", "mirror", "incorrect", "collision", "drifting", "rotating", "not-converged",
+    "diverged",
 )  # fmt: skip
 
 

@@ -16,7 +16,8 @@ from numpy.typing import NDArray
 from .analysis import OUTCOMES, Tolerances
 from .rigid_motion import DRIFTING, ROTATING, RigidMotion, rigid_motion, rigid_outcome
 from .spec import Formation
-from .status import Status
+from .status import DIVERGED_SCALE, Status
+from .validation import COORDINATE_LIMIT
 
 __all__ = ["BatchResult", "classify_batch", "max_distance_errors"]
 
@@ -123,6 +124,7 @@ class BatchResult:
                 formation, q, u, tol, contact=contact, net_speed=net_speed, motion=motion
             )
             errors = max_distance_errors(formation, q)
+        status, outcome = _diverged(formation, q, status, outcome)
         converged = status == Status.CONVERGED.code
         return cls(
             q_final=q, u_final=u, outcome=outcome,
@@ -131,6 +133,32 @@ class BatchResult:
             min_clearance=min_clearance, steps=steps, net_speed=net_speed,
             status=status, x_final=x, motion=motion,
         )  # fmt: skip
+
+
+def _diverged(
+    formation: Formation, q: NDArray[np.float64], status: NDArray[np.int8],
+    outcome: NDArray[np.str_],
+) -> tuple[NDArray[np.int8], NDArray[np.str_]]:  # fmt: skip
+    """Statuses and outcomes of trials whose final positions ``q`` ``(B, n, 2)`` blew up,
+    among those that ended ``success`` or ``converged`` (a collision or a non-finite step
+    already says what happened).
+
+    Not finite, or a coordinate beyond ``validation.COORDINATE_LIMIT`` (squared distances
+    overflow): status ``non-finite``; finite but spread beyond :data:`DIVERGED_SCALE` times
+    the formation's size: ``diverged``. Their outcome is ``diverged`` (a kernel that let
+    such a state stop, its speed lost to overflow, called it ``converged``).
+    """
+    size = max(float(np.max(formation.distances, initial=0.0)), float(np.max(formation.diameters)))
+    with np.errstate(over="ignore", invalid="ignore"):
+        overflow = ~np.all(np.abs(q) <= COORDINATE_LIMIT, axis=(-2, -1))
+        spread = np.max(np.abs(q - q.mean(axis=-2, keepdims=True)), axis=(-2, -1))
+    ended = np.isin(status, [Status.SUCCESS.code, Status.CONVERGED.code])  # others say why
+    overflow &= ended
+    far = ended & ~overflow & (spread > DIVERGED_SCALE * size)
+    status = np.where(overflow, Status.NON_FINITE.code, status)
+    status = np.where(far, Status.DIVERGED.code, status).astype(np.int8)
+    outcome = np.where(overflow | far, "diverged", outcome).astype(outcome.dtype)
+    return status, outcome
 
 
 def _norm(v: NDArray[np.float64]) -> NDArray[np.float64]:

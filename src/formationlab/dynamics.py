@@ -46,6 +46,7 @@ from .models import RobotModel, SingleIntegrator
 from .sensing import Channel, Faults, Seed, Sensing
 from .spec import DENSE_LIMIT, Formation
 from .status import Status
+from .validation import COORDINATE_LIMIT
 
 if TYPE_CHECKING:  # the safety package needs the optional "safety" extra at run time
     from .safety import FilterResult, Obstacle, SafetyFilter
@@ -425,9 +426,17 @@ class System:
         self, x0: NDArray[np.float64], x1: NDArray[np.float64], status: Status, t: float, dt: float
     ) -> str:
         if status is Status.NON_FINITE:
+            head = f"the step to t = {t:g} s produced NaN or infinite positions"
+            size = float(np.max(np.abs(self.positions(x0))))
+            if size <= COORDINATE_LIMIT and np.all(np.isfinite(self.rhs(x0, t - dt))):
+                return f"{head}; reduce dt (now {dt:g} s), e.g. to {dt / 10:g} s"
+            # the velocity at the last accepted state is not finite, or its squared
+            # distances overflow: no dt helps
             return (
-                f"the step to t = {t:g} s produced NaN or infinite positions; reduce dt "
-                f"(now {dt:g} s), e.g. to {dt / 10:g} s"
+                f"{head}: the velocity at t = {t - dt:g} s is not finite, whatever dt (the "
+                f"largest coordinate is {size:.3g}; squared distances overflow beyond about "
+                "1e154, and so do forces with huge gains): scale the positions, distances "
+                "and gains to moderate numbers"
             )
         iu, ju, a, _ = self._pairs(x0, x1)
         q0, q1 = self.positions(x0), self.positions(x1)

@@ -15,6 +15,8 @@ them as one line each.
 
 from __future__ import annotations
 
+from typing import Any
+
 __all__ = [
     "FormationError",
     "FormationlabError",
@@ -29,7 +31,7 @@ __all__ = [
     "UnknownNameError",
     "UserInputError",
     "ViewerWarning",
-    "require",
+    "require_extra",
 ]
 
 
@@ -73,6 +75,37 @@ class ObstacleError(UserInputError):
     """An obstacle is not valid, or it overlaps a robot's start."""
 
 
+class MissingExtraError(UserInputError, ImportError):
+    """An optional part of formationlab is needed but not installed; the message names the
+    extra to install (``pip install "formationlab[safety]"``) and ``extra`` holds its name."""
+
+    def __init__(self, message: str, *, extra: str, key: str | None = None) -> None:
+        super().__init__(message, key=key)
+        self.extra = extra
+
+
+def require_extra(extra: str, modules: tuple[str, ...], what: str) -> Any:
+    """Import ``modules`` and return the first, or raise :class:`MissingExtraError` naming
+    the extra ``extra`` to install. The one place that checks an optional dependency.
+
+    ``what`` names what needs it, as the subject of "need" ("safety filters and
+    obstacles").
+    """
+    import importlib
+
+    loaded = []
+    for name in modules:
+        try:
+            loaded.append(importlib.import_module(name))
+        except ImportError:
+            raise MissingExtraError(
+                f"{what} need the optional part {extra!r}, which is not installed (no module "
+                f'{name!r}): pip install "formationlab[{extra}]"',
+                extra=extra,
+            ) from None
+    return loaded[0] if loaded else None
+
+
 class ScenarioError(UserInputError):
     """A scenario file cannot be read or does not validate; ``key`` is the scenario key."""
 
@@ -99,23 +132,3 @@ class OutputError(UserInputError, OSError):
     Also an ``OSError``, so that code catching the writer's own errors still catches it;
     the message names the folder, the reason and what to do.
     """
-
-
-class MissingExtraError(ParameterError, ImportError):
-    """A part of the package that needs an optional dependency that is not installed."""
-
-
-def require(module: str, extra: str, what: str) -> object:
-    """Import ``module`` or raise a :class:`MissingExtraError` that names the extra to install.
-
-    ``what`` says what needs it (``"the safety filters' QP solver"``).
-    """
-    import importlib
-
-    try:
-        return importlib.import_module(module)
-    except ImportError:
-        raise MissingExtraError(
-            f"{what} needs the optional package {module!r}: install it with "
-            f'pip install "formationlab[{extra}]"'
-        ) from None

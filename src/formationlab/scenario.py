@@ -214,6 +214,43 @@ class Scenario:
         return self.error(key, str(exc).removeprefix(f"{key}: "))
 
 
+#: nesting of arrays and inline tables beyond which a scenario is refused by name (a
+#: scenario's deepest value, a list of pairs, is two deep)
+_DEEP = 32
+
+
+def _too_deep(text: str, source: str) -> str:
+    """The message for TOML nested too deep to parse: the key and line where it gets deep."""
+    depth, quote, table, key, where = 0, "", "", "", ""
+    for number, row in enumerate(text.splitlines(), start=1):
+        if depth == 0 and not quote:
+            head = row.split("=", 1)[0].strip()
+            if row.lstrip().startswith("[") and "=" not in row:
+                table = row.strip().strip("[]").strip()
+            elif "=" in row and head and not head.startswith("#"):
+                key = f"{table}.{head}" if table else head
+        for i, c in enumerate(row):
+            if quote:
+                quote = "" if c == quote and row[i - 1 : i] != "\\" else quote
+            elif c == "#":
+                break  # a comment
+            elif c in "\"'":
+                quote = c
+            elif c in "[{" and (depth or "=" in row[:i]):
+                depth += 1
+                if depth > _DEEP:
+                    where = f"{key} (line {number})" if key else f"line {number}"
+                    break
+            elif c in "]}" and depth:
+                depth -= 1
+        if where:
+            break
+    return (
+        f"{source}: {where or 'a value'}: arrays or tables nested more than {_DEEP} deep, "
+        "too deep to read; positions are a list of pairs, [[x, y], ...]"
+    )
+
+
 def _fields(cls: type) -> set[str]:
     return {f.name for f in dataclasses.fields(cls) if f.init}
 
@@ -248,6 +285,8 @@ def parse_scenario(text_or_dict: str | Mapping[str, Any], source: str = "<string
             raise ScenarioError(
                 f"{source}: TOML syntax error: {exc}; see https://toml.io for the syntax"
             ) from None
+        except RecursionError:  # arrays or tables nested thousands deep
+            raise ScenarioError(_too_deep(text, source)) from None
     else:
         raw = _plain(dict(text_or_dict))
         try:
@@ -362,6 +401,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
             _warnings.warn(message, IgnoredKeyWarning, stacklevel=3)
     sensing, faults = _sensing(model, formation, integrator, fail)
     asynchronous = _asynchronous(model, formation, integrator, fail)
+    duration = _whole_steps(float(sim.duration), integrator, text, source, fail, warnings)
     return Scenario(
         name=model.name or stem(source),
         text=text,
@@ -370,7 +410,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         formation=formation,
         law=law,
         integrator=integrator,
-        duration=float(sim.duration),
+        duration=duration,
         q0=q0,
         raw=raw,
         controller=given,
@@ -386,6 +426,39 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         faults=faults,
         asynchronous=asynchronous,
     )
+
+
+def _whole_steps(
+    duration: float, integrator: Integrator, text: str, source: str, fail: Any, warnings: list[str]
+) -> float:
+    """The duration as a whole number of steps of a fixed-step integrator's ``dt``.
+
+    A ``dt`` longer than the duration is refused (the one step would end past it); a
+    duration that is not a multiple of ``dt`` is rounded to the nearest one, with a warning
+    (the run used to take one more step and end past the duration).
+    """
+    dt = getattr(integrator, "dt", None)
+    if not isinstance(dt, float | int) or isinstance(dt, bool):
+        return duration
+    if dt > duration * (1.0 + 1e-9):
+        raise fail(
+            "simulation.dt",
+            f"dt = {dt:g} s is longer than the duration, {duration:g} s: its one step would end "
+            f"past the duration; use dt <= duration (e.g. dt = {duration / 1000:g})",
+        )
+    steps = round(duration / dt)
+    rounded = steps * dt
+    if abs(rounded - duration) > 1e-9 * duration:
+        line = line_of(text, "simulation.duration")
+        at = f" (line {line})" if line else ""
+        message = (
+            f"{source}: simulation.duration{at}: {duration:g} s is not a whole number of steps "
+            f"of dt = {dt:g} s; running {steps:,} steps, to t = {rounded:g} s (set the "
+            f"duration to a multiple of dt to choose)"
+        )
+        warnings.append(message)
+        return rounded
+    return duration
 
 
 def _asynchronous(

@@ -34,7 +34,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import FormationError
+from .geometry import parity
 from .graph import as_edges, complete_edges, edges_connected, is_rigid
+from .validation import coordinates
 from .orientation import alpha_from_shape, both_orders, neighbour_triples, switching_surfaces
 
 __all__ = [
@@ -110,6 +112,39 @@ def _per_item(value: float | ArrayLike, count: int, what: str, per: str) -> NDAr
     if not np.all(np.isfinite(arr)):
         raise FormationError(f"{what} must be finite numbers, got {arr.tolist()}", key=what)
     return arr
+
+
+def check_alpha_signs(rows: Iterable[Sequence[float]]) -> None:
+    """Refuse an alpha table whose signs no triangle realises (rows ``[i, j, k, alpha]``).
+
+    The sign of ``alpha_ijk`` is the way the triangle ``i, j, k`` turns: kept by a cyclic
+    permutation of ``i, j, k`` and flipped by a swap (eq. (3), and the angle sum (4) of a
+    triangle), so two entries on the same three robots must agree. The scenario loader
+    checks its tables so; :meth:`Formation.from_alpha_table` accepts any table (the laws
+    refuse what they cannot follow).
+    """
+    turns: dict[tuple[int, ...], tuple[tuple[int, int, int], float]] = {}
+    for row in rows:
+        if len(row) != 4 or not math.isfinite(float(row[3])) or float(row[3]) == 0:
+            continue  # (from_alpha_table says what is wrong with the row)
+        i, j, k = (int(x) for x in row[:3])
+        if len({i, j, k}) != 3:
+            continue
+        value = float(row[3])
+        sign = math.copysign(1.0, value) * float(parity(i, j, k))
+        first = turns.setdefault(tuple(sorted((i, j, k))), ((i, j, k), sign))
+        if first[1] != sign:
+            (a, b, c), s0 = first
+            label, other = f"{i}{j}{k}", f"{a}{b}{c}"
+            v0 = s0 * float(parity(a, b, c))
+            how = "a cyclic permutation" if parity(a, b, c) == parity(i, j, k) else "a swap"
+            raise FormationError(
+                f"alpha_{other} = {v0:+g} and alpha_{label} = {math.copysign(1.0, value):+g} "
+                f"contradict: ({i}, {j}, {k}) is {how} of ({a}, {b}, {c}), so no triangle "
+                f"realises both signs (eq. (3) of the paper); give alpha_{label} the sign "
+                f"{-math.copysign(1.0, value):+g}",
+                key="alpha",
+            )
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -709,6 +744,7 @@ class Formation:
             )
         if not np.all(np.isfinite(arr)):
             raise FormationError(f"{what} hold NaN or infinite numbers", key="positions")
+        coordinates(arr, what)  # squared distances must not overflow
         if self.n <= DENSE_LIMIT:
             iu = np.triu_indices(self.n, k=1)
             pi, pj = iu

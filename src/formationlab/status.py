@@ -14,7 +14,7 @@ from enum import StrEnum
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["Status", "status_from_codes"]
+__all__ = ["DIVERGED_SCALE", "Status", "status_from_codes"]
 
 
 class Status(StrEnum):
@@ -35,6 +35,9 @@ class Status(StrEnum):
     EVENT_LIMIT = "event-limit"
     #: the user interrupted the run (Ctrl-C); the states so far are kept
     INTERRUPTED = "interrupted"
+    #: the state grew without bound: finite, but the robots spread beyond
+    #: ``DIVERGED_SCALE`` times the formation's size (judged on a batch's final states)
+    DIVERGED = "diverged"
 
     @property
     def code(self) -> int:
@@ -72,7 +75,12 @@ _EXPLANATIONS = {
     Status.NON_FINITE: "a step produced NaN or infinite positions",
     Status.EVENT_LIMIT: "too many switching events",
     Status.INTERRUPTED: "interrupted by the user",
+    Status.DIVERGED: "the robots spread beyond a million times the formation's size",
 }
+
+#: A trial has diverged when its robots spread (largest distance from their centroid)
+#: beyond this many times the formation's size (its largest desired distance or diameter).
+DIVERGED_SCALE = 1e6
 
 
 def status_from_codes(codes: NDArray[np.integer]) -> NDArray[np.object_]:

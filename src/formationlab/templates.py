@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import FormationError
+from .resources import check_memory
 from .validation import choices
 
 __all__ = ["LATTICES", "LatticeKind", "lattice"]
@@ -45,6 +46,11 @@ LATTICES: dict[str, float] = {
     "square": 1.0,
     "hexagonal": 3.0 * math.sqrt(3.0) / 4.0,
 }
+
+
+#: bytes per point of the square grid a lattice patch is cut from, at the peak (indices,
+#: squared radii, masks and numpy's temporaries)
+_GRID_BYTES = 64
 
 
 def lattice(kind: str, count: int, spacing: float = 1.0) -> NDArray[np.float64]:
@@ -95,6 +101,11 @@ def lattice(kind: str, count: int, spacing: float = 1.0) -> NDArray[np.float64]:
     count = int(count)
     # radius (in spacings) of a disc holding about `count` points, with margin
     radius = math.sqrt(count * LATTICES[kind] / math.pi) + 3.0
+    side = 2 * (math.ceil(2.0 * radius) + 2) + 1  # of the square grid it is cut from
+    check_memory(
+        _GRID_BYTES * side * side, f"a {kind} lattice of {count:,} points", key="template",
+        fix="use fewer points",
+    )  # fmt: skip
     while True:
         i, j, r2 = _grid(kind, math.ceil(2.0 * radius) + 2)
         inside = r2 <= radius * radius

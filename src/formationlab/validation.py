@@ -30,9 +30,11 @@ from pydantic import BaseModel, ConfigDict, ValidationError, create_model
 from .errors import ParameterError, ScenarioError, UserInputError
 
 __all__ = [
+    "COORDINATE_LIMIT",
     "build_dataclass",
     "check_fields",
     "choices",
+    "coordinates",
     "fraction",
     "line_of",
     "nearest",
@@ -96,6 +98,23 @@ def fraction(value: Any, name: str, *, owner: str | None = None) -> float:
     if v > 1.0:
         raise ParameterError(f"{_label(name, owner)} must be in [0, 1], got {value!r}", key=name)
     return v
+
+
+#: The largest coordinate a position may have: distances are computed from squared
+#: differences, which overflow double precision beyond about 1e154.
+COORDINATE_LIMIT = 1e150
+
+
+def coordinates(q: Any, name: str) -> None:
+    """Refuse positions ``(..., n, d)`` with a coordinate beyond :data:`COORDINATE_LIMIT`."""
+    largest = float(np.max(np.abs(q), initial=0.0))
+    if largest > COORDINATE_LIMIT:
+        raise ParameterError(
+            f"{name} has coordinates up to {largest:.3g}, beyond {COORDINATE_LIMIT:g}: "
+            "squared distances would overflow double precision; scale the scenario "
+            "(positions, distances, diameters) to moderate numbers",
+            key=name,
+        )
 
 
 def whole(value: Any, name: str, *, minimum: int = 1, owner: str | None = None) -> int:

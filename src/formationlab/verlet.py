@@ -32,26 +32,50 @@ _SLACK = 1e-9
 
 
 @njit(cache=True)
+def _cell(v, v0, side, count):
+    """The cell ``0 <= c < count`` of coordinate ``v`` in cells of ``side`` from ``v0``.
+
+    Clamped before the conversion to an integer, which is undefined for a quotient that
+    is NaN or beyond the integers (a coordinate around 1e154 or not finite): such a
+    robot goes to an edge cell, where the list stays valid for the finite ones.
+    """
+    t = (v - v0) / side
+    if not t >= 0.0:  # NaN as well
+        return 0
+    if t >= count - 1:
+        return count - 1
+    return int(t)
+
+
+@njit(cache=True)
 def _bin(q, side, cell_of, items, start):
     """Counting sort of the robots into square cells of side ``side``.
 
     At most ``start.size - 1`` cells: the side is doubled until they fit (wider
-    cells still hold every pair within ``side``). Returns ``nx, ny, side, x0, y0``;
-    the robots of cell ``c`` are ``items[start[c]:start[c + 1]]``, in robot order.
+    cells still hold every pair within ``side``); positions whose extent is not
+    finite (NaN, infinite, or too far apart for their difference to be a float) all
+    go into one cell. Returns ``nx, ny, side, x0, y0``; the robots of cell ``c`` are
+    ``items[start[c]:start[c + 1]]``, in robot order.
     """
     n = q.shape[0]
     x0, y0, x1, y1 = np.inf, np.inf, -np.inf, -np.inf
     for i in range(n):
         x0, x1 = min(x0, q[i, 0]), max(x1, q[i, 0])
         y0, y1 = min(y0, q[i, 1]), max(y1, q[i, 1])
-    while (int((x1 - x0) / side) + 1) * (int((y1 - y0) / side) + 1) > start.size - 1:
-        side *= 2.0
-    nx = int((x1 - x0) / side) + 1
-    ny = int((y1 - y0) / side) + 1
+    wide, high = x1 - x0, y1 - y0
+    nx, ny = 1, 1
+    if math.isfinite(wide) and math.isfinite(high) and math.isfinite(side) and side > 0.0:
+        # counted in floats: the cell counts of a huge extent are beyond the integers
+        while (math.floor(wide / side) + 1.0) * (math.floor(high / side) + 1.0) > start.size - 1:
+            side *= 2.0
+        nx = int(wide / side) + 1
+        ny = int(high / side) + 1
+    else:
+        x0, y0, side = 0.0, 0.0, np.inf
     cells = nx * ny
     start[: cells + 1] = 0
     for i in range(n):
-        c = int((q[i, 0] - x0) / side) * ny + int((q[i, 1] - y0) / side)
+        c = _cell(q[i, 0], x0, side, nx) * ny + _cell(q[i, 1], y0, side, ny)
         cell_of[i] = c
         start[c + 1] += 1
     for c in range(cells):
@@ -93,8 +117,8 @@ def build_close_list(q, radius, reach, ex_ptr, ex_nbr, pairs, cell_of, items, st
     for i in range(n):
         for p in range(ex_ptr[i], ex_ptr[i + 1]):
             stamp[ex_nbr[p]] = i
-        cx = int((q[i, 0] - x0) / side)
-        cy = int((q[i, 1] - y0) / side)
+        cx = _cell(q[i, 0], x0, side, nx)
+        cy = _cell(q[i, 1], y0, side, ny)
         m = 0
         for gx in range(max(cx - 1, 0), min(cx + 2, nx)):
             for gy in range(max(cy - 1, 0), min(cy + 2, ny)):

@@ -13,6 +13,7 @@ import importlib
 import pkgutil
 import sys
 
+from . import _signals
 from ._app import app, fail
 
 __all__ = ["app", "fail", "main"]
@@ -26,5 +27,9 @@ def _load_commands() -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``formationlab`` console script."""
-    _load_commands()
-    app(args=argv if argv is not None else sys.argv[1:], prog_name="formationlab")
+    _signals.install()
+    try:  # (inside a command, its own handling says what was kept)
+        _load_commands()
+        app(args=argv if argv is not None else sys.argv[1:], prog_name="formationlab")
+    except KeyboardInterrupt:  # while loading the commands or reading the arguments
+        _signals.exit_interrupted()

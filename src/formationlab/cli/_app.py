@@ -16,7 +16,8 @@ a file or folder that cannot be read or       2       the path and the reason ("
 written (any ``OSError``: permission, disk            denied", "no space left on device",
 full, a path under a regular file)                    "not a directory", ...)
 an optional part that is not installed        2       the extra to install
-Ctrl-C                                        130     ``interrupted`` (and what was kept)
+Ctrl-C (SIGTERM)                              130     ``interrupted`` (and what was kept)
+                                              (143)
 ============================================  ======  =========================================
 """
 
@@ -36,6 +37,7 @@ from rich.markup import escape
 from typer.core import TyperArgument, TyperCommand, TyperGroup, TyperOption
 
 from ..errors import FormationlabWarning, UserInputError
+from ._signals import interrupted_status
 
 __all__ = ["app", "command", "describe_os_error", "err_console", "fail", "warn"]
 
@@ -43,12 +45,19 @@ err_console = Console(stderr=True)
 
 F = TypeVar("F", bound=Callable[..., Any])
 
-#: exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells report it)
+#: exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells report it); 143
+#: (128 + SIGTERM) when a SIGTERM stopped it
 INTERRUPTED = 130
 
 
 def fail(message: str, code: int = 2) -> NoReturn:
-    """Print ``error: message`` on standard error and exit with ``code``."""
+    """Print ``error: message`` on standard error and exit with ``code``.
+
+    :data:`INTERRUPTED` becomes ``128 +`` the signal that stopped the command (143 for
+    SIGTERM, :func:`._signals.interrupted_status`).
+    """
+    if code == INTERRUPTED:
+        code = interrupted_status()
     # escape: messages quote user input such as "[x, y]", which is not rich markup
     err_console.print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True)
     raise typer.Exit(code)

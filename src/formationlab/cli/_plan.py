@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 import shutil
 import tracemalloc
 from dataclasses import dataclass
@@ -31,6 +30,8 @@ import numpy as np
 
 from ..chunked import BUDGET, row_bytes
 from ..errors import ParameterError
+from ..resources import available_memory
+from ..resources import size as _size
 
 __all__ = ["RunPlan", "available_disk", "available_memory", "check_plan", "plan_run"]
 
@@ -109,14 +110,6 @@ def _saved(steps: int, save_every: int) -> int:
     return steps // save_every + 1 + (steps % save_every != 0)
 
 
-def _size(n: float) -> str:
-    for unit in ("B", "kB", "MB", "GB", "TB"):
-        if n < 999.5 or unit == "TB":
-            return f"{n:.3g} {unit}" if unit != "B" else f"{n:.0f} B"
-        n /= 1e3
-    raise AssertionError("unreachable")
-
-
 def plan_run(sc: Any, save_every: int) -> RunPlan:
     """The :class:`RunPlan` of scenario ``sc`` (a :class:`formationlab.scenario.Scenario`)."""
     from ..integrators.base import steps_for
@@ -126,7 +119,9 @@ def plan_run(sc: Any, save_every: int) -> RunPlan:
         raise ParameterError("no fixed step: the run's size is not known in advance")
     steps = steps_for(sc.duration, float(dt))
     f, law = sc.formation, sc.law
-    probe = int(np.clip(_PROBE_ROBOTS // f.n, 4, _PROBE))
+    # a few states, fewer of a formation of many robots or edges (whose every state's
+    # evaluation lists them all)
+    probe = int(np.clip(_PROBE_ROBOTS // max(f.n, len(f.edges)), 1, _PROBE))
     q = np.broadcast_to(np.asarray(sc.q0, float), (probe, f.n, 2)).copy()
     tracemalloc.start()
     try:
@@ -149,21 +144,6 @@ def plan_run(sc: Any, save_every: int) -> RunPlan:
         output_fixed=64e3 + 16.0 * n + 40.0 * m + 16.0 * s,  # robots, edges (and labels)
         post_states=max(1, int(BUDGET // row_bytes(f))),  # one slice (chunked.over_time)
     )
-
-
-def available_memory() -> float | None:
-    """Memory available to a new allocation, bytes (Linux ``MemAvailable``); None if unknown."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return float(line.split()[1]) * 1024
-    except OSError:
-        pass
-    try:
-        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):
-        return None
 
 
 def available_disk(folder: Path) -> float | None:

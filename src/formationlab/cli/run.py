@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -336,6 +337,8 @@ def _simulate(sc: Any, save_every: int, quiet: bool) -> Any:
             sensing=sc.sensing, faults=sc.faults, model=sc.model, save_every=save_every,
         )  # fmt: skip
     if not show:
+        if not quiet and steps * sc.n**2 > 2e5:  # a log, not a terminal: one line once running
+            kwargs["progress"] = _running_note(sc.name)
         return run_scenario(sc, **kwargs)
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -348,6 +351,21 @@ def _simulate(sc: Any, save_every: int, quiet: bool) -> Any:
     with Progress(*columns, console=err_console, transient=True) as bar:
         task = bar.add_task(sc.name, total=sc.duration)
         return run_scenario(sc, progress=lambda t: bar.update(task, completed=t), **kwargs)
+
+
+def _running_note(name: str) -> Callable[[float], None]:
+    """A progress callback that says once, at its first call, that the run is under way."""
+    said: list[bool] = []
+
+    def note(t: float) -> None:
+        if not said:
+            said.append(True)
+            _note(
+                f"{name}: running (at t = {t:g} s); Ctrl-C stops it and keeps the states so far",
+                False,
+            )
+
+    return note
 
 
 @command(

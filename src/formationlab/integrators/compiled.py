@@ -31,8 +31,12 @@ against, to rounding.
 from __future__ import annotations
 
 import math
+import signal
+import sys
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any, NamedTuple
 
 import numba
@@ -142,8 +146,10 @@ def run_compiled(
     """Step one state ``q0`` ``(n, 2)`` with explicit Euler (module docstring).
 
     The loop runs in compiled segments of about a quarter of a second, between which
-    ``progress`` is called with the simulated time and Ctrl-C is seen: with
-    ``interruptible`` the run so far is returned with status ``"interrupted"``.
+    ``progress`` is called with the simulated time and Ctrl-C (or SIGTERM, if its handler
+    raises KeyboardInterrupt) is seen: a signal that comes during a segment is held until
+    the segment ends (:func:`_signals_between_segments`). With ``interruptible`` the run
+    so far is returned with status ``"interrupted"``.
     ``parallel``: on numba's threads or on one; by default one thread, and from
     :data:`PARALLEL_FROM` robots the faster of the two as measured on the second and
     third segments (the same numbers either way).
@@ -179,42 +185,91 @@ def run_compiled(
             k_out, x_out, v_out, info, clear, kept, use, chunks if use else 1,
         )  # fmt: skip
 
+    def keep_reached(k: int) -> None:
+        """Keep the state the loop has reached (step ``k``, in ``q``) and its velocity as the
+        next saved row: a call from step 0 to step 0 on scratch outputs saves exactly that."""
+        part = (np.zeros(1, np.int64), np.zeros((1, n, 2)), np.zeros((1, n, 2)))
+        pairs, fp, p_rows = lists
+        reach = np.array([0.0, np.inf, 0.0])  # a close list of its own, built afresh
+        lists[:] = _run(
+            q, layout, work, pairs, fp, p_rows, dt, 0, 0, n_steps, save_every, *part,
+            np.zeros(3), np.full(1, np.inf), reach, False, 1,
+        )  # fmt: skip
+        row = int(info[2])
+        k_out[row], x_out[row], v_out[row] = k, part[1][0], part[2][0]
+        info[2] = row + 1
+
     chunk = min(256, step_cap)
     segments = 0
     per_step: dict[bool, float] = {}  # seconds per step of the probed segments, by threads
     start = time.perf_counter()
-    try:
-        while True:
-            k_end = min(n_steps, k0 + chunk)
-            began = time.perf_counter()
-            segment(k0, k_end)
-            spent = time.perf_counter() - began
-            status = Status.from_code(int(info[0]))
-            segments += 1
-            if probe and segments > 1 and len(per_step) < 2 and int(info[1]) > k0:
-                per_step[use] = spent / (int(info[1]) - k0)  # one thread, then the threads
-                use = len(per_step) == 1 or per_step[True] < per_step[False]
-            k0 = int(info[1])
-            if status is not Status.SUCCESS or k0 >= n_steps:
-                break
-            if progress is not None:
-                progress(k0 * dt)
-            chunk = int(min(max(chunk * 0.25 / max(spent, 1e-6), 16), 1 << 20, step_cap))
-    except KeyboardInterrupt:
-        if not interruptible:
-            raise
-        status = Status.INTERRUPTED
-        k0 = int(info[1])  # the loop's own count (it may have returned just before Ctrl-C)
-        if int(info[2]) == 0:  # stopped before the first state was kept: keep it
-            info[:] = 0
-            segment(0, 0)
-            k0 = 0
+    with _signals_between_segments() as deliver:
+        try:
+            while True:
+                k_end = min(n_steps, k0 + chunk)
+                began = time.perf_counter()
+                segment(k0, k_end)
+                spent = time.perf_counter() - began
+                deliver()  # a Ctrl-C during the segment: KeyboardInterrupt here
+                status = Status.from_code(int(info[0]))
+                segments += 1
+                if probe and segments > 1 and len(per_step) < 2 and int(info[1]) > k0:
+                    per_step[use] = spent / (int(info[1]) - k0)  # one thread, then the threads
+                    use = len(per_step) == 1 or per_step[True] < per_step[False]
+                k0 = int(info[1])
+                if status is not Status.SUCCESS or k0 >= n_steps:
+                    break
+                if progress is not None:
+                    progress(k0 * dt)
+                chunk = int(min(max(chunk * 0.25 / max(spent, 1e-6), 16), 1 << 20, step_cap))
+        except KeyboardInterrupt:
+            if not interruptible:
+                raise
+            status = Status.INTERRUPTED
+            k0 = int(info[1])  # the loop's own count (it may have returned just before Ctrl-C)
+            if int(info[2]) == 0 or k_out[int(info[2]) - 1] != k0:
+                keep_reached(k0)  # the run ends where it was, not at the last saved step
     wall = time.perf_counter() - start
     saved = int(info[2])
     return CompiledRun(
         k_out[:saved], x_out[:saved], v_out[:saved], status, k0, float(clear[0]), wall,
         threads if use else 1,
     )  # fmt: skip
+
+
+@contextmanager
+def _signals_between_segments() -> Iterator[Callable[[], None]]:
+    """Hold SIGINT and SIGTERM while a compiled segment runs; ``deliver()`` them between.
+
+    A signal that arrives inside numba code runs its Python handler as the segment hands its
+    results back: Ctrl-C's KeyboardInterrupt raised there became a ``SystemError`` ("returned
+    a result with an exception set") and the run was lost. Inside the block the handlers
+    only note the signal, and ``deliver()`` calls the handler that was in place (for
+    Ctrl-C, Python's: KeyboardInterrupt). Only in the main thread (where signals are
+    handled) and for handlers that are Python functions; restored on leaving (a signal
+    held then is raised again, unless the block ended with an exception).
+    """
+    held: list[tuple[int, Any]] = []
+    previous: dict[int, Callable[[int, Any], Any]] = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            handler = signal.getsignal(sig)
+            if callable(handler):
+                previous[sig] = handler
+                signal.signal(sig, lambda s, frame: held.append((s, frame)))
+
+    def deliver() -> None:
+        while held:  # delivered here and now: from the caller's frame
+            sig, _ = held.pop(0)
+            previous[sig](sig, sys._getframe(1))
+
+    try:
+        yield deliver
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    for sig, _ in held:  # one that came after the last delivery: as if it came now
+        signal.raise_signal(sig)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")

@@ -39,6 +39,7 @@ OUTCOME_COLORS = {
     "drifting": "tab:purple",
     "rotating": "tab:brown",
     "not-converged": "tab:gray",
+    "diverged": "black",
 }
 
 

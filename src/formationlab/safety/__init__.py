@@ -10,6 +10,7 @@ point of unicycles. See ``docs/safety.md``.
 This package depends on ``potentials`` and ``errors`` only, so laws and models can use it.
 """
 
+from ..errors import require_extra
 from .barrier import (
     BarrierConstraints,
     QPSolution,
@@ -49,7 +50,18 @@ from .unicycle import (
     unicycle_velocity,
 )
 
+
+def check_extra() -> None:
+    """Raise :class:`~formationlab.errors.MissingExtraError` naming ``formationlab[safety]``
+    unless the extra's solvers and geometry (qpsolvers, Clarabel, shapely) import.
+
+    The package imports without them; a scenario with obstacles or a filter checks here first.
+    """
+    require_extra("safety", ("qpsolvers", "clarabel", "shapely"), "safety filters and obstacles")
+
+
 __all__ = [
+    "check_extra",
     "FILTERS",
     "BarrierConstraints",
     "Circle",

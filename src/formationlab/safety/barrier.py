@@ -50,7 +50,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.sparse.csgraph import connected_components
 
-from ..errors import require
+from ..errors import require_extra
 from .closed_form import closed_form
 from .config import SafetyFilter
 from .obstacles import Obstacle, obstacle_barrier_rows
@@ -216,7 +216,7 @@ def _solve(G: sp.csr_matrix, bound: NDArray, u_hat: NDArray) -> tuple[NDArray, N
     if np.all(bound >= 0.0):
         keep = bound <= norms * 2.0 * float(np.linalg.norm(u_hat)) * (1.0 + 1e-9)
     Gk = sp.diags(1.0 / norms[keep]) @ G[keep]
-    qpsolvers: Any = require("qpsolvers", "safety", "the safety filter's QP solver (Clarabel)")
+    qpsolvers: Any = require_extra("safety", ("qpsolvers", "clarabel"), "safety filters")
     problem = qpsolvers.Problem(
         sp.identity(G.shape[1], format="csc"), -u_hat / s, sp.csc_matrix(Gk),
         bound[keep] / (norms[keep] * s),

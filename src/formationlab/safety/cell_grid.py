@@ -19,6 +19,18 @@ from numpy.typing import NDArray
 __all__ = ["build_grid", "neighbours_of"]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _cell(v, v0, side, count):
+    """The cell ``0 <= c < count`` of coordinate ``v``, clamped before the conversion to an
+    integer (undefined for a NaN quotient or one beyond the integers)."""
+    t = (v - v0) / side
+    if not t >= 0.0:
+        return 0
+    if t >= count - 1:
+        return count - 1
+    return int(t)
+
+
 @njit(cache=True, nogil=True)
 def build_grid(q: NDArray, radius: float):
     """Bin the points ``q`` ``(n, 2)`` into cells of side ``>= radius``.
@@ -36,17 +48,25 @@ def build_grid(q: NDArray, radius: float):
         y0 = min(y0, q[i, 1])
         x1 = max(x1, q[i, 0])
         y1 = max(y1, q[i, 1])
+    wide, high = x1 - x0, y1 - y0
     side = radius
-    cells = (math.floor((x1 - x0) / side) + 1) * (math.floor((y1 - y0) / side) + 1)
-    if cells > 4 * n + 16:  # spread out: larger cells, a grid of about 4 n of them
-        side = max(side, math.sqrt((x1 - x0 + side) * (y1 - y0 + side) / (4 * n + 16)) * 1.01)
-    nx = int((x1 - x0) / side) + 1  # (>= 0: truncation is the floor)
-    ny = int((y1 - y0) / side) + 1
+    nx, ny = 1, 1
+    if math.isfinite(wide) and math.isfinite(high) and math.isfinite(side) and side > 0.0:
+        # counted in floats: the cell counts of a huge extent are beyond the integers
+        cells = (math.floor(wide / side) + 1.0) * (math.floor(high / side) + 1.0)
+        if cells > 4 * n + 16:  # spread out: larger cells, a grid of about 4 n of them
+            side = max(side, math.sqrt((wide + side) * (high + side) / (4 * n + 16)) * 1.01)
+            while (math.floor(wide / side) + 1.0) * (math.floor(high / side) + 1.0) > 4 * n + 16:
+                side *= 2.0  # a thin layout, or one whose area above overflowed
+        nx = int(wide / side) + 1  # (>= 0: truncation is the floor)
+        ny = int(high / side) + 1
+    else:  # not finite, or too far apart for their difference to be a float: one cell
+        x0, y0, side = 0.0, 0.0, np.inf
     cell = np.empty(n, dtype=np.int64)
     start = np.zeros(nx * ny + 1, dtype=np.int64)
     for i in range(n):
-        cx = min(int((q[i, 0] - x0) / side), nx - 1)
-        cy = min(int((q[i, 1] - y0) / side), ny - 1)
+        cx = _cell(q[i, 0], x0, side, nx)
+        cy = _cell(q[i, 1], y0, side, ny)
         cell[i] = cx + nx * cy
         start[cell[i] + 1] += 1
     for c in range(nx * ny):
@@ -62,8 +82,8 @@ def build_grid(q: NDArray, radius: float):
 @njit(cache=True, nogil=True, inline="always")
 def neighbours_of(i, q, r2, x0, y0, side, nx, ny, start, order, out) -> int:
     """Robots ``j != i`` with ``|q_i - q_j|^2 <= r2`` into ``out``, ascending; their count."""
-    cx = min(int((q[i, 0] - x0) / side), nx - 1)
-    cy = min(int((q[i, 1] - y0) / side), ny - 1)
+    cx = _cell(q[i, 0], x0, side, nx)
+    cy = _cell(q[i, 1], y0, side, ny)
     deg = 0
     for gy in range(max(cy - 1, 0), min(cy + 2, ny)):
         for gx in range(max(cx - 1, 0), min(cx + 2, nx)):

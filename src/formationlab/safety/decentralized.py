@@ -52,7 +52,7 @@ import scipy.sparse as sp
 from numba import njit
 from numpy.typing import NDArray
 
-from ..errors import require
+from ..errors import require_extra
 from .cell_grid import build_grid, neighbours_of
 from .config import SafetyFilter
 from .obstacle_terms import obstacle_terms
@@ -264,7 +264,7 @@ def decentralized_filter(
 
 
 def _clarabel(P, c, G, h) -> NDArray[np.float64] | None:  # type: ignore[no-untyped-def]
-    qpsolvers: Any = require("qpsolvers", "safety", "the safety filter's QP solver (Clarabel)")
+    qpsolvers: Any = require_extra("safety", ("qpsolvers", "clarabel"), "safety filters")
     problem = qpsolvers.Problem(P, c, G, h)
     with warnings.catch_warnings():
         # qpsolvers warns on a non-solved status; the caller reads sol.found

@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..controllers.kinds.khatib import dkhatib_ds, khatib
-from ..errors import ObstacleError, require
+from ..errors import ObstacleError, require_extra
 
 __all__ = [
     "Circle",
@@ -123,7 +123,7 @@ class Polygon:
             raise ObstacleError(f"polygon vertices must be finite, got {v.tolist()}")
         if np.allclose(v[0], v[-1]):
             v = v[:-1]  # a closing repeat of the first vertex is tolerated
-        shapely: Any = require("shapely", "safety", "a polygon obstacle's check")
+        shapely: Any = require_extra("safety", ("shapely",), "polygon obstacles")
         ring = shapely.LinearRing(v) if len(v) >= 3 else None
         if ring is None or not ring.is_simple:
             raise ObstacleError(

@@ -18,7 +18,7 @@ __all__ = ["Z95", "study_outcomes", "summarize_groups", "wilson_interval"]
 
 #: Outcomes that a study reports only when some trial has them (before or after
 #: settling): a study without moving rigid formations keeps today's tables.
-OPTIONAL_OUTCOMES = ("drifting", "rotating")
+OPTIONAL_OUTCOMES = ("drifting", "rotating", "diverged")
 
 #: The standard normal quantile of 0.975: two-sided 95 % intervals.
 Z95 = 1.959963984540054

@@ -1,0 +1,6 @@
+"""``python -m formationlab``: the command line."""
+
+if __name__ == "__main__":
+    from .cli import main
+
+    main()

@@ -1,0 +1,55 @@
+"""What the machine can hold: memory available, and refusing work that will not fit.
+
+A formation too large for memory is refused by an estimate before anything is allocated
+(:func:`check_memory`), with the size, what is available and what to change, instead of
+numpy's allocation error after minutes, or the system's out-of-memory killer.
+"""
+
+from __future__ import annotations
+
+import os
+
+from .errors import FormationError
+
+__all__ = ["SHARE", "available_memory", "check_memory", "size"]
+
+
+def available_memory() -> float | None:
+    """Memory available to a new allocation, bytes (Linux ``MemAvailable``); None if unknown."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def size(n: float) -> str:
+    """A number of bytes for a person: ``"91.9 MB"``, ``"32.9 GB"``."""
+    for unit in ("B", "kB", "MB", "GB", "TB"):
+        if n < 999.5 or unit == "TB":
+            return f"{n:.3g} {unit}" if unit != "B" else f"{n:.0f} B"
+        n /= 1e3
+    raise AssertionError("unreachable")
+
+
+#: the share of the available memory that building a formation may take: a run needs at
+#: least as much again (the law's lists, the states, the results)
+SHARE = 0.5
+
+
+def check_memory(need: float, what: str, *, key: str, fix: str) -> None:
+    """Refuse ``what`` (a :class:`FormationError` with ``key``) when its estimated ``need``
+    in bytes exceeds :data:`SHARE` of the memory available; ``fix`` says what to change."""
+    free = available_memory()
+    if free is not None and need > SHARE * free:
+        raise FormationError(
+            f"{what} needs about {size(need)} of memory to build, {size(free)} available "
+            f"(at most half of it: a run needs as much again); {fix}",
+            key=key,
+        )

@@ -1,0 +1,94 @@
+"""Extreme but finite inputs: a clear error or an honest status, never an abort.
+
+Positions around 1e154 (whose squared distances overflow), 1e150 and 1e-150, huge gains
+and zero diameters through the compiled single run and the command line. The command
+runs as a subprocess: an out-of-bounds write in compiled code ends the process with
+SIGABRT (status -6 here), which no in-process test can observe.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from _scenarios import triangle
+
+import formationlab as fl
+from formationlab.errors import FormationError, UserInputError
+
+TEMPLATE = [[0.0, 0.0], [1.0, 0.0], [0.5, np.sqrt(3) / 2]]
+START = np.array([[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]])
+LAW = fl.AngleRestrictedLaw(k_c=2.0, k_a=3.0, theta=0.5)
+CLI = [sys.executable, "-c", "from formationlab.cli import main; main()"]
+
+
+def run(formation, law, q0):
+    with np.errstate(all="ignore"):
+        return fl.simulate(
+            formation, law, q0, duration=0.05, integrator=fl.Euler(dt=1e-3), backend="numba"
+        )
+
+
+def test_huge_gains_end_non_finite_on_the_command_line(tmp_path: Path) -> None:
+    # the first step is not finite; the close list was then built from it: a scenario
+    # around 1e154 (now refused by validate) ended in SIGABRT (munmap_chunk) this way
+    text = triangle("strong", "1.0").replace("k_c = 2.0", "k_c = 1e300")
+    assert "1e300" in text
+    scenario = tmp_path / "strong.toml"
+    scenario.write_text(text)
+    out = tmp_path / "out"
+    proc = subprocess.run(
+        [*CLI, "run", str(scenario), "--out", str(out), "-q"],
+        capture_output=True, text=True, timeout=600, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 1, proc.stderr  # not -6 (SIGABRT)
+    assert "Traceback" not in proc.stderr
+    error = [ln for ln in proc.stderr.splitlines() if ln.startswith("error:")]
+    assert len(error) == 1 and "produced NaN or infinite positions" in error[0]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "non-finite"
+
+
+def test_positions_beyond_1e150_are_refused_by_validate(tmp_path: Path) -> None:
+    text = triangle("far", "1.0").replace(
+        "positions = [[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]",
+        "positions = [[-3e154, -3e154], [3e154, -3e154], [0.0, 3e154]]",
+    )
+    scenario = tmp_path / "far.toml"
+    scenario.write_text(text)
+    proc = subprocess.run(
+        [*CLI, "validate", str(scenario)], capture_output=True, text=True, timeout=600, check=False
+    )
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert proc.stderr.strip() == (
+        f"error: {scenario}: robots.positions (line 3): positions has coordinates up to 3e+154, "
+        "beyond 1e+150: squared distances would overflow double precision; scale the scenario "
+        "(positions, distances, diameters) to moderate numbers"
+    )
+
+
+def test_positions_around_1e154_are_refused_and_huge_gains_end_non_finite() -> None:
+    # squared distances overflow: the law's forces would come out 0 (a run that lies)
+    f = fl.Formation.from_template(TEMPLATE, diameters=0.2)
+    with pytest.raises(UserInputError, match="initial positions has coordinates up to 3e"):
+        run(f, LAW, START * 1e154)
+    strong = run(f, fl.AngleRestrictedLaw(k_c=1e300, k_a=1e300, theta=0.5), START)
+    assert strong.status == "non-finite"
+    assert np.all(np.isfinite(strong.q))  # the last finite state is kept
+
+
+def test_large_positions_and_zero_diameters_run() -> None:
+    wide = run(fl.Formation.from_template(TEMPLATE, diameters=0.2), LAW, START * 3e149)  # coordinates up to the limit, 1e150
+    assert wide.status == "success" and np.all(np.isfinite(wide.q))
+    points = run(fl.Formation.from_template(TEMPLATE, diameters=0.0), LAW, START)
+    assert points.status == "success" and np.all(np.isfinite(points.q))
+
+
+def test_tiny_positions_are_refused_as_overlapping() -> None:
+    f = fl.Formation.from_template(TEMPLATE, diameters=0.2)
+    with pytest.raises(FormationError, match="robots 1 and 2 overlap in the initial positions"):
+        run(f, LAW, START * 1e-150)
