@@ -1,8 +1,8 @@
-"""Speed of sensed batches: the compiled sensed path against the numpy driver and the plain kernel.
+"""Speed of sensed batches: the compiled loop's sensing stage, the numpy driver, the plain field.
 
-``run_batch(..., sensing=...)`` of single integrators under explicit Euler runs in numba
-(``formationlab.studies.sensed_kernel``); ``backend="numpy"`` is the stepping driver with
-its measurement channel, the reference the kernel is tested against. Printed, for the
+``run_batch(..., sensing=...)`` under explicit Euler runs on the engine's compiled
+loop with its sensing stage (``formationlab.sensing.stage``); ``backend="numpy"`` is the
+stepping driver with its measurement channel, the reference the loop is tested against. Printed, for the
 paper's triangle (simulation 2's alpha table, angle-restricted law k_c = 2, k_a = 3,
 theta = 0.5, diameters 0.2) and the unit square with both diagonals, dt = 5 ms as in the
 robustness studies, early stopping off (every trial runs every step):

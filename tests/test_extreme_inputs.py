@@ -82,7 +82,8 @@ def test_positions_around_1e154_are_refused_and_huge_gains_end_non_finite() -> N
 
 
 def test_large_positions_and_zero_diameters_run() -> None:
-    wide = run(fl.Formation.from_template(TEMPLATE, diameters=0.2), LAW, START * 3e149)  # coordinates up to the limit, 1e150
+    # coordinates up to the limit, 1e150
+    wide = run(fl.Formation.from_template(TEMPLATE, diameters=0.2), LAW, START * 3e149)
     assert wide.status == "success" and np.all(np.isfinite(wide.q))
     points = run(fl.Formation.from_template(TEMPLATE, diameters=0.0), LAW, START)
     assert points.status == "success" and np.all(np.isfinite(points.q))

@@ -132,5 +132,4 @@ def test_unicycles_on_the_compiled_path_equal_the_driver(kind, starts):
 def test_backend_stays_compiled_with_obstacles_and_filter():
     cfg = SafetyFilter(filter="barrier", distance=0.3)
     assert batch_backend("numba", OBSTACLES, cfg) == ("numba", "")
-    used, note = batch_backend("numba", OBSTACLES, cfg, sensed=True)
-    assert used == "numpy" and "obstacles and a safety filter" in note
+    assert batch_backend("numba", OBSTACLES, cfg, sensed=True) == ("numba", "")

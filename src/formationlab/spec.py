@@ -36,8 +36,8 @@ from numpy.typing import ArrayLike, NDArray
 from .errors import FormationError
 from .geometry import parity
 from .graph import as_edges, complete_edges, edges_connected, is_rigid
-from .validation import coordinates
 from .orientation import alpha_from_shape, both_orders, neighbour_triples, switching_surfaces
+from .validation import coordinates
 
 __all__ = [
     "DENSE_LIMIT",

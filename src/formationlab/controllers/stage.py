@@ -1,5 +1,9 @@
 """A law's field ``u = f(q)`` over every pair, as a stage of the compiled loop.
 
+Two forms: :func:`law_field`, the field of the true positions for a chunk of trials, and
+:func:`local_field`, every robot's command from its own measurements (one trial; the
+sensing stage, :mod:`formationlab.sensing.stage`, measures and delivers them).
+
 The law enters as a :class:`~formationlab.controllers.terms.KernelTerms`, the named arrays
 and numbers each law builds (``Law.kernel_terms``), so one compiled loop serves every law
 and formation. Each pair contributes ``u_i += g r_ij``, ``u_j -= g r_ij`` with the edge's
@@ -20,7 +24,7 @@ from .kinds.khatib import repulsion_gain
 from .kinds.restriction import restriction_force, switched_on, switching, triangle_product
 from .kinds.signed_area import area_force, area_gain, signed_area
 
-__all__ = ["law_field"]
+__all__ = ["law_field", "local_field"]
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
@@ -106,3 +110,84 @@ def law_field(q, u, sigma, nact, terms):
             fx, fy = area_force(g, xa, ya, xb, yb)
             u[ic, 0, b] += fx
             u[ic, 1, b] += fy
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def local_field(z, seen, own, terms, u):
+    """Every robot's command ``u`` ``(n, 2)`` in its own frame from its measurements.
+
+    ``z[i, j]`` is robot ``i``'s measurement of ``p_j - p_i`` and ``seen[i, j]`` whether it
+    has one; ``own[e]`` the desired distance of edge ``e`` as its robots ``edge_i[e]``,
+    ``edge_j[e]`` hold it. The compiled twin of :func:`formationlab.sensing.local_controls`,
+    term by term in its order: each edge from each end; Khatib's repulsion between
+    non-neighbours, each from its end; each restricted triple ``(i, j, k)`` from robot
+    ``i``'s view of its surface (eqs. 11, 13, 14, 23); the signed-area penalty per vertex.
+    A term that needs a robot its robot does not see is left out.
+    """
+    t = terms
+    n = u.shape[0]
+    for i in range(n):
+        u[i, 0] = 0.0
+        u[i, 1] = 0.0
+    for side in range(2):  # each edge from each end, with that robot's own d_ij
+        for e in range(t.edge_i.shape[0]):
+            obs = t.edge_i[e] if side == 0 else t.edge_j[e]
+            tgt = t.edge_j[e] if side == 0 else t.edge_i[e]
+            if not seen[obs, tgt]:
+                continue
+            vx = z[obs, tgt, 0]
+            vy = z[obs, tgt, 1]
+            g = edge_gain(t.kind, vx * vx + vy * vy, own[e, side], t.edge_contact[e], t.edge_gain)
+            u[obs, 0] += g * vx  # eq. (8)
+            u[obs, 1] += g * vy
+    if t.repulsion_gain != 0:  # Khatib's repulsion between non-neighbours, each from its end
+        for side in range(2):
+            for p in range(t.pair_i.shape[0]):
+                if t.pair_is_edge[p]:
+                    continue
+                obs = t.pair_i[p] if side == 0 else t.pair_j[p]
+                tgt = t.pair_j[p] if side == 0 else t.pair_i[p]
+                if not seen[obs, tgt]:
+                    continue
+                vx = z[obs, tgt, 0]
+                vy = z[obs, tgt, 1]
+                r = math.sqrt(vx * vx + vy * vy)
+                g = repulsion_gain(
+                    r, r - t.pair_contact[p], t.repulsion_gain, t.repulsion_eta,
+                    t.repulsion_influence,
+                )  # fmt: skip
+                u[obs, 0] += g * vx
+                u[obs, 1] += g * vy
+    for v in range(t.term_i.shape[0]):  # eqs. (11), (13), (14), (23), from robot i's view
+        i = t.term_i[v]
+        j = t.term_j[v]
+        k = t.term_k[v]
+        if not (seen[i, j] and seen[i, k]):
+            continue
+        sf = t.term_surface[v]
+        ia = t.surface_a[sf]
+        ib = t.surface_b[sf]
+        ic = t.surface_c[sf]
+        cab = triangle_product(z[i, ia, 0], z[i, ia, 1], z[i, ib, 0], z[i, ib, 1], z[i, ic, 0],
+                               z[i, ic, 1])  # fmt: skip
+        on = switched_on(switching(t.surface_beta[sf], cab, t.theta))  # eq. (14)
+        fx, fy = restriction_force(
+            t.term_weight[v] * on, z[i, k, 0] - z[i, j, 0], z[i, k, 1] - z[i, j, 1]
+        )  # eq. (23)
+        u[i, 0] += fx
+        u[i, 1] += fy
+    for rot in range(3):  # signed-area penalty, grad_a A_abc = 1/2 k x r_bc, per vertex
+        for m in range(t.area_a.shape[0]):
+            a0, a1, a2 = t.area_a[m], t.area_b[m], t.area_c[m]
+            if rot == 1:
+                a0, a1, a2 = a1, a2, a0
+            elif rot == 2:
+                a0, a1, a2 = a2, a0, a1
+            if not (seen[a0, a1] and seen[a0, a2]):
+                continue
+            p1x, p1y = z[a0, a1, 0], z[a0, a1, 1]
+            p2x, p2y = z[a0, a2, 0], z[a0, a2, 1]
+            area = signed_area(0.0, 0.0, p1x, p1y, p2x, p2y)  # the vertex at 0
+            fx, fy = area_force(area_gain(area, t.area_target[m], t.area_gain), p1x, p1y, p2x, p2y)
+            u[a0, 0] += fx
+            u[a0, 1] += fy

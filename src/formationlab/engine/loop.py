@@ -9,16 +9,21 @@ innermost, contiguous axis, so that each loop over trials is a plain SIMD loop. 
 1. **model**: the points the law acts on (:func:`formationlab.models.stage.points`;
    unicycles' headings carried from step to step, :func:`~formationlab.models.stage.turn`);
 2. **law**: its field over every pair (:func:`formationlab.controllers.stage.law_field`,
-   the law's :class:`~formationlab.controllers.terms.KernelTerms`);
+   the law's :class:`~formationlab.controllers.terms.KernelTerms`); or, when the robots
+   sense each other (local frames, noise, delay, losses, range, mismatch, faults), every
+   robot's command from its own measurements
+   (:func:`formationlab.sensing.stage.sensed_field`);
 3. **obstacles and filter** (only when the run has them), trial by trial
    (:func:`formationlab.safety.stage.filter_command`); a trial whose QP rounding defeats
    pauses its chunk, and the host answers (:mod:`.trials`);
 4. **model**: the state's rate from the command
-   (:func:`formationlab.models.stage.rates`);
+   (:func:`formationlab.models.stage.rates`); zero for robots stopped by a fault
+   (:func:`formationlab.sensing.stage.halt`);
 5. **drift window**: the positions at ``window_step`` (``Stepped.q_window``);
 6. **stop rule** (:class:`~formationlab.integrators.StopRule`): at a check, the
    instantaneous speed (:func:`formationlab.models.stage.speed`) or the net speed since
-   the previous check at most ``speed``;
+   the previous check at most ``speed`` (with sensing, only while every robot sees its
+   neighbours, now and at the previous check);
 7. **step and verdict**: the Euler step, judged by the contact rule
    (:mod:`.contact`, and :func:`formationlab.safety.stage.obstacle_contact`): not finite,
    contact at its end, contact along it; a rejected step is not taken;
@@ -43,6 +48,7 @@ from ..controllers.stage import law_field
 from ..models.stage import headings, points, rates, speed, turn
 from ..models.terms import HEADING, NEAR_IDENTITY
 from ..safety.stage import CENTRALIZED, WAIT, filter_command, filter_scratch, obstacle_contact
+from ..sensing.stage import halt, informed, sensed_field
 from .contact import COLLISION, CONVERGED, END, NON_FINITE, SWEPT_MARGIN, TOO_LARGE, contact
 
 __all__ = [
@@ -68,6 +74,7 @@ class RunNumbers(NamedTuple):
     check_every: int
     speed: float  #: the stop rule's speed
     window_step: int  #: start of the drift window (negative: never)
+    k_end: int  #: the chunks stop (and stay running) at this step: the end of a block
 
 
 class ChunkState(NamedTuple):
@@ -109,13 +116,14 @@ class TrialOutputs(NamedTuple):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def step_chunk(c, law, model, obs, flt, st, out, run):
-    """Steps of chunk ``c`` until every trial has ended or one needs a QP (module docstring).
+def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run):
+    """Steps of chunk ``c`` until every trial has ended, one needs a QP, or ``run.k_end``.
 
     ``obs`` and ``flt`` are the run's obstacle and filter terms, or both None when it has
-    neither obstacles nor a filter: numba then compiles this function without the safety
-    stage (a ``None`` argument prunes the branches that test it), so a run compiles only
-    what it uses.
+    neither obstacles nor a filter; ``sn`` and ``ss`` its sensing terms and state
+    (:mod:`formationlab.sensing.stage`), or None when its robots see the true positions:
+    numba then compiles this function without that stage (a ``None`` argument prunes the
+    branches that test it), so a run compiles only what it uses.
     """
     n = st.x.shape[1]
     kk = st.x.shape[2]
@@ -141,6 +149,8 @@ def step_chunk(c, law, model, obs, flt, st, out, run):
     code = np.full(C, -1, dtype=np.int8)  # -1: still running
     if obs is not None:
         S = filter_scratch(n, obs, flt)
+    if sn is not None:
+        ul = np.empty((n, 2))  # one trial's commands in its robots' frames
     dt = run.dt
     nact = st.meta[c, 0]
     step = st.meta[c, 1]
@@ -149,12 +159,20 @@ def step_chunk(c, law, model, obs, flt, st, out, run):
         headings(x, hc, hs, hcl, hsl, nact)
         st.meta[c, 5] = 1
     while nact > 0:
+        if step >= run.k_end:  # the end of a block of steps: the chunk goes on later
+            st.meta[c, 0] = nact
+            st.meta[c, 1] = step
+            st.meta[c, 2] = kc
+            return
         k = step
         src = x
         if hand:
             points(x, hc, hs, p, nact, model)
             src = p
-        law_field(src, u, scratch, nact, law)
+        if sn is not None and sn.measured:  # each robot's command from its own measurements
+            sensed_field(src, x, hc, hs, u, ul, nact, ids, k, law, sn, ss)
+        else:
+            law_field(src, u, scratch, nact, law)
         if obs is not None:  # obstacles' repulsion and the filter, trial by trial
             pause = False
             for b in range(nact):
@@ -176,6 +194,8 @@ def step_chunk(c, law, model, obs, flt, st, out, run):
                 st.meta[c, 4] = PAUSED
                 return
         rates(x, hc, hs, u, f, scratch, nact, model)
+        if sn is not None:  # robots stopped by a fault
+            halt(f, k * dt, sn, nact)
         if k == run.window_step:  # start of the drift window (the driver's q_window)
             for b in range(nact):
                 for i in range(n):
@@ -202,6 +222,10 @@ def step_chunk(c, law, model, obs, flt, st, out, run):
                     net = math.sqrt(gap[b]) / ((k - kc) * dt)
                     ns[b] = net
                     still = still or net <= run.speed
+                if sn is not None and sn.measured:  # robots waiting for a measurement
+                    seen = informed(ids[b], law, ss)
+                    still = still and seen and ss.seen_c[ids[b]]
+                    ss.seen_c[ids[b]] = seen
                 if still:
                     code[b] = CONVERGED
             for i in range(n):
@@ -296,8 +320,8 @@ def step_chunk(c, law, model, obs, flt, st, out, run):
 
 
 @njit(cache=True, error_model="numpy", nogil=True, parallel=True)
-def run_chunks(law, model, obs, flt, st, out, run):
-    """Every running chunk until it ends or pauses, chunks in parallel."""
+def run_chunks(law, model, obs, flt, sn, ss, st, out, run):
+    """Every running chunk until it ends, pauses or reaches ``run.k_end``, in parallel."""
     for c in prange(st.x.shape[0]):
-        if st.meta[c, 4] == RUNNING:
-            step_chunk(c, law, model, obs, flt, st, out, run)
+        if st.meta[c, 4] == RUNNING and st.meta[c, 1] < run.k_end:
+            step_chunk(c, law, model, obs, flt, sn, ss, st, out, run)

@@ -5,7 +5,9 @@ builds each stage's numbers (the law's :class:`~formationlab.controllers.terms.K
 the robot model's :class:`~formationlab.models.terms.ModelTerms`, the obstacles' and the
 filter's terms), runs the chunks in parallel until every trial has ended, and answers the
 rare pauses of a centralized filter whose QP rounding defeats (Clarabel, through
-:func:`formationlab.safety.barrier_filter`, between calls). It returns a
+:func:`formationlab.safety.barrier_filter`, between calls). With sensing, it draws each
+block's noise and losses between calls (:class:`~formationlab.sensing.Channel`), and runs
+the trials in groups that bound the memory of their measurement arrays. It returns a
 :class:`TrialRun`: how each trial ended, by name.
 """
 
@@ -24,10 +26,15 @@ from ..models import RobotModel
 from ..models.terms import HEADING, NEAR_IDENTITY, model_terms
 from ..safety.obstacle_terms import obstacle_terms
 from ..safety.stage import CENTRALIZED, NONE, filter_terms
+from ..sensing import BLOCK, Channel, Faults, Seed, Sensing
+from ..sensing.stage import sensing_arrays, trial_bytes
 from ..spec import Formation
-from .loop import RUNNING, ChunkState, RunNumbers, TrialOutputs, run_chunks
+from .loop import DONE, RUNNING, ChunkState, RunNumbers, TrialOutputs, run_chunks
 
-__all__ = ["TrialRun", "run_trials"]
+__all__ = ["GROUP_BYTES", "TrialRun", "run_trials"]
+
+#: bytes of per-trial sensing arrays (noise and loss blocks, delay ring) a group may hold
+GROUP_BYTES = 64 * 2**20
 
 
 class TrialRun(NamedTuple):
@@ -56,17 +63,22 @@ def run_trials(
     chunk: int,
     obstacles: Sequence[Any] = (),
     safety: Any = None,
+    sensing: Sensing | None = None,
+    faults: Faults | None = None,
+    seeds: Sequence[Seed] | None = None,
 ) -> TrialRun:
     """Step the trials ``q0`` ``(B, n, k)`` with explicit Euler on the compiled loop.
 
     Trial by trial the stepping driver's run with a :class:`~formationlab.integrators.StopRule`
     (``speed`` of ``tol``, every ``check_every`` steps) and the drift window of ``tol``;
-    ``chunk`` trials per chunk of parallel work.
+    ``chunk`` trials per chunk of parallel work. With ``sensing`` or ``faults`` the robots
+    command from their own measurements (``seeds``: each trial's, default the sensing's).
     """
-    from ..safety import barrier_filter
-
     obstacles = tuple(obstacles)
-    system = System(formation=formation, law=law, model=model, obstacles=obstacles, safety=safety)
+    system = System(
+        formation=formation, law=law, model=model, obstacles=obstacles, safety=safety,
+        sensing=sensing, faults=faults,
+    )  # fmt: skip
     terms = law.compiled_terms(formation).writable()  # one signature for every law
     robots = model_terms(model)
     d_o, gamma = (safety.d_obstacle, safety.gamma) if safety is not None else (0.0, 0.0)
@@ -80,23 +92,68 @@ def run_trials(
     # (None, None): no safety stage (the loop is then compiled without it)
     stage = (obs, flt) if obstacles or flt.kind != NONE else (None, None)
     B, n, k = q0.shape
+    window_step = n_steps - tol.drift_steps(dt)  # negative: never reached
+    # (mc starts as the least clearance of the starts, as the driver starts it)
+    out = TrialOutputs(
+        x=np.empty((B, n, k)), v=np.full((B, n, k), np.nan), steps=np.zeros(B, np.int64),
+        status=np.zeros(B, np.int8), mc=system.clearance(q0), ns=np.full(B, np.nan),
+        qw=np.full((B, n, 2), np.nan),
+    )  # fmt: skip
+    numbers = RunNumbers(float(dt), int(n_steps), int(check_every), float(tol.speed),
+                         int(window_step), int(n_steps) + 1)  # fmt: skip
+    sensed = (sensing is not None and not sensing.ideal) or (faults is not None and faults.any)
+    if not sensed:
+        _run_group(q0, out, chunk, terms, robots, stage, None, numbers, safety, obstacles)
+        return TrialRun(out.x, out.v, out.status, out.steps, out.mc, out.ns, out.qw, window_step)
+    channel = Channel(  # (faults alone: an ideal channel, for the stage's numbers)
+        sensing or Sensing(), formation, law, model,
+        [(sensing or Sensing()).seed] * B if seeds is None else list(seeds), dt,
+    )  # fmt: skip
+    if channel.B != B:
+        raise ValueError(f"run_trials: {channel.B} seeds for {B} trials")
+    stop_at = np.full(n, np.inf)
+    for s in (faults or Faults()).stop:
+        stop_at[s.robot - 1] = s.at
+    headed = model.has_heading and channel.fixed_angles is None
+    group = int(min(B, max(64, GROUP_BYTES // trial_bytes(channel))))
+    for g0 in range(0, B, group):
+        ids = np.arange(g0, min(B, g0 + group))
+        sense = (channel, ids, *sensing_arrays(channel, ids, stop_at, headed))
+        part = TrialOutputs(*(a[g0 : g0 + ids.size] for a in out))  # views
+        _run_group(q0[ids], part, chunk, terms, robots, stage, sense, numbers, safety, obstacles)
+    return TrialRun(out.x, out.v, out.status, out.steps, out.mc, out.ns, out.qw, window_step)
+
+
+def _run_group(
+    q0: NDArray[np.float64], out: TrialOutputs, chunk: int, terms: Any, robots: Any,
+    stage: tuple[Any, Any], sense: tuple[Any, ...] | None, numbers: RunNumbers, safety: Any,
+    obstacles: tuple[Any, ...],
+) -> None:  # fmt: skip
+    """Step the trials ``q0`` in chunks until each has ended, writing ``out`` (by trial).
+
+    ``sense``: ``(channel, trial numbers in the channel, SensingTerms, SensingState)``, or
+    None. With noise or losses the chunks stop at the end of each block of steps, and the
+    next block's draws of the trials still running are made here (:meth:`Channel.block`).
+    """
+    from ..safety import barrier_filter
+
+    B, n, k = q0.shape
     C = int(max(1, min(chunk, B)))
     G = -(-B // C)
-    window_step = n_steps - tol.drift_steps(dt)  # negative: never reached
     x = np.zeros((G, n, k, C))
     ids = np.zeros((G, C), np.int64)
-    mc0 = system.clearance(q0)  # as the driver starts it
     mc = np.full((G, C), np.inf)
     meta = np.zeros((G, 6), np.int64)
     for g in range(G):
         sel = np.arange(g * C, min(B, (g + 1) * C))
         x[g, :, :, : sel.size] = np.moveaxis(q0[sel], 0, -1)
         ids[g, : sel.size] = sel
-        mc[g, : sel.size] = mc0[sel]
+        mc[g, : sel.size] = out.mc[sel]
         meta[g] = (sel.size, 0, -1, 0, RUNNING, 0)
     turns = robots.kind in (HEADING, NEAR_IDENTITY)
     hshape = (G, n, C) if turns else (G, 1, 1)
-    qp = (G, C, n, 2) if flt.kind == CENTRALIZED else (1, 1, n, 2)
+    flt = stage[1]
+    qp = (G, C, n, 2) if flt is not None and flt.kind == CENTRALIZED else (1, 1, n, 2)
     st = ChunkState(
         x=x, xn=np.zeros_like(x), qc=np.array(x[:, :, :2], order="C"),
         hc=np.zeros(hshape), hs=np.zeros(hshape), hcl=np.zeros(hshape), hsl=np.zeros(hshape),
@@ -104,22 +161,33 @@ def run_trials(
         need_p=np.zeros(qp), need_u=np.zeros(qp), given=np.zeros((G, C), bool),
         given_u=np.zeros(qp),
     )  # fmt: skip
-    out = TrialOutputs(
-        x=np.empty((B, n, k)), v=np.full((B, n, k), np.nan), steps=np.zeros(B, np.int64),
-        status=np.zeros(B, np.int8), mc=np.full(B, np.inf), ns=np.full(B, np.nan),
-        qw=np.full((B, n, 2), np.nan),
-    )  # fmt: skip
-    numbers = RunNumbers(float(dt), int(n_steps), int(check_every), float(tol.speed),
-                         int(window_step))  # fmt: skip
+    sn = ss = None
+    blocks = False
+    if sense is not None:
+        channel, trials, sn, ss = sense
+        blocks = sn.noise > 0 or sn.drop > 0
+    k_end = BLOCK if blocks else numbers.k_end
     while True:
-        run_chunks(terms, robots, *stage, st, out, numbers)
-        wait_g, wait_b = np.nonzero(st.need)  # chunks paused, and their slots needing a QP
-        if wait_g.size == 0:
-            break
-        res = barrier_filter(safety, st.need_p[wait_g, wait_b], st.need_u[wait_g, wait_b],
-                             obstacles)  # fmt: skip
-        st.given_u[wait_g, wait_b] = res.u
-        st.given[wait_g, wait_b] = True
-        st.need[wait_g, wait_b] = False
-        st.meta[np.unique(wait_g), 4] = RUNNING
-    return TrialRun(out.x, out.v, out.status, out.steps, out.mc, out.ns, out.qw, window_step)
+        if blocks:  # this block's draws, from each running trial's own generator
+            live = np.concatenate(
+                [st.ids[g, : st.meta[g, 0]] for g in range(G) if st.meta[g, 4] != DONE]
+            )
+            if sn.noise > 0:
+                sn.noise_block[live] = channel.block("noise", trials[live])
+            if sn.drop > 0:
+                sn.drop_block[live] = channel.block("drop", trials[live])
+        run = numbers._replace(k_end=min(k_end, numbers.k_end))
+        while True:
+            run_chunks(terms, robots, *stage, sn, ss, st, out, run)
+            wait_g, wait_b = np.nonzero(st.need)  # chunks paused, and their slots needing a QP
+            if wait_g.size == 0:
+                break
+            res = barrier_filter(safety, st.need_p[wait_g, wait_b], st.need_u[wait_g, wait_b],
+                                 obstacles)  # fmt: skip
+            st.given_u[wait_g, wait_b] = res.u
+            st.given[wait_g, wait_b] = True
+            st.need[wait_g, wait_b] = False
+            st.meta[np.unique(wait_g), 4] = RUNNING
+        if np.all(st.meta[:, 4] == DONE):
+            return
+        k_end += BLOCK

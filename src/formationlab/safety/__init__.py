@@ -61,7 +61,6 @@ def check_extra() -> None:
 
 
 __all__ = [
-    "check_extra",
     "FILTERS",
     "BarrierConstraints",
     "Circle",
@@ -74,6 +73,7 @@ __all__ = [
     "SafetyRecord",
     "barrier_constraints",
     "barrier_filter",
+    "check_extra",
     "check_obstacle_starts",
     "clearances",
     "decentralized_commands",

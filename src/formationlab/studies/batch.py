@@ -27,11 +27,11 @@ loop (:mod:`formationlab.engine.loop`), with obstacles and a safety filter as it
 (trial by trial the driver's run; the centralized filter's QP is solved exactly in the
 loop, by a closed form for one or two active rows and a dual active-set method beyond).
 
-With sensing other than the paper's or faults, ``"numba"`` runs single integrators
-on the compiled sensed path (:mod:`.sensed_kernel`: the measurement channel, every
-robot's own command and the stop rule only while every robot sees its neighbours,
-as the driver does them, with each trial's noise and losses drawn by its own
-channel); sensed batches of other robot models run on the numpy driver path.
+With sensing other than the paper's or faults, the loop's law stage is the sensing
+stage (:mod:`formationlab.sensing.stage`: the measurement channel, every robot's own
+command and the stop rule only while every robot sees its neighbours, as the driver
+does them, with each trial's noise and losses drawn by its own channel), under every
+robot model, obstacle and filter.
 """
 
 from __future__ import annotations
@@ -91,30 +91,12 @@ def batch_backend(
 ) -> tuple[Backend, str]:
     """The backend a batch runs on, and why it differs from ``backend`` ("" if it does not).
 
-    Obstacles and a safety filter are a stage of the compiled loop (:mod:`formationlab.engine`);
-    sensing and faults (``sensed``) have the compiled sensed path, :mod:`.sensed_kernel`, for
-    single integrators
-    (``model``, default the paper's). Sensed batches of other robot models, or with
-    obstacles or a filter, run on the numpy driver path.
+    Every robot model, sensing model, fault, obstacle and safety filter is a stage of the
+    one compiled loop (:mod:`formationlab.engine`), so a batch runs where it is asked to;
+    the reason stays in the interface (and in ``summary.json``) for a part that a future
+    stage may not compile.
     """
-    sensed_model = model is None or type(model) is SingleIntegrator
-    if backend == "numba" and sensed and not sensed_model:
-        assert model is not None
-        return "numpy", (
-            f"the compiled sensed path steps single integrators, not {model.name!r}: the "
-            "batch runs on the numpy driver path (every trial with its own seeded "
-            "measurement channel)"
-        )
-    filtered = safety is not None and safety.enabled
-    if backend == "numba" and sensed and (obstacles or filtered):
-        what = " and ".join(
-            w for w, on in (("obstacles", bool(obstacles)), ("a safety filter", filtered)) if on
-        )
-        return "numpy", (
-            f"the compiled sensed path has no {what}: the batch runs on the numpy driver path "
-            "(the decentralized filter is batched in numba, the centralized QP is solved "
-            "per trial)"
-        )
+    del obstacles, safety, sensed, model  # every combination is compiled
     return backend, ""  # type: ignore[return-value]
 
 
@@ -168,13 +150,11 @@ def run_batch(
     obstacles : sequence of Circle or Polygon
         Static obstacles (:mod:`formationlab.safety`); starts must be clear of them.
     safety : SafetyFilter, optional
-        Safety filter between the law and the robots (a stage of the compiled loop;
-        with sensing, the numpy path: :func:`batch_backend`).
+        Safety filter between the law and the robots (a stage of the compiled loop).
     sensing : Sensing, optional
         How the robots sense each other (:mod:`formationlab.sensing`); with a sensing
-        model other than the paper's, or with ``faults``, single integrators run on the
-        compiled sensed path (:mod:`.sensed_kernel`) and other robot models on the numpy
-        driver path.
+        model other than the paper's, or with ``faults``, the compiled loop's sensing
+        stage (:mod:`formationlab.sensing.stage`) gives each robot its own command.
     faults : Faults, optional
         Robots that stop.
     seeds : sequence of int or tuple of int, optional
@@ -193,18 +173,11 @@ def run_batch(
     if check_every is None:
         check_every = max(1, round(tol.window / dt))
     check_every = whole(check_every, "check_every")
-    sensed = (sensing is not None and not sensing.ideal) or (faults is not None and faults.any)
-    backend, _ = batch_backend(backend, obstacles, safety, sensed, model)
     safe = bool(obstacles) or (safety is not None and safety.enabled)
-    if backend == "numba" and sensed and not safe:
-        x, v, status, steps, mc, ns, qw, window_step = _run_sensed(
-            formation, law, model, q0, float(dt), n_steps, int(check_every), tol,
-            sensing, faults, seeds,
-        )  # fmt: skip
-    elif backend == "numba":
+    if backend == "numba":
         run = _run_compiled(
             formation, law, model, q0, float(dt), n_steps, int(check_every), tol,
-            obstacles, safety if safe else None,
+            obstacles, safety if safe else None, sensing, faults, seeds,
         )  # fmt: skip
         x, v, status, steps, mc, ns = (
             run.x, run.v, run.status, run.steps, run.min_clearance, run.net_speed,
@@ -266,6 +239,7 @@ def _check_initial(formation: Formation, q0: ArrayLike, k: int = 2) -> NDArray[n
 def _run_compiled(
     formation: Formation, law: Law, model: RobotModel, q0: NDArray[np.float64], dt: float,
     n_steps: int, check_every: int, tol: Tolerances, obstacles: Sequence[Any], safety: Any,
+    sensing: Sensing | None, faults: Faults | None, seeds: Sequence[Seed] | None,
 ) -> TrialRun:  # fmt: skip
     """The trials on the engine's compiled loop (:func:`formationlab.engine.trials.run_trials`)."""
     import numba
@@ -278,7 +252,8 @@ def _run_compiled(
     with _one_chunk_at_a_time():
         return run_trials(
             formation, law, model, q0, dt=dt, n_steps=n_steps, check_every=check_every,
-            tol=tol, chunk=chunk, obstacles=obstacles, safety=safety,
+            tol=tol, chunk=chunk, obstacles=obstacles, safety=safety, sensing=sensing,
+            faults=faults, seeds=seeds,
         )  # fmt: skip
 
 
@@ -297,29 +272,6 @@ def _one_chunk_at_a_time() -> Iterator[None]:
             yield
         finally:
             numba.set_parallel_chunksize(previous)
-
-
-def _run_sensed(
-    formation: Formation,
-    law: Law,
-    model: RobotModel,
-    q0: NDArray[np.float64],
-    dt: float,
-    n_steps: int,
-    check_every: int,
-    tol: Tolerances,
-    sensing: Sensing | None,
-    faults: Faults | None,
-    seeds: Sequence[Seed] | None,
-) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray, int]:
-    from .sensed_kernel import run_sensed
-
-    assert isinstance(model, SingleIntegrator)
-    System(formation=formation, law=law, model=model, sensing=sensing, faults=faults)  # checks
-    with _one_chunk_at_a_time():
-        return run_sensed(
-            formation, law, model, q0, dt, n_steps, check_every, tol, sensing, faults, seeds
-        )
 
 
 def _chunk_size(n_trials: int, threads: int) -> int:

@@ -450,32 +450,32 @@ def run_study(
 
 
 def _warm_kernels(tasks: list[ChunkTask], notify: Callable[[str], None] | None) -> float:
-    """Compile (or load from numba's cache) the kernel for each law, on one trial of two
-    steps, so that the study's throughput does not count it; returns the time taken."""
-    first = {t.group.law.name: t for t in tasks if t.backend == "numba" and not t.group.sensed}
-    sensed = [  # one sensed trial compiles the sensed kernel for every law
-        t for t in tasks if t.backend == "numba" and t.group.sensed and not t.obstacles
-        and type(t.model) is SingleIntegrator and (t.safety is None or not t.safety.enabled)
-    ][:1]  # fmt: skip
-    if not first and not sensed:
+    """Compile (or load from numba's cache) each version of the loop the tasks use (with or
+    without sensing, safety, per robot model), on one trial of two steps, so that the
+    study's throughput does not count it; returns the time taken."""
+    first: dict[tuple[Any, ...], ChunkTask] = {}  # one trial per version of the loop
+    for t in tasks:
+        if t.backend == "numba":
+            safe = bool(t.obstacles) or (t.safety is not None and t.safety.enabled)
+            first.setdefault((t.group.sensed, safe, type(t.model)), t)
+    if not first:
         return 0.0
     from ..engine.loop import run_chunks
     from .batch import run_batch
-    from .sampling import trial_initial_states
-    from .sensed_kernel import run_block
+    from .sampling import model_initial_states, trial_initial_states
 
-    cached = _kernel_cached(run_chunks) if first else True
-    if notify is not None and not (cached and (not sensed or _kernel_cached(run_block))):
+    if notify is not None and not _kernel_cached(run_chunks):
         notify("compiling kernels (once; later studies load them from the cache) ...")
     start = time.perf_counter()
-    for t in [*first.values(), *sensed]:
+    for t in first.values():
         f, g = t.group.formation, t.group
         q0 = trial_initial_states(
             f, t.initial, t.seed, np.arange(1), center=t.center, obstacles=t.obstacles
         )
+        x0 = model_initial_states(f, t.model, q0, t.seed, np.arange(1))
         run_batch(
-            f, g.law, q0, dt=t.dt, duration=2 * t.dt, tolerances=t.tolerances,
-            obstacles=t.obstacles, safety=t.safety,
+            f, g.law, x0, dt=t.dt, duration=2 * t.dt, tolerances=t.tolerances,
+            model=t.model, obstacles=t.obstacles, safety=t.safety,
             sensing=g.sensing if g.sensed else None, faults=g.faults if g.sensed else None,
             seeds=[(t.seed, 0)] if g.sensed else None,
         )  # fmt: skip

@@ -1,4 +1,4 @@
-"""The compiled sensed path (studies/sensed_kernel.py) against the stepping driver.
+"""The compiled loop's sensing stage (sensing/stage.py) against the stepping driver.
 
 ``run_batch(..., backend="numba", sensing=..., faults=...)`` must be the numpy driver's
 run trial by trial: the same statuses and steps, the same final states to 1e-12 (the
@@ -18,16 +18,22 @@ from _scenarios import clear_starts
 
 import formationlab as fl
 from formationlab.controllers import LAWS
-from formationlab.models import Unicycle
+from formationlab.dynamics import System
+from formationlab.io.scenario import load_scenario
+from formationlab.models import DoubleIntegrator, Unicycle
+from formationlab.safety import SafetyFilter
 from formationlab.scenario import parse_scenario
 from formationlab.sensing import BLOCK, Faults, Sensing, Stop
 from formationlab.studies.batch import batch_backend, run_batch
+from formationlab.studies.config import BoxInitial
+from formationlab.studies.sampling import model_initial_states, trial_initial_states
 
 TRIANGLE = fl.Formation.from_template([[0, 0], [1, 0], [0.5, 0.8]], diameters=0.2)
 SQUARE = parse_scenario(
     Path(__file__).parents[1].joinpath("examples/square-with-diagonals.toml").read_text()
 ).formation
 DT = 1e-2
+EXAMPLES = Path(__file__).parents[1] / "examples"
 
 #: each sensing key alone, and a robot that stops
 CASES = {
@@ -108,9 +114,76 @@ def test_a_trial_is_the_same_alone_and_in_a_batch() -> None:
     assert np.abs(other.q_final[0] - whole.q_final[0]).max() > 1e-4
 
 
-def test_sensed_batches_of_single_integrators_stay_compiled() -> None:
-    assert batch_backend("numba", sensed=True) == ("numba", "")
-    assert batch_backend("numba", sensed=True, model=fl.SingleIntegrator()) == ("numba", "")
-    used, note = batch_backend("numba", sensed=True, model=Unicycle())
-    assert used == "numpy" and "single integrators" in note
+def test_sensed_batches_of_every_model_stay_compiled() -> None:
+    for model in (None, fl.SingleIntegrator(), Unicycle()):
+        assert batch_backend("numba", sensed=True, model=model) == ("numba", "")
     assert batch_backend("numpy", sensed=True) == ("numpy", "")
+
+
+#: the robot models under sensing (unicycles measure in their headings' frames)
+MODELS = [
+    fl.SingleIntegrator(max_speed=0.6),
+    Unicycle(offset=0.05),
+    Unicycle(mapping="heading", max_turn_rate=2.0),
+    DoubleIntegrator(damping=2.0),
+]
+#: what a robot senses: its own frame and range, late, noisy, lossy, mismatched; or a stop
+MIXES = {
+    "frames-range-delay": (Sensing(frames="local", range=2.5, delay=0.02), None),
+    "noise-drop-mismatch-stop": (
+        Sensing(noise=0.01, drop=0.3, mismatch=0.03),
+        Faults(stop=[Stop(robot=1, at=0.4)]),
+    ),
+}
+
+
+def _model_starts(formation, model, batch, seed):
+    q0 = clear_starts(formation.n, batch, seed)
+    return model_initial_states(formation, model, q0, seed, np.arange(batch))
+
+
+def _close(a, b) -> None:
+    """Trial by trial the driver's run: unicycles' carried headings round within an ulp of
+    the library's (models/stage.py), so states agree to 1e-9, not bit for bit."""
+    np.testing.assert_array_equal(a.status, b.status)
+    np.testing.assert_array_equal(a.steps, b.steps)
+    np.testing.assert_allclose(a.q_final, b.q_final, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a.min_clearance, b.min_clearance, rtol=0, atol=1e-9)
+    assert list(a.outcome) == list(b.outcome)
+
+
+@pytest.mark.parametrize("mix", list(MIXES))
+@pytest.mark.parametrize("model", MODELS, ids=lambda m: repr(m)[:40])
+def test_every_model_senses_on_the_compiled_loop_as_in_the_driver(model, mix) -> None:
+    sensing, faults = MIXES[mix]
+    x0 = _model_starts(TRIANGLE, model, 4, 2)
+    seeds = [(3, t) for t in range(len(x0))]
+    kw = dict(dt=DT, duration=2.0, sensing=sensing, faults=faults, seeds=seeds, model=model)
+    law = fl.AngleRestrictedLaw(k_a=3.0, theta=0.5)
+    fast = run_batch(TRIANGLE, law, x0, backend="numba", **kw)
+    reference = run_batch(TRIANGLE, law, x0, backend="numpy", **kw)
+    _close(fast, reference)
+    plain = run_batch(TRIANGLE, law, x0, dt=DT, duration=2.0, model=model)
+    assert np.abs(fast.q_final - plain.q_final).max() > 1e-6  # the sensing was applied
+
+
+@pytest.mark.parametrize("kind", ["barrier-decentralized", "barrier"])
+def test_sensing_with_obstacles_and_a_filter_on_the_compiled_loop(kind) -> None:
+    sc = load_scenario(EXAMPLES / "triangle-obstacle.toml")
+    f = sc.formation
+    q0 = trial_initial_states(f, BoxInitial(half_width=3.0), 3, np.arange(30),
+                              obstacles=sc.obstacles)  # fmt: skip
+    clear = System(formation=f, law=fl.DistanceLaw(), obstacles=sc.obstacles)
+    q0 = q0[clear.obstacle_clearances(q0).min(axis=(-2, -1)) > 0.1][:6]
+    sensing = Sensing(frames="local", noise=0.01, delay=0.02)
+    kw = dict(
+        dt=1e-3,
+        duration=1.5,
+        sensing=sensing,
+        seeds=[(1, t) for t in range(len(q0))],
+        obstacles=sc.obstacles,
+        safety=SafetyFilter(filter=kind, distance=0.3),
+    )
+    fast = run_batch(f, fl.DistanceLaw(), q0, backend="numba", **kw)
+    reference = run_batch(f, fl.DistanceLaw(), q0, backend="numpy", **kw)
+    _close(fast, reference)

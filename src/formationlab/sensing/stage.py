@@ -1,0 +1,204 @@
+"""Robots that sense each other, as a stage of the compiled loop (:mod:`formationlab.engine.loop`).
+
+The compiled twin of :meth:`formationlab.sensing.Channel.observe` and
+:meth:`~formationlab.sensing.Channel.local`: with a sensing model other than the paper's
+(or with faults) the law's stage of the loop is :func:`sensed_field` instead of
+:func:`formationlab.controllers.stage.law_field`. Per step ``k`` of each live trial:
+
+1. every robot ``i`` measures ``z_ij = R(-a_i) (p_j - p_i) + noise`` of every robot (zero
+   on the diagonal; ``p`` the law's points, ``a_i`` its frame: a fixed random angle, or
+   its heading for robot models that have one), and whether ``j`` is within ``range``
+   (centre to centre);
+2. the measurement it uses is the one taken at ``k - m`` (``m = delay / dt``; nothing
+   has arrived for ``k < m``), from a ring of ``m + 1`` slots; a delivered measurement
+   lost with probability ``drop`` leaves the last one received in place, one out of
+   range clears it;
+3. its command is :func:`formationlab.controllers.stage.local_field` of its own
+   measurements (its own desired distances under ``mismatch``), rotated back ``R(a_i)``.
+
+Then :func:`halt` zeroes the rates of the robots stopped by a fault, and the stop rule
+counts only while every robot sees all its neighbours, now and at the previous check
+(:func:`informed`).
+
+Randomness stays the channel's: each trial's frames and mismatch come from its seed,
+and its noise and losses are drawn by :meth:`Channel.block` in numpy, per block of
+:data:`~formationlab.sensing.BLOCK` steps, between calls of the loop (which stops at the
+end of each block). A trial's run therefore depends on its seed only. Per-trial arrays
+are indexed by the trial's number, not by its slot in a chunk, so the loop's compaction
+of finished trials does not move them.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from ..controllers.stage import local_field
+from .channel import BLOCK
+
+__all__ = ["SensingState", "SensingTerms", "halt", "informed", "sensed_field"]
+
+
+class SensingTerms(NamedTuple):
+    """A run's sensing and faults as plain arrays and numbers (``B`` trials, ``n`` robots)."""
+
+    measured: bool  #: robots command from measurements (False: faults alone, the law's field)
+    local: bool  #: robots measure in their own frames
+    headed: bool  #: those frames are the robots' headings (else the fixed angles below)
+    cos_in: NDArray[np.float64]  #: cos(-a_i), (B, n) (else (1, 1))
+    sin_in: NDArray[np.float64]  #: sin(-a_i)
+    cos_out: NDArray[np.float64]  #: cos(a_i)
+    sin_out: NDArray[np.float64]  #: sin(a_i)
+    own_distance: NDArray[np.float64]  #: (B, E, 2): d_ij as robots edge_i, edge_j hold it
+    noise: float
+    drop: float
+    ranged: bool
+    range2: float  #: range**2
+    stop_at: NDArray[np.float64]  #: (n,): when each robot stops (inf: never)
+    noise_block: NDArray[np.float64]  #: (B, BLOCK, n, n, 2) standard normals of this block
+    drop_block: NDArray[np.float64]  #: (B, BLOCK, n, n) uniforms of this block
+
+
+class SensingState(NamedTuple):
+    """What each trial's robots carry from one step to the next (``M = m + 1`` ring slots)."""
+
+    ring_z: NDArray[np.float64]  #: (B, M, n, n, 2) measurements taken at the last M steps
+    ring_in: NDArray[np.bool_]  #: (B, M, n, n) whether in range when taken
+    held: NDArray[np.float64]  #: (B, n, n, 2) the measurement each robot uses
+    has: NDArray[np.bool_]  #: (B, n, n) whether it has one
+    seen_c: NDArray[np.bool_]  #: (B,) whether every robot saw its neighbours at the last check
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def sensed_field(p, x, hc, hs, u, ul, nact, ids, k, terms, sn, ss):
+    """``u`` ``(n, 2, C)``: every robot's command from its own measurements (steps 1-3).
+
+    ``p`` the law's points and ``x`` the states ``(n, k, C)`` of a chunk's first ``nact``
+    trials, whose numbers are ``ids``; ``hc``, ``hs`` the carried ``cos`` and ``sin`` of the
+    headings (:func:`formationlab.models.stage.turn`); ``ul`` ``(n, 2)`` room for one
+    trial's commands in the robots' frames.
+    """
+    n = p.shape[0]
+    row = k % BLOCK
+    slots = ss.ring_z.shape[1]
+    m = slots - 1
+    slot = k % slots
+    back = (k - m) % slots
+    for b in range(nact):
+        g = ids[b]
+        for i in range(n):  # 1. measure, into the ring's slot of step k
+            c = 1.0
+            s = 0.0
+            if sn.local:
+                c = hc[i, b] if sn.headed else sn.cos_in[g, i]
+                s = -hs[i, b] if sn.headed else sn.sin_in[g, i]
+            for j in range(n):
+                dx = p[j, 0, b] - p[i, 0, b]
+                dy = p[j, 1, b] - p[i, 1, b]
+                zx, zy = dx, dy
+                if sn.local:
+                    zx = c * dx - s * dy
+                    zy = s * dx + c * dy
+                if sn.noise > 0:
+                    wx = 0.0 if i == j else sn.noise_block[g, row, i, j, 0]
+                    wy = 0.0 if i == j else sn.noise_block[g, row, i, j, 1]
+                    zx = zx + sn.noise * wx
+                    zy = zy + sn.noise * wy
+                ss.ring_z[g, slot, i, j, 0] = zx
+                ss.ring_z[g, slot, i, j, 1] = zy
+                inside = True
+                if sn.ranged:
+                    cx = x[j, 0, b] - x[i, 0, b]
+                    cy = x[j, 1, b] - x[i, 1, b]
+                    inside = cx * cx + cy * cy <= sn.range2
+                ss.ring_in[g, slot, i, j] = inside
+        for i in range(n):  # 2. deliver what was taken at k - m
+            for j in range(n):
+                if k < m:  # nothing has arrived yet
+                    ss.has[g, i, j] = False
+                elif not ss.ring_in[g, back, i, j]:
+                    ss.has[g, i, j] = False  # out of range when taken: nothing held
+                elif sn.drop > 0 and i != j and sn.drop_block[g, row, i, j] < sn.drop:
+                    pass  # lost: the last one received (if any) is kept
+                else:
+                    ss.held[g, i, j, 0] = ss.ring_z[g, back, i, j, 0]
+                    ss.held[g, i, j, 1] = ss.ring_z[g, back, i, j, 1]
+                    ss.has[g, i, j] = True
+        local_field(ss.held[g], ss.has[g], sn.own_distance[g], terms, ul)  # 3.
+        for i in range(n):
+            ux = ul[i, 0]
+            uy = ul[i, 1]
+            if sn.local:  # back to the common frame, R(a_i) u_i
+                c = hc[i, b] if sn.headed else sn.cos_out[g, i]
+                s = hs[i, b] if sn.headed else sn.sin_out[g, i]
+                ux, uy = c * ux - s * uy, s * ux + c * uy
+            u[i, 0, b] = ux
+            u[i, 1, b] = uy
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def halt(f, t, sn, nact):
+    """Zero the rates ``f`` ``(n, k, C)`` of the robots stopped by ``t`` (``System._faulty``)."""
+    for i in range(f.shape[0]):
+        if t >= sn.stop_at[i]:
+            for d in range(f.shape[1]):
+                for b in range(nact):
+                    f[i, d, b] = 0.0
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def informed(g, terms, ss):
+    """Whether every robot of trial ``g`` sees all its neighbours (``Channel.informed``)."""
+    for e in range(terms.edge_i.shape[0]):
+        i = terms.edge_i[e]
+        j = terms.edge_j[e]
+        if not (ss.has[g, i, j] and ss.has[g, j, i]):
+            return False
+    return True
+
+
+def sensing_arrays(
+    channel, ids: NDArray[np.intp], stop_at: NDArray[np.float64], headed: bool
+) -> tuple[SensingTerms, SensingState]:
+    """The terms and a fresh state of the trials ``ids`` of ``channel`` (a group of a run).
+
+    The noise and loss blocks are left to fill (:meth:`Channel.block`) at the start of
+    each block of steps.
+    """
+    s = channel.sensing
+    n = channel.n
+    terms = channel.terms
+    G = ids.size
+    E = terms.edge_i.size
+    a = channel.fixed_angles[ids] if channel.fixed_angles is not None else np.zeros((1, 1))
+    own = (
+        channel.own_distance[ids]
+        if channel.own_distance is not None
+        else np.broadcast_to(terms.edge_distance[None, :, None], (G, E, 2)).copy()
+    )
+    noisy, lossy = s.noise > 0, s.drop > 0
+    sn = SensingTerms(
+        measured=not s.ideal, local=s.frames == "local", headed=headed, cos_in=np.cos(-a),
+        sin_in=np.sin(-a), cos_out=np.cos(a), sin_out=np.sin(a), own_distance=own, noise=float(s.noise),
+        drop=float(s.drop), ranged=not math.isinf(s.range), range2=float(s.range**2),
+        stop_at=stop_at,
+        noise_block=np.zeros((G, BLOCK, n, n, 2) if noisy else (1, 1, 1, 1, 2)),
+        drop_block=np.zeros((G, BLOCK, n, n) if lossy else (1, 1, 1, 1)),
+    )  # fmt: skip
+    M = channel.m + 1
+    ss = SensingState(
+        ring_z=np.zeros((G, M, n, n, 2)), ring_in=np.zeros((G, M, n, n), dtype=bool),
+        held=np.zeros((G, n, n, 2)), has=np.zeros((G, n, n), dtype=bool),
+        seen_c=np.ones(G, dtype=bool),
+    )  # fmt: skip
+    return sn, ss
+
+
+def trial_bytes(channel) -> int:
+    """Bytes of one trial's sensing arrays (noise and loss blocks, ring, held values)."""
+    s, n = channel.sensing, channel.n
+    return 8 * n * n * (BLOCK * (2 * (s.noise > 0) + (s.drop > 0)) + 3 * (channel.m + 1) + 3)
