@@ -184,8 +184,8 @@ def sensing_arrays(
     sn = SensingTerms(
         measured=not s.ideal, local=s.frames == "local", headed=headed, cos_in=np.cos(-a),
         sin_in=np.sin(-a), cos_out=np.cos(a), sin_out=np.sin(a), own_distance=own,
-        noise=float(s.noise), drop=float(s.drop), ranged=not math.isinf(s.range), range2=float(s.range**2),
-        stop_at=stop_at,
+        noise=float(s.noise), drop=float(s.drop), ranged=not math.isinf(s.range),
+        range2=float(s.range**2), stop_at=stop_at,
         noise_block=np.zeros((G, BLOCK, n, n, 2) if noisy else (1, 1, 1, 1, 2)),
         drop_block=np.zeros((G, BLOCK, n, n) if lossy else (1, 1, 1, 1)),
     )  # fmt: skip
