@@ -4,8 +4,8 @@
 loop with its sensing stage (``formationlab.sensing.stage``); ``backend="numpy"`` is the
 stepping driver with its measurement channel, the reference the loop is tested against.
 Printed, for the paper's triangle (simulation 2's alpha table, angle-restricted law
-k_c = 2, k_a = 3, theta = 0.5, diameters 0.2) and the unit square with both diagonals, dt = 5 ms as in the
-robustness studies, early stopping off (every trial runs every step):
+k_c = 2, k_a = 3, theta = 0.5, diameters 0.2) and the unit square with both diagonals,
+dt = 5 ms as in the robustness studies, early stopping off (every trial runs every step):
 
 * trial-steps per second of the sensed numba path, of the numpy driver path (same
   sensing, the same batch of trials, a fifth of the steps) and of the plain compiled
