@@ -33,6 +33,7 @@ def invoke(*args: object) -> object:
     return CLI.invoke(app, [str(a) for a in args])
 
 
+@pytest.mark.slow
 def test_run_writes_what_the_robots_sensed_and_the_stop(tmp_path: Path) -> None:
     path = tmp_path / "s.toml"
     path.write_text(triangle("sensed", "0.6", AGENTS))

@@ -269,6 +269,7 @@ def test_clarabel_solves_the_gap_starts_preconditioned():
     assert raw >= 4  # what the preconditioning is for (seven of eight measured)
 
 
+@pytest.mark.slow
 def test_gap_batch_under_barrier_equals_the_driver(monkeypatch):
     """Eight trials of the gap for 3 s: every step in the kernel, the driver's outcomes.
 

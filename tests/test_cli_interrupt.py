@@ -59,17 +59,24 @@ def start(args: list[str], *, group: bool) -> subprocess.Popen[str]:
     )
 
 
-def interrupt_after(proc: subprocess.Popen[str], marker: str, delay: float, *, group: bool) -> str:
-    """Wait for ``marker`` on stderr, then ``delay`` s, then SIGINT; returns all of stderr."""
+def _read_until(proc: subprocess.Popen[str], marker: str) -> list[str]:
+    """The lines of stderr up to the first that holds ``marker``."""
     assert proc.stderr is not None
     seen = []
     for line in proc.stderr:
         seen.append(line)
         if marker in line:
-            break
-    else:
-        raise AssertionError(f"{marker!r} never printed: {''.join(seen)}")
-    time.sleep(delay)
+            return seen
+    raise AssertionError(f"{marker!r} never printed: {''.join(seen)}")
+
+
+def interrupt_after(proc: subprocess.Popen[str], marker: str, *, group: bool) -> str:
+    """Wait for ``marker`` on stderr, then SIGINT; returns all of stderr.
+
+    The marker is what the program prints once it is where the test wants it stopped, so
+    the test holds however fast or loaded the machine is (no waiting by the clock).
+    """
+    seen = _read_until(proc, marker)
     if group:
         os.killpg(proc.pid, signal.SIGINT)
     else:
@@ -87,7 +94,8 @@ def test_ctrl_c_during_a_long_run_writes_the_trajectory_so_far(tmp_path: Path, g
     scenario.write_text(long)
     out = tmp_path / "out"
     proc = start(["run", str(scenario), "--out", str(out)], group=group)
-    err = interrupt_after(proc, "1,000,000 steps", 2.0, group=group)
+    # printed at the driver's first progress call, after its first step
+    err = interrupt_after(proc, "running (at t = ", group=group)
     assert proc.returncode == 130, err
     assert "Traceback" not in err
     assert "error: interrupted by the user at t = " in err
@@ -117,7 +125,7 @@ def test_ctrl_c_while_animating_keeps_the_simulation_results(tmp_path: Path, gro
     proc = start(
         ["run", str(scenario), "--out", str(out), "--animate", "--frames", "400"], group=group
     )
-    err = interrupt_after(proc, "animating", 1.5, group=group)
+    err = interrupt_after(proc, "writing animation.", group=group)  # its first file started
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "CalledProcessError" not in err
     assert "error: interrupted while animating; the run's results are in " in err
@@ -135,10 +143,8 @@ def test_ctrl_c_during_mp4_export_of_animate(tmp_path: Path) -> None:
     out = tmp_path / "out"
     assert invoke("run", scenario, "--out", out, "-q").exit_code == 0
     proc = start(["animate", str(out), "--format", "mp4", "--frames", "600"], group=True)
-    assert proc.stderr is not None
-    time.sleep(4.0)  # loading, then ffmpeg encoding 600 frames (tens of seconds)
-    os.killpg(proc.pid, signal.SIGINT)
-    _, err = proc.communicate(timeout=120)
+    # the line that the encoding of 600 frames (tens of seconds) has started
+    err = interrupt_after(proc, "writing animation.mp4", group=True)
     assert proc.returncode == 130, err
     assert "Traceback" not in err
     assert err.strip().splitlines()[-1] == "error: interrupted"
@@ -187,6 +193,9 @@ def test_the_estimates_bound_what_a_run_takes(tmp_path: Path) -> None:
     scenario.write_text(SCENARIO.replace("DURATION", "5.0"))
     sc = parse_scenario(scenario.read_text())
     plan = _plan.plan_run(sc, 1)
+    # the first run in a process loads the compiled kernels (Python objects of their own):
+    # a short run first, so that what is traced is the run's memory in any test order
+    fl.simulate(sc.formation, sc.law, sc.q0, duration=0.01, integrator=sc.integrator)
     tracemalloc.start()
     res = fl.simulate(sc.formation, sc.law, sc.q0, duration=5.0, integrator=sc.integrator)
     res.summary()
@@ -264,17 +273,6 @@ def test_the_progress_callback_comes_at_least_twice_a_second() -> None:
     assert len(wall) >= 5 and np.max(gaps) < 1.0, gaps
 
 
-def _read_until(proc: subprocess.Popen[str], marker: str) -> list[str]:
-    """The lines of stderr up to the first that holds ``marker``."""
-    assert proc.stderr is not None
-    seen = []
-    for line in proc.stderr:
-        seen.append(line)
-        if marker in line:
-            return seen
-    raise AssertionError(f"{marker!r} never printed: {''.join(seen)}")
-
-
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_signal_during_a_long_compiled_run_keeps_the_run_so_far(tmp_path: Path, sig) -> None:
     # explicit Euler's compiled loop (2e8 steps, minutes): a Ctrl-C inside numba code ended
@@ -343,3 +341,26 @@ def test_a_signal_while_the_command_starts_prints_no_traceback(tmp_path: Path, s
     assert "Traceback" not in err
     assert [ln for ln in err.splitlines() if ln.startswith("error:")] == ["error: interrupted"]
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("fmt", ["gif", "mp4", "html"])
+def test_ctrl_c_at_the_first_frame_of_an_animation_is_an_interrupt(tmp_path: Path, fmt) -> None:
+    # a Ctrl-C while the first frame is drawn: Pillow's clean-up then fails on no frames
+    # (IndexError) and matplotlib warned that the animation was never rendered
+    from formationlab.io.animation import save_animation
+    from formationlab.plotting.animation import animate_run
+
+    q = np.array([[[0.0, 0.0], [1.0, 0.0], [0.5, 0.8]]] * 3)
+    anim = animate_run(
+        np.arange(3.0), q, edges=np.array([[0, 1], [1, 2]]), diameters=np.full(3, 0.1), title="t"
+    )
+
+    def ctrl_c(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    anim._fig.savefig = ctrl_c  # every writer draws a frame through the figure's savefig
+    with pytest.raises(KeyboardInterrupt):
+        save_animation(anim, tmp_path / "animation", formats=[fmt])
+    assert anim._draw_was_started  # no "deleted without rendering anything" warning
+    del anim
+    assert list(tmp_path.iterdir()) == []  # no half-written file, no temporary one

@@ -146,6 +146,7 @@ def test_a_wide_terminal_gets_one_line_per_group(
     assert max(len(ln) for ln in lines) <= 200
 
 
+@pytest.mark.slow
 def test_the_first_study_announces_the_compilation_and_times_it_apart(tmp_path: Path) -> None:
     path = tmp_path / "s.toml"
     path.write_text(SCENARIO.replace("NAME", "cold").replace("trials = 30", "trials = 8"))

@@ -1,20 +1,27 @@
 """Every example and seeded study ends where it ended before the engine became one loop.
 
 The references were recorded by ``tests/engine_reference.py`` (its docstring says how and
-at which commit). Since then each formula is written once (``controllers/kinds``) and every
-path composes it the same way, where before the compiled loops and the robots' own-frame
-commands had their own arithmetic. So:
+at which commit), on one machine. A recorded last bit is not a property of the code: numpy,
+OpenBLAS and Clarabel choose their SIMD kernels by processor (numpy's ``sin`` and ``cos``
+and the barrier QP end one unit in the last place apart on an AVX2 processor and an
+AVX-512 one). So every comparison with the recording has a tolerance that another processor
+meets and a real change does not; bit-for-bit comparisons are kept for two paths computed
+in the same run (tests/test_compiled.py, tests/test_engine_sensing.py and the like).
 
-* the numpy driver under a law's own ``control`` gives the same bits;
-* every other path (the compiled loops, the robots' own-frame commands of ``[sensing]``)
-  rounds differently, and a rounding difference stays a rounding difference under a
-  smooth closed loop: held to ``1e-12`` of the positions' scale;
+* under a smooth law the trajectory depends continuously on the arithmetic, and a rounding
+  difference stays a rounding difference: positions within ``1e-12`` of their scale
+  (measured with numpy's AVX-512 kernels switched off: at most 3e-16 of it);
 * under a switching law (``Law.smooth`` false: the angle-restricted law) a trajectory that
   reaches a switching surface chatters across it under explicit Euler with an amplitude of
   order ``k_a dt`` (docs/integrators.md), and a change in the last bit re-draws the chatter:
-  there the run must end the same way (status, time, outcome, steps), and where it ends
-  is not compared. Measured at the change: converged trials within 2e-7, trials that
-  chatter on a Filippov equilibrium for the whole run (``not-converged``) within 3e-2.
+  there the run must end the same way (status, time, outcome, steps) and its positions
+  within ``1e-7`` of their scale (measured with numpy's AVX-512 kernels switched off: at most
+  6.5e-10 of it, on the ten-robot example). Study trials under a switching law that chatter
+  on a Filippov equilibrium for the whole run (``not-converged``) end up to 3e-2 apart
+  between the paths, so there only the outcome is compared.
+
+``.ci/run`` runs this file a second time with numpy's dispatch narrowed to AVX2
+(``NPY_DISABLE_CPU_FEATURES``) and OpenBLAS's Haswell kernels (``OPENBLAS_CORETYPE``).
 """
 
 from __future__ import annotations
@@ -30,6 +37,9 @@ from formationlab.controllers import LAWS
 RECORDED = json.loads(ref.DATA.read_text())
 RUNS = sorted(RECORDED["runs"])
 
+#: positions' tolerance, relative to their scale, under a smooth and a switching law
+SMOOTH, SWITCHING = 1e-12, 1e-7
+
 
 def _smooth(law: str) -> bool:
     return LAWS[law].smooth
@@ -44,11 +54,10 @@ def test_example_ends_where_it_ended(name: str) -> None:
     assert got["t"] == want["t"]
     x, x_ref = np.asarray(got["x"]), np.asarray(want["x"])
     assert x.shape == x_ref.shape
-    if backend == "numpy" and not got["sensed"]:
-        np.testing.assert_array_equal(x, x_ref)  # bit for bit
-    elif _smooth(got["law"]):
-        scale = max(1.0, float(np.abs(x_ref).max()))
-        np.testing.assert_allclose(x, x_ref, rtol=0, atol=1e-12 * scale)
+    scale = max(1.0, float(np.abs(x_ref).max()))
+    # rounding differences of another processor's kernels (see the module's docstring)
+    tolerance = SMOOTH if _smooth(got["law"]) else SWITCHING
+    np.testing.assert_allclose(x, x_ref, rtol=0, atol=tolerance * scale)
 
 
 @pytest.mark.parametrize("study", [s[0] for s in ref.STUDIES])
@@ -62,7 +71,7 @@ def test_seeded_study_has_the_same_trials(study: str) -> None:
     final, final_ref = np.asarray(got["final"]), np.asarray(want["final"])
     smooth = np.array([_smooth(law) for law in want["law"]])
     scale = max(1.0, float(np.abs(final_ref).max()))
-    np.testing.assert_allclose(final[smooth], final_ref[smooth], rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(final[smooth], final_ref[smooth], rtol=0, atol=SMOOTH * scale)
 
 
 def test_the_reference_covers_every_example() -> None:

@@ -167,6 +167,7 @@ def test_every_model_senses_on_the_compiled_loop_as_in_the_driver(model, mix) ->
     assert np.abs(fast.q_final - plain.q_final).max() > 1e-6  # the sensing was applied
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["barrier-decentralized", "barrier"])
 def test_sensing_with_obstacles_and_a_filter_on_the_compiled_loop(kind) -> None:
     sc = load_scenario(EXAMPLES / "triangle-obstacle.toml")

@@ -117,6 +117,7 @@ def test_the_examples_of_the_models_are_there():
     assert len(NEW_EXAMPLES) == 8
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", NEW_EXAMPLES)
 def test_the_model_examples_run_to_what_they_say(name, tmp_path):
     from typer.testing import CliRunner

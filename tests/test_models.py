@@ -207,6 +207,7 @@ def test_from_rest_the_double_integrator_reaches_the_single_integrators_shape():
     assert di.summary()["orientation"] == si.summary()["orientation"]
 
 
+@pytest.mark.slow
 def test_the_angle_restricted_energy_falls_between_switches_and_jumps_with_V():
     law = fl.AngleRestrictedLaw(k_c=2.0, k_a=3.0, theta=0.5)
     f = fl.Formation.from_alpha_table(

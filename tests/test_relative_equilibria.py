@@ -41,6 +41,7 @@ def hexagon_drift():
     return sc, res.q_final[k], res.motion[k]
 
 
+@pytest.mark.slow
 def test_finder_recovers_the_drifting_hexagon_of_a_simulation(hexagon_drift):
     sc, q_end, _ = hexagon_drift
     f, law = sc.formation, sc.law

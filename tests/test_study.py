@@ -294,7 +294,7 @@ def test_study_on_a_dask_local_cluster_of_processes(reference_run):
 def test_study_on_a_dask_scheduler_given_by_its_address(reference_run):
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0"
     ) as cluster:
         res = study(
             TRIANGLE, LAW, small(chunk_size=5), seed=5, dt=DT, duration=DURATION,

@@ -99,7 +99,7 @@ def write_animation(
     )  # fmt: skip
     return save_animation(
         anim, folder / ANIMATION_STEM, formats=formats, written=done,
-        progress=_progress_bar if progress and err_console.is_terminal else None,
+        progress=_frames_progress() if progress else None,
     )  # fmt: skip
 
 
@@ -122,6 +122,18 @@ def _progress_bar(label: str) -> Iterator[Callable[[int, int], None]]:
     with Progress(*columns, console=err_console, transient=True) as bar:
         task = bar.add_task(label, total=None)
         yield lambda done, total: bar.update(task, completed=done, total=total)
+
+
+def _frames_progress() -> Callable[[str], Any]:
+    """A bar per file on a terminal, a line per file in a log."""
+    return _progress_bar if err_console.is_terminal else _progress_line
+
+
+@contextmanager
+def _progress_line(label: str) -> Iterator[Callable[[int, int], None]]:
+    """In a log (not a terminal): one line as the frames of a file start being drawn."""
+    err_console.print(f"writing {label} ...", markup=False, highlight=False)
+    yield lambda done, total: None
 
 
 @command(

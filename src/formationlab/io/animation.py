@@ -89,10 +89,31 @@ def save_animation(
         if fmt not in FORMATS:
             raise ValueError(f"unknown animation format {fmt!r}; choose from {', '.join(FORMATS)}")
         target = stem.with_suffix(FORMATS[fmt])
-        with nullcontext(None) if progress is None else progress(target.name) as update:
-            _save(anim, fmt, target, fps, update)
+        try:
+            with nullcontext(None) if progress is None else progress(target.name) as update:
+                _save(anim, fmt, target, fps, update)
+        except BaseException as exc:
+            # stopped (Ctrl-C) before its first frame: matplotlib would warn, as the
+            # animation is deleted, that it was never rendered; its own flag says it was
+            anim._draw_was_started = True
+            interrupt = _interrupt_behind(exc)
+            if interrupt is not None and interrupt is not exc:
+                # a writer's clean-up that failed on the way out of the interrupt (Pillow's
+                # with no frame yet: an IndexError): the interrupt is what happened
+                raise interrupt from None
+            raise
         written.append(target)
     return written
+
+
+def _interrupt_behind(exc: BaseException) -> BaseException | None:
+    """``exc`` or the exception it was raised while handling, if that is a Ctrl-C."""
+    seen: BaseException | None = exc
+    while seen is not None:
+        if isinstance(seen, KeyboardInterrupt):
+            return seen
+        seen = seen.__context__
+    return None
 
 
 def _save(anim: Any, fmt: str, target: Path, fps: int, update: Progress | None) -> None:

@@ -13,7 +13,7 @@ import errno
 import json
 import os
 import re
-import tempfile
+import secrets
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -75,26 +75,37 @@ def atomic_path(target: str | os.PathLike[str], suffix: str = "") -> Iterator[Pa
     becomes an :class:`~formationlab.errors.OutputError` naming the folder.
     """
     target = Path(target)
+    tmp_path: Path | None = None
     try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(
-            prefix=f".{target.name}.", suffix=suffix or target.suffix, dir=target.parent
-        )
-        os.close(fd)
-    except OSError as exc:
-        raise output_error(exc, target.parent) from exc
-    tmp_path = Path(tmp)
-    try:
-        yield tmp_path
-        with open(tmp_path, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp makes it private; files are not
-        os.replace(tmp_path, target)
-    except OSError as exc:
-        raise output_error(exc, target.parent, f"write {target.name} in") from exc
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            # the name is chosen before the file exists, so that a signal at any moment
+            # (even inside the call that creates it) leaves a name to remove
+            while True:
+                tmp_path = _temporary_name(target, suffix or target.suffix)
+                try:
+                    os.close(os.open(tmp_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+                    break
+                except FileExistsError:  # another writer's: not ours to remove
+                    tmp_path = None
+        except OSError as exc:
+            raise output_error(exc, target.parent) from exc
+        try:
+            yield tmp_path
+            with open(tmp_path, "rb+") as fh:
+                os.fsync(fh.fileno())
+            os.chmod(tmp_path, 0o666 & ~_umask())  # created private; files are not
+            os.replace(tmp_path, target)
+        except OSError as exc:
+            raise output_error(exc, target.parent, f"write {target.name} in") from exc
     finally:
-        if tmp_path.exists():
+        if tmp_path is not None and tmp_path.exists():
             tmp_path.unlink()
+
+
+def _temporary_name(target: Path, suffix: str) -> Path:
+    """A hidden name beside ``target`` (``.NAME.RANDOM.SUFFIX``, as mkstemp would choose)."""
+    return target.with_name(f".{target.name}.{secrets.token_hex(4)}{suffix}")
 
 
 def _umask() -> int:

@@ -63,7 +63,9 @@ def run_on_dask(
             n_workers=workers or os.cpu_count() or 1,
             threads_per_worker=1,
             processes=True,
-            dashboard_address=None,
+            # a free port: with None the scheduler's HTTP server still takes 8787, and a
+            # second cluster at the same time (another study, another test) fails to start
+            dashboard_address=":0",
             env={"NUMBA_NUM_THREADS": "1"},
         )
         client = Client(cluster)
