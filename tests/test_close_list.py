@@ -1,6 +1,6 @@
 """The compiled run's lists: close pairs on a cell grid, rows by robot, threads.
 
-The close list (formationlab.verlet) against a brute-force search over every pair on
+The close list (formationlab.engine.close_list) against a brute-force search over every pair on
 random and adversarial layouts; the compiled run on one thread against several, bit for
 bit; a list rebuilt at every step against one rebuilt rarely, bit for bit (each robot's
 sum has one order whatever the list holds beyond what acts); the run's memory layout.
@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 
 import formationlab as fl
-from formationlab.integrators.compiled import run_compiled, saved_rows
-from formationlab.integrators.layout import run_layout
+from formationlab.engine.close_list import close_list
+from formationlab.engine.layout import run_layout
+from formationlab.engine.saving import saved_rows
+from formationlab.integrators.compiled import run_compiled
 from formationlab.neighbours import non_edges
 from formationlab.templates import lattice
-from formationlab.verlet import close_list
 
 
 def brute(q, radius, reach, exclude):
@@ -153,7 +154,7 @@ def test_the_run_keeps_exactly_the_saved_states():
         out = run_compiled(lw.compiled_terms(f), q0, dt=1e-3, n_steps=steps, save_every=every)
         expected = sorted({*range(0, steps + 1, every), steps})
         np.testing.assert_array_equal(out.k, expected)
-        assert saved_rows(steps, every) == len(expected) == out.x.base.shape[0]
+        assert saved_rows(steps, every) == len(expected) == out.x.base.shape[-3]
 
 
 def test_restricted_terms_take_twelve_bytes_each():
@@ -276,7 +277,7 @@ def test_the_cell_grid_stays_in_bounds_for_huge_or_non_finite_positions(kind):
     # The cell of a coordinate around 1e154 (the first Euler step of a scenario placed
     # there) was an integer conversion beyond int64: a negative cell count, writes out of
     # the grid's bounds and an abort (munmap_chunk) when the run's memory was freed.
-    from formationlab.verlet import _bin
+    from formationlab.engine.close_list import _bin
 
     q = np.array(EXTREME[kind])
     n = len(q)

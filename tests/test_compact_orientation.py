@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import formationlab as fl
+from formationlab.engine.layout import run_layout
 from formationlab.integrators.compiled import run_compiled
-from formationlab.integrators.layout import run_layout
 from formationlab.orientation import alpha_from_shape, switching_surfaces
 from formationlab.templates import lattice
 

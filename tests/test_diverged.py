@@ -20,15 +20,19 @@ TRIANGLE = fl.Formation.from_template([[0.0, 0.0], [1.0, 0.0], [0.5, 0.866]], di
 
 
 @pytest.mark.parametrize("backend", ["numba", "numpy"])
-def test_a_first_step_to_1e298_is_non_finite_and_diverged(backend: str) -> None:
+def test_a_first_step_to_1e298_is_non_finite(backend: str) -> None:
+    # beyond about 1e154 squared distances overflow (the law's forces come out 0 or NaN):
+    # the step is not finite, and the trial keeps its start (classified from there, as
+    # test_batch's first step that overflows)
     q0 = np.random.default_rng(0).uniform(-3, 3, (4, 3, 2))
     with np.errstate(all="ignore"):
         res = run_batch(
             TRIANGLE, fl.DistanceLaw(k_c=1e300), q0, dt=1e-2, duration=1.0, backend=backend
         )
-    assert np.all(np.abs(res.q_final).max(axis=(1, 2)) > 1e297)
+    np.testing.assert_array_equal(res.q_final, q0)
+    assert res.steps.tolist() == [0] * 4
     assert [Status.from_code(s) for s in res.status] == [Status.NON_FINITE] * 4
-    assert res.outcome.tolist() == ["diverged"] * 4
+    assert res.outcome.tolist() == ["not-converged"] * 4
 
 
 def final(q: np.ndarray, status: Status) -> BatchResult:

@@ -19,6 +19,7 @@ from _scenarios import triangle
 
 import formationlab as fl
 from formationlab.errors import FormationError, UserInputError
+from formationlab.simulation_batch import simulate_batch
 
 TEMPLATE = [[0.0, 0.0], [1.0, 0.0], [0.5, np.sqrt(3) / 2]]
 START = np.array([[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]])
@@ -26,10 +27,10 @@ LAW = fl.AngleRestrictedLaw(k_c=2.0, k_a=3.0, theta=0.5)
 CLI = [sys.executable, "-c", "from formationlab.cli import main; main()"]
 
 
-def run(formation, law, q0):
+def run(formation, law, q0, backend="numba"):
     with np.errstate(all="ignore"):
         return fl.simulate(
-            formation, law, q0, duration=0.05, integrator=fl.Euler(dt=1e-3), backend="numba"
+            formation, law, q0, duration=0.05, integrator=fl.Euler(dt=1e-3), backend=backend
         )
 
 
@@ -76,9 +77,14 @@ def test_positions_around_1e154_are_refused_and_huge_gains_end_non_finite() -> N
     f = fl.Formation.from_template(TEMPLATE, diameters=0.2)
     with pytest.raises(UserInputError, match="initial positions has coordinates up to 3e"):
         run(f, LAW, START * 1e154)
-    strong = run(f, fl.AngleRestrictedLaw(k_c=1e300, k_a=1e300, theta=0.5), START)
-    assert strong.status == "non-finite"
-    assert np.all(np.isfinite(strong.q))  # the last finite state is kept
+    strong = fl.AngleRestrictedLaw(k_c=1e300, k_a=1e300, theta=0.5)
+    runs = [run(f, strong, START, backend) for backend in ("numba", "numpy")]
+    for r in runs:  # the first step reaches 1.6e297: squared distances overflow there
+        assert r.status == "non-finite" and r.t[-1] == 0.0, (r.stats["backend"], r.message)
+        assert np.all(np.isfinite(r.q))  # the last finite state is kept
+        assert "whatever dt" in r.message  # a smaller step would not help
+    batch = simulate_batch(f, strong, START[None], duration=0.05)[0]  # a batch of one
+    assert batch.status == "non-finite" and batch.t[-1] == 0.0
 
 
 def test_large_positions_and_zero_diameters_run() -> None:

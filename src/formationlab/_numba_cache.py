@@ -2,8 +2,8 @@
 
 numba caches each compiled function beside the file that defines it and checks only that
 file for changes: a cached caller keeps the old code of a callee defined in another module
-(the time loop of ``integrators/compiled.py`` over ``integrators/field.py``, the batch kernel
-over ``models/trig.py``) after an edit or an upgrade that changed only the callee,
+(the engine's loop of ``engine/loop.py`` over ``engine/lists.py``, or over
+``models/trig.py``) after an edit or an upgrade that changed only the callee,
 and would give silently wrong results.
 
 :func:`check` runs when this module is imported, before any other of the package's: it

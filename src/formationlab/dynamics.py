@@ -11,7 +11,9 @@ depend on the time through the marching reference only: ``rhs(x, t)`` takes
 
 :meth:`System.step_verdict` is the contact rule of the package, used by the
 stepping driver, the settling of equilibria and (in compiled form) the batch
-kernel: a step from ``x0`` to ``x1`` is rejected when it is not finite, when it
+kernel: a step from ``x0`` to ``x1`` is rejected when it is not finite (a coordinate
+NaN or infinite, or a position coordinate beyond about 1.3e154, whose square overflows:
+squared distances, and so the law's forces, are meaningless there), when it
 ends with two robots in contact (``r_ij <= a_ij``: :attr:`Status.COLLISION`)
 or when the straight path of the step passes through contact while both ends
 are clear (:attr:`Status.STEP_TOO_LARGE`: robots jumped through each other).
@@ -398,7 +400,10 @@ class System:
         ``Status.code`` (module docstring), and the least clearance at ``x1``; both ``(...)``.
         """
         with np.errstate(invalid="ignore", over="ignore"):
-            finite = np.all(np.isfinite(x1), axis=(-2, -1))
+            q1 = self.positions(x1)
+            finite = np.all(np.isfinite(x1), axis=(-2, -1)) & np.all(
+                np.isfinite(q1 * q1), axis=(-2, -1)
+            )  # (squares that overflow: module docstring)
             safe = np.where(finite[..., None, None], x1, x0)
             end = self.clearance(safe)
             swept = self.swept_clearance(x0, safe)
@@ -426,9 +431,13 @@ class System:
         self, x0: NDArray[np.float64], x1: NDArray[np.float64], status: Status, t: float, dt: float
     ) -> str:
         if status is Status.NON_FINITE:
-            head = f"the step to t = {t:g} s produced NaN or infinite positions"
+            head = (
+                f"the step to t = {t:g} s produced NaN or infinite positions, or positions "
+                "beyond about 1e154"
+            )
             size = float(np.max(np.abs(self.positions(x0))))
-            if size <= COORDINATE_LIMIT and np.all(np.isfinite(self.rhs(x0, t - dt))):
+            move = dt * float(np.max(np.abs(self.rhs(x0, t - dt))))  # NaN if not finite
+            if size <= COORDINATE_LIMIT and move / 10 <= COORDINATE_LIMIT:
                 return f"{head}; reduce dt (now {dt:g} s), e.g. to {dt / 10:g} s"
             # the velocity at the last accepted state is not finite, or its squared
             # distances overflow: no dt helps

@@ -535,9 +535,9 @@ def run_system(
     terms = compiled_terms(system, integrator) if backend != "numpy" else None
     if backend == "numba" and terms is None:
         raise ParameterError(
-            'backend="numba" runs explicit Euler on single integrators without marching, '
-            f"with a law that has kernel data; got {integrator.name!r}, {robot.name!r} and "
-            f'{law.name!r}: use backend="auto"'
+            'backend="numba" runs explicit Euler without marching, obstacles, a safety '
+            "filter, sensing or faults, with a law that has kernel data; got "
+            f"{integrator.name!r}, {robot.name!r} and {law.name!r}: use backend='auto'"
         )
     if terms is not None:
         raw = run_euler_compiled(

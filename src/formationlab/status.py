@@ -29,7 +29,8 @@ class Status(StrEnum):
     #: a step would carry two robots through each other (contact inside the step, both
     #: ends clear): the step is too large for the field, not a contact of the flow
     STEP_TOO_LARGE = "step-too-large"
-    #: a step produced NaN or infinite numbers
+    #: a step produced NaN or infinite numbers, or positions beyond about 1e154 (whose
+    #: squares, and so squared distances and the law's forces, overflow)
     NON_FINITE = "non-finite"
     #: an event-driven integrator met more switching events than it allows
     EVENT_LIMIT = "event-limit"
@@ -72,7 +73,7 @@ _EXPLANATIONS = {
     Status.CONVERGED: "the robots stopped moving",
     Status.COLLISION: "a step would end with two robots in contact",
     Status.STEP_TOO_LARGE: "a step would carry two robots through each other",
-    Status.NON_FINITE: "a step produced NaN or infinite positions",
+    Status.NON_FINITE: "a step produced NaN, infinite or overflowing positions",
     Status.EVENT_LIMIT: "too many switching events",
     Status.INTERRUPTED: "interrupted by the user",
     Status.DIVERGED: "the robots spread beyond a million times the formation's size",

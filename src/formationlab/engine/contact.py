@@ -1,6 +1,7 @@
 """The contact rule of the compiled loop: the twin of ``System.step_verdict``.
 
-A step is rejected when it is not finite, when it ends with a pair in contact
+A step is rejected when it is not finite (a coordinate NaN or infinite, or a position
+whose square overflows: :func:`.euler.euler`), when it ends with a pair in contact
 (``Status.COLLISION``) or when the straight path of the step passes through contact
 (``Status.STEP_TOO_LARGE``). The swept test is computed only for pairs whose end
 clearance is below twice the largest displacement of the step (farther pairs cannot have

@@ -46,13 +46,17 @@ from numpy.typing import NDArray
 
 from ..controllers.stage import law_field
 from ..models.stage import headings, points, rates, speed, turn
-from ..models.terms import HEADING, NEAR_IDENTITY
+from ..models.terms import HEADING, NEAR_IDENTITY, SINGLE
 from ..safety.stage import CENTRALIZED, WAIT, filter_command, filter_scratch, obstacle_contact
 from ..sensing.stage import halt, informed, sensed_field
 from .contact import COLLISION, CONVERGED, END, NON_FINITE, SWEPT_MARGIN, TOO_LARGE, contact
+from .euler import euler
+from .lists import list_contact, list_field, list_step
+from .saving import save
 
 __all__ = [
     "DONE",
+    "GROW",
     "PAUSED",
     "RUNNING",
     "ChunkState",
@@ -62,8 +66,9 @@ __all__ = [
     "step_chunk",
 ]
 
-#: A chunk's status in ``ChunkState.meta[:, 4]``: running, done, or paused for QP solves.
-RUNNING, DONE, PAUSED = -1, 0, -2
+#: A chunk's status in ``ChunkState.meta[:, 4]``: running, done, paused for QP solves, or
+#: paused for a close list that needs more room (the lists layout, :mod:`.lists`)
+RUNNING, DONE, PAUSED, GROW = -1, 0, -2, -3
 
 
 class RunNumbers(NamedTuple):
@@ -71,7 +76,7 @@ class RunNumbers(NamedTuple):
 
     dt: float
     n_steps: int
-    check_every: int
+    check_every: int  #: steps between the stop rule's checks (0: no stop rule)
     speed: float  #: the stop rule's speed
     window_step: int  #: start of the drift window (negative: never)
     k_end: int  #: the chunks stop (and stay running) at this step: the end of a block
@@ -116,28 +121,38 @@ class TrialOutputs(NamedTuple):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run):
+def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run, lists, sv):
     """Steps of chunk ``c`` until every trial has ended, one needs a QP, or ``run.k_end``.
 
     ``obs`` and ``flt`` are the run's obstacle and filter terms, or both None when it has
     neither obstacles nor a filter; ``sn`` and ``ss`` its sensing terms and state
     (:mod:`formationlab.sensing.stage`), or None when its robots see the true positions:
     numba then compiles this function without that stage (a ``None`` argument prunes the
-    branches that test it), so a run compiles only what it uses.
+    branches that test it), so a run compiles only what it uses. The law's field comes from
+    one of two layouts: its pairs (``law``, its
+    :class:`~formationlab.controllers.terms.KernelTerms`; ``lists`` None), or its lists
+    (``lists``: its :class:`~formationlab.engine.layout.RunLayout`, the
+    :class:`~.lists.ListStage` and the passes' chunks on numba's threads, or None for one
+    thread; ``law`` None, and the chunk one trial of any model without sensing, obstacles or
+    a filter). ``sv``: the saving stage
+    (:class:`~.saving.Saving`), or None when only how each trial ended is kept (``out.x``,
+    ``out.v``; with saving, the saved rows hold the last state).
     """
     n = st.x.shape[1]
     kk = st.x.shape[2]
     C = st.x.shape[3]
     hand = model.kind == NEAR_IDENTITY  # the law acts on points other than the centres
     turns = hand or model.kind == HEADING  # the state has a heading
+    # f = u: the single integrator's rates are its commands (no copy)
+    same = model.kind == SINGLE and model.max_speed == np.inf and sn is None
     ids = st.ids[c]
     mc = st.mc[c]
     ns = st.ns[c]
     qc = st.qc[c]
     hc, hs, hcl, hsl = st.hc[c], st.hs[c], st.hcl[c], st.hsl[c]
     x, xn = (st.x[c], st.xn[c]) if st.meta[c, 3] == 0 else (st.xn[c], st.x[c])
-    f = np.empty((n, kk, C))
     u = np.empty((n, 2, C))
+    f = u if same else np.empty((n, kk, C))
     p = np.empty((n, 2, C) if hand else (1, 2, 1))  # hand points
     scratch = np.empty(C)  # the law's surface decisions, the unicycles' speeds
     gap = np.empty(C)  # clearance of the next state
@@ -151,6 +166,8 @@ def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run):
         S = filter_scratch(n, obs, flt)
     if sn is not None:
         ul = np.empty((n, 2))  # one trial's commands in its robots' frames
+    if lists is not None:  # (taken apart once: each taking apart counts its arrays' uses)
+        lay, ls, par = lists
     dt = run.dt
     nact = st.meta[c, 0]
     step = st.meta[c, 1]
@@ -160,19 +177,24 @@ def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run):
         st.meta[c, 5] = 1
     while nact > 0:
         if step >= run.k_end:  # the end of a block of steps: the chunk goes on later
-            st.meta[c, 0] = nact
-            st.meta[c, 1] = step
-            st.meta[c, 2] = kc
+            _pause(st, c, nact, step, kc, RUNNING)
             return
         k = step
         src = x
         if hand:
             points(x, hc, hs, p, nact, model)
             src = p
-        if sn is not None and sn.measured:  # each robot's command from its own measurements
-            sensed_field(src, x, hc, hs, u, ul, nact, ids, k, law, sn, ss)
-        else:
-            law_field(src, u, scratch, nact, law)
+        if lists is not None:  # the law over its lists (one trial)
+            room, start = list_field(x, src, u, ls, lay, par, hand)
+            if not room:  # the close list needs more room: the host grows it
+                _pause(st, c, nact, step, kc, GROW)
+                return
+            mc[0] = min(mc[0], start)  # (the least clearance of the start)
+        if law is not None:  # the law over its pairs
+            if sn is not None and sn.measured:  # each robot's command from its measurements
+                sensed_field(src, x, hc, hs, u, ul, nact, ids, k, law, sn, ss)
+            else:
+                law_field(src, u, scratch, nact, law)
         if obs is not None:  # obstacles' repulsion and the filter, trial by trial
             pause = False
             for b in range(nact):
@@ -188,12 +210,10 @@ def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run):
                     pause = True
                 st.given[c, b] = False
             if pause:  # the step is computed again, with the QPs' answers, when resumed
-                st.meta[c, 0] = nact
-                st.meta[c, 1] = step
-                st.meta[c, 2] = kc
-                st.meta[c, 4] = PAUSED
+                _pause(st, c, nact, step, kc, PAUSED)
                 return
-        rates(x, hc, hs, u, f, scratch, nact, model)
+        if not same:
+            rates(x, hc, hs, u, f, scratch, nact, model)
         if sn is not None:  # robots stopped by a fault
             halt(f, k * dt, sn, nact)
         if k == run.window_step:  # start of the drift window (the driver's q_window)
@@ -203,7 +223,8 @@ def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run):
                     out.qw[ids[b], i, 1] = x[i, 1, b]
         for b in range(nact):
             code[b] = -1
-        if k % run.check_every == 0 or k == run.n_steps:  # the stop rule
+        checked = run.check_every > 0 and (k % run.check_every == 0 or k == run.n_steps)
+        if checked:  # the stop rule
             for b in range(nact):
                 gap[b] = 0.0  # (here: the largest squared move since the previous check)
             if kc >= 0:
@@ -228,11 +249,6 @@ def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run):
                     ss.seen_c[ids[b]] = seen
                 if still:
                     code[b] = CONVERGED
-            for i in range(n):
-                for d in range(2):
-                    for b in range(nact):
-                        qc[i, d, b] = x[i, d, b]
-            kc = k
         if k == run.n_steps:
             for b in range(nact):
                 if code[b] < 0:
@@ -241,24 +257,19 @@ def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run):
             for b in range(nact):
                 fin[b] = 0.0
                 disp[b] = 0.0
-            for i in range(n):
-                for b in range(nact):
-                    nx = x[i, 0, b] + dt * f[i, 0, b]
-                    ny = x[i, 1, b] + dt * f[i, 1, b]
-                    ex = nx - x[i, 0, b]
-                    ey = ny - x[i, 1, b]
-                    disp[b] = max(disp[b], ex * ex + ey * ey)
-                    xn[i, 0, b] = nx
-                    xn[i, 1, b] = ny
-                    fin[b] += (nx + ny) * 0.0  # NaN unless x and y are finite
-                for d in range(2, kk):
-                    for b in range(nact):
-                        z = x[i, d, b] + dt * f[i, d, b]
-                        xn[i, d, b] = z
-                        fin[b] += z * 0.0
+            if lists is not None:
+                list_step(x, f, xn, dt, ls, disp, fin, par)
+            else:
+                euler(x, f, xn, dt, 0, n, nact, disp, fin)
             for b in range(nact):
                 disp[b] = math.sqrt(disp[b])
-            contact(xn, x, disp, gap, swept, near, nact, law)
+            if law is not None:
+                contact(xn, x, disp, gap, swept, near, nact, law)
+            if lists is not None and fin[0] == 0.0:  # (not finite: judged before the list)
+                room, gap[0], swept[0] = list_contact(xn, x, disp[0], ls, lay, par)
+                if not room:  # the step is taken again, with room for the list
+                    _pause(st, c, nact, step, kc, GROW)
+                    return
             for b in range(nact):
                 if code[b] >= 0:
                     continue
@@ -280,14 +291,23 @@ def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run):
                     mc[b] = min(mc[b], gap[b])
             if turns:  # the headings of the next states
                 turn(xn, x, hc, hs, hcl, hsl, wide, nact)
+        if checked:  # (after the verdict: a chunk paused before here takes the step again)
+            for i in range(n):
+                for d in range(2):
+                    for b in range(nact):
+                        qc[i, d, b] = x[i, d, b]
+            kc = k
         # trials that end here end at x (a rejected step is not taken), with the rates f
         for b in range(nact):
+            if sv is not None and (code[b] >= 0 or k % sv.every == 0):
+                save(sv, x, f, b, ids[b], k)
             if code[b] >= 0:
                 g = ids[b]
-                for i in range(n):
-                    for d in range(kk):
-                        out.x[g, i, d] = x[i, d, b]
-                        out.v[g, i, d] = f[i, d, b]
+                if sv is None:  # (with saving, the last saved row is this state)
+                    for i in range(n):
+                        for d in range(kk):
+                            out.x[g, i, d] = x[i, d, b]
+                            out.v[g, i, d] = f[i, d, b]
                 out.steps[g] = k
                 out.status[g] = code[b]
                 out.mc[g] = mc[b]
@@ -319,9 +339,18 @@ def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run):
     st.meta[c, 4] = DONE
 
 
+@njit(cache=True, error_model="numpy", nogil=True, inline="always")
+def _pause(st, c, nact, step, kc, status):
+    """Chunk ``c`` stops at ``step`` (not taken yet) with ``status``; it goes on from there."""
+    st.meta[c, 0] = nact
+    st.meta[c, 1] = step
+    st.meta[c, 2] = kc
+    st.meta[c, 4] = status
+
+
 @njit(cache=True, error_model="numpy", nogil=True, parallel=True)
 def run_chunks(law, model, obs, flt, sn, ss, st, out, run):
     """Every running chunk until it ends, pauses or reaches ``run.k_end``, in parallel."""
     for c in prange(st.x.shape[0]):
         if st.meta[c, 4] == RUNNING and st.meta[c, 1] < run.k_end:
-            step_chunk(c, law, model, obs, flt, sn, ss, st, out, run)
+            step_chunk(c, law, model, obs, flt, sn, ss, st, out, run, None, None)

@@ -31,7 +31,7 @@ from ..sensing.stage import sensing_arrays, trial_bytes
 from ..spec import Formation
 from .loop import DONE, RUNNING, ChunkState, RunNumbers, TrialOutputs, run_chunks
 
-__all__ = ["GROUP_BYTES", "TrialRun", "run_trials"]
+__all__ = ["GROUP_BYTES", "TrialRun", "chunk_state", "run_trials", "trial_outputs"]
 
 #: bytes of per-trial sensing arrays (noise and loss blocks, delay ring) a group may hold
 GROUP_BYTES = 64 * 2**20
@@ -94,11 +94,8 @@ def run_trials(
     B, n, k = q0.shape
     window_step = n_steps - tol.drift_steps(dt)  # negative: never reached
     # (mc starts as the least clearance of the starts, as the driver starts it)
-    out = TrialOutputs(
-        x=np.empty((B, n, k)), v=np.full((B, n, k), np.nan), steps=np.zeros(B, np.int64),
-        status=np.zeros(B, np.int8), mc=system.clearance(q0), ns=np.full(B, np.nan),
-        qw=np.full((B, n, 2), np.nan),
-    )  # fmt: skip
+    out = trial_outputs(B, n, k)
+    out.mc[:] = system.clearance(q0)
     numbers = RunNumbers(float(dt), int(n_steps), int(check_every), float(tol.speed),
                          int(window_step), int(n_steps) + 1)  # fmt: skip
     sensed = (sensing is not None and not sensing.ideal) or (faults is not None and faults.any)
@@ -141,25 +138,13 @@ def _run_group(
     C = int(max(1, min(chunk, B)))
     G = -(-B // C)
     x = np.zeros((G, n, k, C))
-    ids = np.zeros((G, C), np.int64)
-    mc = np.full((G, C), np.inf)
-    meta = np.zeros((G, 6), np.int64)
     for g in range(G):
         sel = np.arange(g * C, min(B, (g + 1) * C))
         x[g, :, :, : sel.size] = np.moveaxis(q0[sel], 0, -1)
-        ids[g, : sel.size] = sel
-        mc[g, : sel.size] = out.mc[sel]
-        meta[g] = (sel.size, 0, -1, 0, RUNNING, 0)
-    turns = robots.kind in (HEADING, NEAR_IDENTITY)
-    hshape = (G, n, C) if turns else (G, 1, 1)
     flt = stage[1]
-    qp = (G, C, n, 2) if flt is not None and flt.kind == CENTRALIZED else (1, 1, n, 2)
-    st = ChunkState(
-        x=x, xn=np.zeros_like(x), qc=np.array(x[:, :, :2], order="C"),
-        hc=np.zeros(hshape), hs=np.zeros(hshape), hcl=np.zeros(hshape), hsl=np.zeros(hshape),
-        ids=ids, mc=mc, ns=np.full((G, C), np.nan), meta=meta, need=np.zeros((G, C), bool),
-        need_p=np.zeros(qp), need_u=np.zeros(qp), given=np.zeros((G, C), bool),
-        given_u=np.zeros(qp),
+    st = chunk_state(
+        x, B=B, mc=out.mc, turns=robots.kind in (HEADING, NEAR_IDENTITY),
+        centralized=flt is not None and flt.kind == CENTRALIZED,
     )  # fmt: skip
     sn = ss = None
     blocks = False
@@ -178,7 +163,7 @@ def _run_group(
                 sn.drop_block[live] = channel.block("drop", trials[live])
         run = numbers._replace(k_end=min(k_end, numbers.k_end))
         while True:
-            run_chunks(terms, robots, *stage, sn, ss, st, out, run)
+            run_chunks(terms, robots, *stage, sn, ss, st, out, run)  # (the pairs layout)
             wait_g, wait_b = np.nonzero(st.need)  # chunks paused, and their slots needing a QP
             if wait_g.size == 0:
                 break
@@ -191,3 +176,45 @@ def _run_group(
         if np.all(st.meta[:, 4] == DONE):
             return
         k_end += BLOCK
+
+
+def chunk_state(
+    x: NDArray[np.float64], *, B: int | None = None, mc: NDArray[np.float64] | None = None,
+    turns: bool = False, centralized: bool = False, stop_rule: bool = True,
+) -> ChunkState:  # fmt: skip
+    """The chunks' state at the start, from the starts ``x`` ``(G, n, k, C)``: the ``B``
+    trials (default all) in order, chunk by chunk; ``mc`` ``(B,)`` their clearances (default
+    +inf); ``turns``: room for headings; ``centralized``: room for QP pauses;
+    ``stop_rule``: room for the positions at the stop rule's checks."""
+    G, n, _, C = x.shape
+    B = G * C if B is None else B
+    ids = np.zeros((G, C), np.int64)
+    least = np.full((G, C), np.inf)
+    meta = np.zeros((G, 6), np.int64)
+    for g in range(G):
+        sel = np.arange(g * C, min(B, (g + 1) * C))
+        ids[g, : sel.size] = sel
+        if mc is not None:
+            least[g, : sel.size] = mc[sel]
+        meta[g] = (sel.size, 0, -1, 0, RUNNING, 0)
+    hshape = (G, n, C) if turns else (G, 1, 1)
+    qp = (G, C, n, 2) if centralized else (1, 1, n, 2)
+    qc = np.array(x[:, :, :2], order="C") if stop_rule else np.zeros((G, 1, 2, C))
+    return ChunkState(
+        x=x, xn=np.zeros_like(x), qc=qc,
+        hc=np.zeros(hshape), hs=np.zeros(hshape), hcl=np.zeros(hshape), hsl=np.zeros(hshape),
+        ids=ids, mc=least, ns=np.full((G, C), np.nan), meta=meta, need=np.zeros((G, C), bool),
+        need_p=np.zeros(qp), need_u=np.zeros(qp), given=np.zeros((G, C), bool),
+        given_u=np.zeros(qp),
+    )  # fmt: skip
+
+
+def trial_outputs(B: int, n: int, k: int, *, kept: bool = True) -> TrialOutputs:
+    """Room for how ``B`` trials of ``n`` robots (``k`` numbers each) end; without ``kept``
+    none for their final states and drift windows (a run that saves its path has them)."""
+    m = n if kept else 1
+    return TrialOutputs(
+        x=np.empty((B, m, k)), v=np.full((B, m, k), np.nan), steps=np.zeros(B, np.int64),
+        status=np.zeros(B, np.int8), mc=np.full(B, np.inf), ns=np.full(B, np.nan),
+        qw=np.full((B, m, 2), np.nan),
+    )  # fmt: skip

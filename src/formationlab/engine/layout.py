@@ -1,7 +1,8 @@
 """A law's kernel data laid out for the compiled single run: lists by robot, in int32.
 
 :class:`RunLayout` is :class:`~formationlab.controllers.terms.KernelTerms` (the law
-as arrays) rearranged for a time loop over many robots (``integrators/compiled.py``):
+as arrays) rearranged for the lists layout of the engine's loop over many robots
+(:mod:`.lists`):
 
 * **edges** ``(i, j)``, ``i < j``, with ``d_ij`` and ``a_ij``: each edge's force is
   computed once per step and each robot gathers it from its row of the edge list

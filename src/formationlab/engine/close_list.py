@@ -25,7 +25,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["CloseList", "build_close_list", "close_list", "list_holds", "pair_rows"]
+__all__ = ["CloseList", "build_close_list", "close_list", "grown", "list_holds", "pair_rows"]
 
 #: relative slack of the list's guarantee against rounding of the clearances
 _SLACK = 1e-9
@@ -98,13 +98,14 @@ def build_close_list(q, radius, reach, ex_ptr, ex_nbr, pairs, cell_of, items, st
     ----------
     q : (n, 2) positions (finite); radius : (n,) half diameters; reach : clearance bound.
     ex_ptr, ex_nbr : CSR rows of the excluded partners of each robot (int32).
-    pairs : (cap, 2) int32 buffer; a larger one is allocated if it is too small.
+    pairs : (cap, 2) int32 buffer, filled with the first ``min(count, cap)`` pairs.
     cell_of, items, stamp, cand : (n,) int32 scratch; start : (cells + 1,) int32 scratch.
 
     Returns
     -------
-    pairs : (cap', 2) int32, the first ``count`` rows sorted lexicographically.
-    count : int
+    count : int, the number of pairs, sorted lexicographically in ``pairs``. Nothing is
+    allocated here: when ``count > cap`` the list is incomplete, and the caller builds it
+    again into a buffer of at least ``count`` rows (:func:`grown`).
     """
     n = q.shape[0]
     top = 0.0
@@ -139,29 +140,33 @@ def build_close_list(q, radius, reach, ex_ptr, ex_nbr, pairs, cell_of, items, st
                 cand[b + 1] = cand[b]
                 b -= 1
             cand[b + 1] = v
-        if count + m > pairs.shape[0]:
-            grown = np.empty((max(2 * pairs.shape[0], count + m, 16), 2), np.int32)
-            grown[:count] = pairs[:count]
-            pairs = grown
         for a in range(m):
-            pairs[count, 0] = i
-            pairs[count, 1] = cand[a]
+            if count < pairs.shape[0]:
+                pairs[count, 0] = i
+                pairs[count, 1] = cand[a]
             count += 1
-    return pairs, count
+    return count
+
+
+def grown(a: NDArray, rows: int) -> NDArray:
+    """``a`` with room for at least ``rows`` rows (doubling), its rows kept."""
+    if a.shape[0] >= rows:
+        return a
+    b = np.zeros((max(rows, 2 * a.shape[0], 16), *a.shape[1:]), a.dtype)
+    b[: a.shape[0]] = a
+    return b
 
 
 @njit(cache=True)
 def pair_rows(pairs, count, n, ptr, rows):
     """Each robot's row of the list: signed pair numbers sorted by partner.
 
-    ``ptr`` ``(n + 1,)`` int32 is filled; ``rows`` is a buffer of at least
-    ``2 count`` int32 (a larger one is allocated if needed) and returned. Pair
+    ``ptr`` ``(n + 1,)`` int32 and ``rows``, a buffer of at least ``2 count`` int32, are
+    filled. Pair
     ``p = (i, j)`` is ``p`` in row ``i`` and ``~p`` in row ``j``. The pairs being
     sorted, robot ``i`` meets its partners ``j < i`` (as the second robot) in
     increasing order before its partners ``j > i`` (as the first).
     """
-    if rows.shape[0] < 2 * count:
-        rows = np.empty(max(2 * count, 2 * rows.shape[0]), np.int32)
     ptr[:] = 0
     for p in range(count):
         ptr[pairs[p, 0] + 1] += 1
@@ -177,7 +182,6 @@ def pair_rows(pairs, count, n, ptr, rows):
         i = pairs[p, 0]
         rows[fill[i]] = p
         fill[i] += 1
-    return rows
 
 
 @njit(cache=True)
@@ -211,11 +215,16 @@ class CloseList:
     ) -> None:
         """Fill the list from positions ``q`` ``(n, 2)`` (:func:`build_close_list`)."""
         n = q.shape[0]
-        self.pairs, self.count = build_close_list(
-            q, radius, reach, ex_ptr, ex_nbr, self.pairs, self.cell_of, self.items,
-            self.start, self.stamp, self.cand,
-        )  # fmt: skip
-        self.rows = pair_rows(self.pairs, self.count, n, self.ptr, self.rows)
+        while True:
+            self.count = build_close_list(
+                q, radius, reach, ex_ptr, ex_nbr, self.pairs, self.cell_of, self.items,
+                self.start, self.stamp, self.cand,
+            )  # fmt: skip
+            if self.count <= self.pairs.shape[0]:
+                break
+            self.pairs = grown(self.pairs, self.count)
+        self.rows = grown(self.rows, 2 * self.count)
+        pair_rows(self.pairs, self.count, n, self.ptr, self.rows)
 
 
 def close_list(

@@ -1,0 +1,46 @@
+"""The explicit Euler step of the compiled loop, with what the step rule needs of it.
+
+``x_{k+1} = x_k + dt f(x_k)`` for robots ``lo:hi`` of a chunk of trials (states
+``(n, k, C)``, the trials innermost), with each trial's largest squared displacement of a
+position and whether the new state is finite (its coordinates, and the squares of its
+positions: beyond about 1.3e154 squared distances overflow, and the law's forces with
+them, so such a state is not finite either, as ``System.step_verdict`` judges it): the
+numbers the contact rule
+(:mod:`.contact`) and the close list (:mod:`.lists`) judge the step by. The loop over all
+robots of a chunk (:func:`formationlab.engine.loop.step_chunk`) and the robots' chunks of a
+run of many robots on numba's threads (:func:`formationlab.engine.lists.advance_parallel`)
+both take the step here.
+"""
+
+from __future__ import annotations
+
+from numba import njit
+
+__all__ = ["euler"]
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
+def euler(x, f, xn, dt, lo, hi, nact, disp, fin):
+    """``xn = x + dt f`` for robots ``lo:hi`` of the first ``nact`` trials.
+
+    ``disp[b]`` becomes the larger of itself and trial ``b``'s largest squared move of a
+    position (``|xn_i - x_i|^2``, as computed from ``xn``); ``fin[b]`` stays 0 while every
+    new coordinate and the square of every new position coordinate is finite (NaN
+    otherwise).
+    """
+    kk = x.shape[1]
+    for i in range(lo, hi):
+        for b in range(nact):
+            nx = x[i, 0, b] + dt * f[i, 0, b]  # explicit Euler
+            ny = x[i, 1, b] + dt * f[i, 1, b]
+            ex = nx - x[i, 0, b]
+            ey = ny - x[i, 1, b]
+            disp[b] = max(disp[b], ex * ex + ey * ey)
+            xn[i, 0, b] = nx
+            xn[i, 1, b] = ny
+            fin[b] += (nx * nx + ny * ny) * 0.0  # NaN unless finite, squares too
+        for d in range(2, kk):
+            for b in range(nact):
+                z = x[i, d, b] + dt * f[i, d, b]
+                xn[i, d, b] = z
+                fin[b] += z * 0.0
