@@ -8,11 +8,14 @@ layout; ``backend="numpy"``: the stepping driver). The cost of a step is the dif
 a long and a short run divided by the difference of their steps (what a run costs beyond
 its set-up and post-processing), best of ``--repeat``. It prints, per model, ms per step
 compiled and in the numpy driver, their ratio, and the compiled cost against single
-integrators' measured in the same run; then PASS/FAIL against the engine issue's targets:
-unicycles (heading mapping) at least 10x faster compiled than in the numpy driver, and
-within 2x of single integrators compiled.
+integrators' measured in the same run, and the same for single integrators with one
+obstacle (a circle of radius 2 beside the lattice) and the decentralized filter (safety
+distance 0.3, sensing radius 1.5: a swarm sets one, else every pair is a constraint); then
+PASS/FAIL against the engine issue's targets: unicycles (heading mapping), and single
+integrators with the obstacle and the filter, at least 10x faster compiled than in the
+numpy driver, and unicycles within 2x of single integrators compiled.
 
-``python benchmarks/bench_swarm_models.py [--n 10000] [--repeat 2]``
+``python benchmarks/bench_swarm_models.py [--n 10000] [--repeat 3]``
 """
 
 from __future__ import annotations
@@ -25,6 +28,8 @@ import numpy as np
 
 import formationlab as fl
 from formationlab.models import DoubleIntegrator, SingleIntegrator, Unicycle
+from formationlab.safety import SafetyFilter
+from formationlab.safety.obstacles import Circle
 
 DT = 1e-3
 MODELS = {
@@ -41,8 +46,9 @@ def load() -> str:
     return f"load average {one:.2f} (5 min {five:.2f}) on {os.cpu_count()} cores"
 
 
-def per_step(f, q0, model, backend: str, steps: tuple[int, int], repeat: int) -> float:
-    """Seconds per step beyond a run's fixed costs (long run minus short run)."""
+def per_step(f, q0, model, backend: str, steps: tuple[int, int], repeat: int, **env) -> float:
+    """Seconds per step beyond a run's fixed costs (long run minus short run); ``env``:
+    obstacles and safety."""
     best = np.inf
     for _ in range(repeat):
         took = []
@@ -50,7 +56,7 @@ def per_step(f, q0, model, backend: str, steps: tuple[int, int], repeat: int) ->
             began = time.perf_counter()
             res = fl.simulate(
                 f, "distance", q0, model=model, duration=k * DT, save_every=k,
-                backend=backend,
+                backend=backend, **env,
             )  # fmt: skip
             took.append(time.perf_counter() - began)
             assert res.status == "success", res.message
@@ -61,7 +67,7 @@ def per_step(f, q0, model, backend: str, steps: tuple[int, int], repeat: int) ->
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--n", type=int, default=10_000)
-    parser.add_argument("--repeat", type=int, default=2)
+    parser.add_argument("--repeat", type=int, default=3)
     args = parser.parse_args()
     n = args.n
     tpl = fl.lattice("triangular", n, 1.0)
@@ -81,11 +87,27 @@ def main() -> None:
         compiled[name], ratio[name] = c, p / c
         rel = c / compiled["single integrator"]
         print(f"{name:>26} {c * 1e3:8.3f}ms {p * 1e3:8.2f}ms {p / c:14.1f}x {rel:7.2f}x")
+    env = {
+        "obstacles": (Circle(center=[float(tpl[:, 0].mean()), float(tpl[:, 1].min()) - 3.0],
+                             radius=2.0),),
+        "safety": SafetyFilter(filter="barrier-decentralized", distance=0.3, sensing_radius=1.5),
+    }  # fmt: skip
+    fl.simulate(f, "distance", q0, duration=2 * DT, backend="numba", **env)
+    c = per_step(f, q0, SingleIntegrator(), "numba", (50, 550), args.repeat, **env)
+    p = per_step(f, q0, SingleIntegrator(), "numpy", (10, 60), args.repeat, **env)
+    rel = c / compiled["single integrator"]
+    name = "single, obstacle + filter"
+    print(f"{name:>26} {c * 1e3:8.3f}ms {p * 1e3:8.2f}ms {p / c:14.1f}x {rel:7.2f}x")
+    safe = p / c
     uni = "unicycle (heading)"
     rel = compiled[uni] / compiled["single integrator"]
     print(f"end: {load()}")
     print(f"{'PASS' if ratio[uni] >= 10 else 'FAIL'}: unicycles compiled vs numpy driver "
           f"{ratio[uni]:.1f}x (target >= 10x)")  # fmt: skip
+    print(
+        f"{'PASS' if safe >= 10 else 'FAIL'}: single integrators with an obstacle and the "
+        f"decentralized filter, compiled vs numpy driver {safe:.1f}x (target >= 10x)"
+    )
     print(f"{'PASS' if rel <= 2 else 'FAIL'}: unicycles vs single integrators compiled "
           f"{rel:.2f}x (target <= 2x)")  # fmt: skip
 

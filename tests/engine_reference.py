@@ -88,6 +88,8 @@ def run_example(path: Path, backend: str) -> dict[str, object]:
         "status": str(res.status),
         "law": sc.law.name,
         "sensed": sc.sensing is not None or sc.asynchronous is not None,
+        # the centralized filter's QP: Clarabel in the numpy driver, exact in the compiled loop
+        "qp": sc.safety is not None and sc.safety.filter == "barrier",
     }
 
 

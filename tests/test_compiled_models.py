@@ -16,8 +16,8 @@ from test_compiled import TRIANGLE, ladder
 
 import formationlab as fl
 from formationlab.integrators import compiled
+from formationlab.marching import Marching
 from formationlab.models import DoubleIntegrator, SingleIntegrator, Unicycle
-from formationlab.safety.obstacles import Circle
 from formationlab.spec import DENSE_LIMIT
 
 MODELS = {
@@ -104,8 +104,8 @@ def test_what_the_compiled_run_refuses_it_names():
         assert fl.simulate(TRIANGLE, law, q0, model=model, **kw).stats["backend"] == "numba"
     with pytest.raises(fl.errors.ParameterError, match=r"explicit Euler .* got 'rk4'"):
         fl.simulate(TRIANGLE, law, q0, integrator=fl.RK4(dt=1e-3), **kw)
-    wall = Circle(center=(0.0, -3.0), radius=0.5)
-    with pytest.raises(fl.errors.ParameterError, match="obstacles"):  # (not yet compiled)
-        fl.simulate(TRIANGLE, law, q0, obstacles=[wall], **kw)
-    auto = fl.simulate(TRIANGLE, law, q0, obstacles=[wall], duration=0.1)
+    walk = Marching(velocity=[0.1, 0.0])
+    with pytest.raises(fl.errors.ParameterError, match="marching"):  # (not yet compiled)
+        fl.simulate(TRIANGLE, law, q0, marching=walk, **kw)
+    auto = fl.simulate(TRIANGLE, law, q0, marching=walk, duration=0.1)
     assert "backend" not in auto.stats  # the numpy driver runs it

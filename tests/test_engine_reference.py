@@ -18,7 +18,13 @@ in the same run (tests/test_compiled.py, tests/test_engine_sensing.py and the li
   within ``1e-7`` of their scale (measured with numpy's AVX-512 kernels switched off: at most
   6.5e-10 of it, on the ten-robot example). Study trials under a switching law that chatter
   on a Filippov equilibrium for the whole run (``not-converged``) end up to 3e-2 apart
-  between the paths, so there only the outcome is compared.
+  between the paths, so there only the outcome is compared;
+* under the centralized safety filter (``filter = "barrier"``) the numpy driver solves each
+  step's QP with Clarabel, to its tolerances (about 1e-8), and the compiled loop by its
+  exact active-set method (Clarabel only when rounding defeats it): a run of one path
+  against a recording of the other ends within ``1e-9`` of the scale (measured: 1.5e-11 on
+  the head-on deadlock, whose filter binds at every step; recorded when its default path
+  was the numpy driver).
 
 ``.ci/run`` runs this file a second time with numpy's dispatch narrowed to AVX2
 (``NPY_DISABLE_CPU_FEATURES``) and OpenBLAS's Haswell kernels (``OPENBLAS_CORETYPE``).
@@ -37,8 +43,9 @@ from formationlab.controllers import LAWS
 RECORDED = json.loads(ref.DATA.read_text())
 RUNS = sorted(RECORDED["runs"])
 
-#: positions' tolerance, relative to their scale, under a smooth and a switching law
-SMOOTH, SWITCHING = 1e-12, 1e-7
+#: positions' tolerance, relative to their scale, under a smooth and a switching law, and
+#: under the centralized filter's QP (module docstring)
+SMOOTH, SWITCHING, QP = 1e-12, 1e-7, 1e-9
 
 
 def _smooth(law: str) -> bool:
@@ -57,6 +64,8 @@ def test_example_ends_where_it_ended(name: str) -> None:
     scale = max(1.0, float(np.abs(x_ref).max()))
     # rounding differences of another processor's kernels (see the module's docstring)
     tolerance = SMOOTH if _smooth(got["law"]) else SWITCHING
+    if got["qp"] and backend != "numpy":
+        tolerance = max(tolerance, QP)
     np.testing.assert_allclose(x, x_ref, rtol=0, atol=tolerance * scale)
 
 

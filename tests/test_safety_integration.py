@@ -138,13 +138,15 @@ def test_no_obstacles_and_no_filter_is_todays_loop(rng):
 @pytest.mark.parametrize("kind", ["barrier", "barrier-decentralized"])
 def test_inactive_filter_changes_nothing_bit_for_bit(kind):
     """With gamma large the barrier never binds from the paper's start: the run is exact."""
-    # the filtered run takes the stepping driver: compare it with the driver's plain run
-    plain = fl.simulate(TRIANGLE, DistanceLaw(), PAPER_START, duration=5.0, backend="numpy")
     cfg = SafetyFilter(filter=kind, distance=0.2, gamma=1e4)
-    filt = fl.simulate(TRIANGLE, DistanceLaw(), PAPER_START, duration=5.0, safety=cfg)
-    assert not filt.safety.active.any() and filt.safety.status.max() == 0
-    np.testing.assert_array_equal(plain.q, filt.q)
-    np.testing.assert_array_equal(plain.u, filt.u)
+    for backend in ("numpy", "numba"):  # each path against its own plain run
+        plain = fl.simulate(TRIANGLE, DistanceLaw(), PAPER_START, duration=5.0, backend=backend)
+        filt = fl.simulate(
+            TRIANGLE, DistanceLaw(), PAPER_START, duration=5.0, safety=cfg, backend=backend
+        )
+        assert not filt.safety.active.any() and filt.safety.status.max() == 0
+        np.testing.assert_array_equal(plain.q, filt.q)
+        np.testing.assert_array_equal(plain.u, filt.u)
 
 
 # ------------------------------------------------------------------ Lyapunov function

@@ -41,7 +41,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit, prange, types
+from numba.extending import overload
 from numpy.typing import NDArray
 
 from ..controllers.stage import law_field
@@ -133,10 +134,9 @@ def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run, lists, sv):
     :class:`~formationlab.controllers.terms.KernelTerms`; ``lists`` None), or its lists
     (``lists``: its :class:`~formationlab.engine.layout.RunLayout`, the
     :class:`~.lists.ListStage` and the passes' chunks on numba's threads, or None for one
-    thread; ``law`` None, and the chunk one trial of any model without sensing, obstacles or
-    a filter). ``sv``: the saving stage
-    (:class:`~.saving.Saving`), or None when only how each trial ended is kept (``out.x``,
-    ``out.v``; with saving, the saved rows hold the last state).
+    thread; ``law`` None, and the chunk one trial of any model, without sensing). ``sv``:
+    the saving stage (:class:`~.saving.Saving`), or None when only how each trial ended is
+    kept (``out.x``, ``out.v``; with saving, the saved rows hold the last state).
     """
     n = st.x.shape[1]
     kk = st.x.shape[2]
@@ -168,6 +168,7 @@ def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run, lists, sv):
         ul = np.empty((n, 2))  # one trial's commands in its robots' frames
     if lists is not None:  # (taken apart once: each taking apart counts its arrays' uses)
         lay, ls, par = lists
+    radius = robot_radii(law, lists)
     dt = run.dt
     nact = st.meta[c, 0]
     step = st.meta[c, 1]
@@ -199,7 +200,7 @@ def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run, lists, sv):
             pause = False
             for b in range(nact):
                 given_u = st.given_u[c, b] if flt.kind == CENTRALIZED else st.given_u[0, 0]
-                answer = filter_command(src, u, b, law.radius, obs, flt, st.given[c, b], given_u, S)
+                answer = filter_command(src, u, b, radius, obs, flt, st.given[c, b], given_u, S)
                 if answer == WAIT:  # the host solves this trial's QP
                     st.need[c, b] = True
                     for i in range(n):
@@ -280,7 +281,7 @@ def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run, lists, sv):
                     if obs.radius.shape[0] > 0:
                         reach = SWEPT_MARGIN * disp[b]
                         floor = min(mc[b], gap[b])
-                        end, sw = obstacle_contact(obs, law.radius, x, xn, b, reach, floor)
+                        end, sw = obstacle_contact(obs, radius, x, xn, b, reach, floor)
                         gap[b] = min(gap[b], end)
                         swept[b] = min(swept[b], sw)
                 if not gap[b] > 0.0:
@@ -337,6 +338,18 @@ def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run, lists, sv):
         step += 1
     st.meta[c, 0] = 0
     st.meta[c, 4] = DONE
+
+
+def robot_radii(law, lists):
+    """The robots' radii: the law's (its pairs layout) or the lists layout's."""
+    raise NotImplementedError  # (numba's: the overload below, chosen by the arguments' types)
+
+
+@overload(robot_radii, inline="always")
+def _robot_radii(law, lists):
+    if isinstance(law, types.NoneType):  # (a None argument: the lists layout)
+        return lambda law, lists: lists[0].radius
+    return lambda law, lists: law.radius
 
 
 @njit(cache=True, error_model="numpy", nogil=True, inline="always")

@@ -31,7 +31,7 @@ from ..sensing.stage import sensing_arrays, trial_bytes
 from ..spec import Formation
 from .loop import DONE, RUNNING, ChunkState, RunNumbers, TrialOutputs, run_chunks
 
-__all__ = ["GROUP_BYTES", "TrialRun", "chunk_state", "run_trials", "trial_outputs"]
+__all__ = ["GROUP_BYTES", "TrialRun", "chunk_state", "run_trials", "safety_stage", "trial_outputs"]
 
 #: bytes of per-trial sensing arrays (noise and loss blocks, delay ring) a group may hold
 GROUP_BYTES = 64 * 2**20
@@ -81,16 +81,7 @@ def run_trials(
     )  # fmt: skip
     terms = law.compiled_terms(formation).writable()  # one signature for every law
     robots = model_terms(model)
-    d_o, gamma = (safety.d_obstacle, safety.gamma) if safety is not None else (0.0, 0.0)
-    rep = law.obstacle_repulsion() if obstacles else None
-    obs = obstacle_terms(
-        obstacles, d_obstacle=d_o, gamma=gamma,
-        gain=rep.gain if rep else 0.0, eta=rep.repulsion.eta if rep else 1.0,
-        influence=rep.repulsion.influence if rep else 1.0,
-    )  # fmt: skip
-    flt = filter_terms(safety)
-    # (None, None): no safety stage (the loop is then compiled without it)
-    stage = (obs, flt) if obstacles or flt.kind != NONE else (None, None)
+    stage = safety_stage(law, obstacles, safety)
     B, n, k = q0.shape
     window_step = n_steps - tol.drift_steps(dt)  # negative: never reached
     # (mc starts as the least clearance of the starts, as the driver starts it)
@@ -119,6 +110,21 @@ def run_trials(
         part = TrialOutputs(*(a[g0 : g0 + ids.size] for a in out))  # views
         _run_group(q0[ids], part, chunk, terms, robots, stage, sense, numbers, safety, obstacles)
     return TrialRun(out.x, out.v, out.status, out.steps, out.mc, out.ns, out.qw, window_step)
+
+
+def safety_stage(law: Law, obstacles: Sequence[Any], safety: Any) -> tuple[Any, Any]:
+    """The loop's obstacle and filter terms of a closed loop of ``law`` among ``obstacles``
+    under the filter ``safety`` (or None), or ``(None, None)`` when it has neither (the loop
+    is then compiled without that stage)."""
+    d_o, gamma = (safety.d_obstacle, safety.gamma) if safety is not None else (0.0, 0.0)
+    rep = law.obstacle_repulsion() if obstacles else None
+    obs = obstacle_terms(
+        obstacles, d_obstacle=d_o, gamma=gamma,
+        gain=rep.gain if rep else 0.0, eta=rep.repulsion.eta if rep else 1.0,
+        influence=rep.repulsion.influence if rep else 1.0,
+    )  # fmt: skip
+    flt = filter_terms(safety)
+    return (obs, flt) if obstacles or flt.kind != NONE else (None, None)
 
 
 def _run_group(

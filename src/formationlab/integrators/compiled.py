@@ -39,12 +39,13 @@ from ..controllers.terms import KernelTerms
 from ..dynamics import System
 from ..engine.layout import REORDER_FROM, RunLayout, robot_order, run_layout
 from ..engine.lists import grow, list_stage
-from ..engine.loop import DONE, GROW, RUNNING, RunNumbers, step_chunk
+from ..engine.loop import DONE, GROW, PAUSED, RUNNING, RunNumbers, step_chunk
 from ..engine.saving import saving
-from ..engine.trials import chunk_state, trial_outputs
+from ..engine.trials import chunk_state, safety_stage, trial_outputs
 from ..errors import ParameterError
-from ..models import RobotModel, SingleIntegrator
+from ..models import SingleIntegrator
 from ..models.terms import HEADING, NEAR_IDENTITY, model_terms
+from ..safety.stage import CENTRALIZED
 from ..status import Status
 from .base import RawSolution, steps_for
 from .diagnostics import switching_diagnostics
@@ -87,10 +88,11 @@ def run_compiled(
     progress: Callable[[float], None] | None = None,
     interruptible: bool = False,
     parallel: bool | None = None,
-    model: RobotModel | None = None,
+    system: System | None = None,
 ) -> CompiledRun:
-    """Step one state ``q0`` ``(n, k)`` of robots of ``model`` (default single integrators)
-    with explicit Euler (module docstring).
+    """Step one state ``q0`` ``(n, k)`` of the closed loop ``system`` (its robot model,
+    obstacles and filter; default single integrators and neither) with explicit Euler
+    (module docstring).
 
     The loop runs in compiled segments of about a quarter of a second, between which
     ``progress`` is called with the simulated time and Ctrl-C (or SIGTERM, if its handler
@@ -110,7 +112,7 @@ def run_compiled(
     use = bool(parallel) and threads > 1
     chunks = threads * _CHUNKS_PER_THREAD
     run = SingleRun(
-        layout, q0, dt=dt, n_steps=n_steps, save_every=save_every, chunks=chunks, model=model
+        layout, q0, dt=dt, n_steps=n_steps, save_every=save_every, chunks=chunks, system=system
     )
     k0, status = 0, Status.SUCCESS
     # progress at least every 1 % of the run, as the driver (without progress, segments of
@@ -152,22 +154,32 @@ def run_compiled(
 
 class SingleRun:
     """One formation's run on the compiled loop (:func:`formationlab.engine.loop.step_chunk`)
-    on the lists layout, one chunk of one trial, with its saving stage: the state between
-    segments of steps (:meth:`advance`)."""
+    on the lists layout, one chunk of one trial, with its saving stage and, when ``system``
+    has them, its obstacles and filter: the state between segments of steps
+    (:meth:`advance`)."""
 
     def __init__(
         self, layout: RunLayout, x0: NDArray[np.float64], *, dt: float, n_steps: int,
-        save_every: int, chunks: int = 1, model: RobotModel | None = None,
+        save_every: int, chunks: int = 1, system: System | None = None,
     ) -> None:  # fmt: skip
         n, k = x0.shape
         x = np.array(x0, dtype=float, order="C")  # the run's own (writable) copy
         x = x[layout.perm] if layout.perm.size else x  # in the layout's numbers
         self.layout = layout
-        self.model = model_terms(model or SingleIntegrator())
+        self.model = model_terms(system.model if system is not None else SingleIntegrator())
         kind = self.model.kind
+        self.obstacles = tuple(system.obstacles) if system is not None else ()
+        self.safety = system.safety if system is not None and system.filtered else None
+        self.stage = (None, None)
+        if system is not None:
+            self.stage = safety_stage(system.law, self.obstacles, self.safety)
         self.st = chunk_state(
-            x[None, :, :, None], stop_rule=False, turns=kind in (HEADING, NEAR_IDENTITY)
-        )
+            x[None, :, :, None], stop_rule=False, turns=kind in (HEADING, NEAR_IDENTITY),
+            centralized=self.stage[1] is not None and self.stage[1].kind == CENTRALIZED,
+        )  # fmt: skip
+        if self.obstacles:  # the start's clearance to the obstacles (the robots' in the loop)
+            assert system is not None
+            self.st.mc[0, 0] = np.min(system.obstacle_clearances(x0), initial=np.inf)
         self.out = trial_outputs(1, n, k, kept=False)
         extra = 2.0 * self.model.offset if kind == NEAR_IDENTITY else 0.0
         self.ls = list_stage(layout, n, max(1, chunks), extra)
@@ -209,15 +221,26 @@ class SingleRun:
 
     def _call(self, numbers: RunNumbers, chunks: int) -> None:
         par = chunks if chunks > 1 else None  # (None: the threads' code is not compiled)
+        st = self.st
         while True:
             step_chunk(
-                0, None, self.model, None, None, None, None, self.st, self.out, numbers,
+                0, None, self.model, *self.stage, None, None, st, self.out, numbers,
                 (self.layout, self.ls, par), self.sv,
             )  # fmt: skip
-            if int(self.st.meta[0, 4]) != GROW:
+            status = int(st.meta[0, 4])
+            if status == GROW:
+                self.ls = grow(self.ls)  # room for the close list, and the step again
+            elif status == PAUSED:  # the centralized QP that rounding defeated: Clarabel's
+                from ..safety import barrier_filter  # (safety's package imports the loop)
+
+                res = barrier_filter(self.safety, st.need_p[0, :1], st.need_u[0, :1],
+                                     self.obstacles)  # fmt: skip
+                st.given_u[0, 0] = res.u[0]
+                st.given[0, 0] = True
+                st.need[0, 0] = False
+            else:
                 return
-            self.ls = grow(self.ls)  # room for the close list, and the step again
-            self.st.meta[0, 4] = RUNNING
+            st.meta[0, 4] = RUNNING
 
     def saved(self) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
         """The saved steps, states and rates (in the robots' own numbers)."""
@@ -266,8 +289,9 @@ def compiled_terms(system: System, integrator: object) -> RunLayout | None:
 
     Explicit Euler (exactly, not a subclass) on any robot model the compiled loop steps
     (:func:`formationlab.models.terms.model_terms`: single integrators, unicycles of both
-    mappings, double integrators, with their limits) without marching, obstacles, a filter,
-    sensing or faults, with a law whose ``kernel_terms`` describe its control.
+    mappings, double integrators, with their limits), among obstacles and under a safety
+    filter or not, without marching, sensing or faults, with a law whose ``kernel_terms``
+    describe its control.
     """
     from .explicit import Euler  # (explicit imports this module's package)
 
@@ -277,7 +301,7 @@ def compiled_terms(system: System, integrator: object) -> RunLayout | None:
         model_terms(system.model)
     except ParameterError:  # (a model of the user's own)
         return None
-    if system.marching is not None or system.obstacles or system.filtered:
+    if system.marching is not None:
         return None
     if system.sensed or (system.faults is not None and system.faults.any):
         return None
@@ -314,7 +338,7 @@ def run_euler_compiled(
     n_steps = steps_for(duration, dt)
     out = run_compiled(
         terms, x0, dt=dt, n_steps=n_steps, save_every=save_every, progress=progress,
-        interruptible=interruptible, model=system.model,
+        interruptible=interruptible, system=system,
     )  # fmt: skip
     return raw_solution(out, system, dt=dt, save_every=save_every, diagnostics=diagnostics)
 

@@ -21,12 +21,14 @@ Per trial and step, after the law's control (as ``System.rhs`` does it):
 
 from __future__ import annotations
 
+import math
 from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from .cell_grid import build_grid, neighbours_of
 from .dual_active_set import FALLBACK, NUMERICAL, centralized_command
 from .obstacle_terms import (
     barrier_row,
@@ -36,6 +38,7 @@ from .obstacle_terms import (
     signed_distance,
     swept_clearance,
 )
+from .pairs import DENSE_BELOW
 from .projection import filter_robot, unchanged_robot
 
 __all__ = [
@@ -134,6 +137,9 @@ def _decentralized(pq, uq, uf, obs, flt, nbr, A, bb, neg, owner, out) -> None:
     speed_n = flt.speed_n
     speed_b = flt.speed_b
     n_obs = obs.radius.shape[0]
+    grid = n >= DENSE_BELOW and math.isfinite(flt.r2)  # else all pairs (decentralized.py's rule)
+    if grid:  # (neighbours within the sensing radius from a grid of cells: O(n))
+        x0, y0, side, gx, gy, start, order = build_grid(pq, math.sqrt(flt.r2))
     for r in range(n):
         x = pq[r, 0]
         y = pq[r, 1]
@@ -142,17 +148,23 @@ def _decentralized(pq, uq, uf, obs, flt, nbr, A, bb, neg, owner, out) -> None:
         uf[r, 0] = uh0
         uf[r, 1] = uh1
         deg = 0
+        if grid:
+            deg = neighbours_of(r, pq, flt.r2, x0, y0, side, gx, gy, start, order, nbr)
+        else:
+            for j in range(n):  # neighbours in ascending order
+                if j == r:
+                    continue
+                dx = x - pq[j, 0]
+                dy = y - pq[j, 1]
+                if dx * dx + dy * dy <= flt.r2:
+                    nbr[deg] = j
+                    deg += 1
         inside = True
-        for j in range(n):  # neighbours in ascending order
-            if j == r:
-                continue
-            dx = x - pq[j, 0]
-            dy = y - pq[j, 1]
-            if dx * dx + dy * dy <= flt.r2:
-                nbr[deg] = j
-                deg += 1
-                h = dx * dx + dy * dy - d2
-                inside = inside and -2.0 * dx * uh0 + -2.0 * dy * uh1 <= half * h * h * h
+        for p in range(deg):  # (the first test of _project, row by row)
+            dx = x - pq[nbr[p], 0]
+            dy = y - pq[nbr[p], 1]
+            h = dx * dx + dy * dy - d2
+            inside = inside and -2.0 * dx * uh0 + -2.0 * dy * uh1 <= half * h * h * h
         for s in range(speed_n.shape[0]):
             inside = inside and speed_n[s, 0] * uh0 + speed_n[s, 1] * uh1 <= speed_b
         if inside and (n_obs == 0 or unchanged_robot(r, pq, uh0, uh1, nbr, 0, obs, d2,
