@@ -15,6 +15,7 @@ import warnings
 
 import numpy as np
 import pytest
+from test_compiled_models import assert_follows
 
 import formationlab as fl
 from formationlab.errors import FormationlabWarning
@@ -44,15 +45,6 @@ def both(formation, law, q0, **kw):
         a = fl.simulate(formation, law, q0, backend="numba", **kw)
         b = fl.simulate(formation, law, q0, backend="numpy", **kw)
     return a, b
-
-
-def assert_follows(a, b, scale, tol=1e-12):
-    assert a.stats["backend"] == "numba" and "backend" not in b.stats
-    assert a.status == b.status, (a.message, b.message)
-    assert a.message == b.message
-    np.testing.assert_array_equal(a.t, b.t)
-    np.testing.assert_allclose(a.x, b.x, rtol=0, atol=tol * scale)
-    np.testing.assert_allclose(a.xdot, b.xdot, rtol=0, atol=tol * scale / 1e-3)
 
 
 @pytest.mark.parametrize("obstacles", [False, True])

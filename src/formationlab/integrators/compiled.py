@@ -170,9 +170,11 @@ class SingleRun:
         kind = self.model.kind
         self.obstacles = tuple(system.obstacles) if system is not None else ()
         self.safety = system.safety if system is not None and system.filtered else None
-        self.stage = (None, None)
-        if system is not None:
-            self.stage = safety_stage(system.law, self.obstacles, self.safety)
+        self.stage = (
+            safety_stage(system.law, self.obstacles, self.safety)
+            if system is not None
+            else (None, None)
+        )
         self.st = chunk_state(
             x[None, :, :, None], stop_rule=False, turns=kind in (HEADING, NEAR_IDENTITY),
             centralized=self.stage[1] is not None and self.stage[1].kind == CENTRALIZED,
