@@ -104,8 +104,13 @@ def test_what_the_compiled_run_refuses_it_names():
         assert fl.simulate(TRIANGLE, law, q0, model=model, **kw).stats["backend"] == "numba"
     with pytest.raises(fl.errors.ParameterError, match=r"explicit Euler .* got 'rk4'"):
         fl.simulate(TRIANGLE, law, q0, integrator=fl.RK4(dt=1e-3), **kw)
-    walk = Marching(velocity=[0.1, 0.0])
-    with pytest.raises(fl.errors.ParameterError, match="marching"):  # (not yet compiled)
-        fl.simulate(TRIANGLE, law, q0, marching=walk, **kw)
-    auto = fl.simulate(TRIANGLE, law, q0, marching=walk, duration=0.1)
+
+    class Sluggish(SingleIntegrator):  # a model of the user's own: the numpy driver's
+        name = "sluggish"
+
+    with pytest.raises(fl.errors.ParameterError, match="'sluggish'"):
+        fl.simulate(TRIANGLE, law, q0, model=Sluggish(), **kw)
+    auto = fl.simulate(TRIANGLE, law, q0, model=Sluggish(), duration=0.1)
     assert "backend" not in auto.stats  # the numpy driver runs it
+    walk = Marching(velocity=[0.1, 0.0])  # marching runs compiled (test_compiled_stages.py)
+    assert fl.simulate(TRIANGLE, law, q0, marching=walk, **kw).stats["backend"] == "numba"

@@ -535,8 +535,8 @@ def run_system(
     terms = compiled_terms(system, integrator) if backend != "numpy" else None
     if backend == "numba" and terms is None:
         raise ParameterError(
-            'backend="numba" runs explicit Euler without marching, sensing or faults, with a '
-            "law that has kernel data; got "
+            'backend="numba" runs explicit Euler on the package\'s robot models with a law '
+            "that has kernel data; got "
             f"{integrator.name!r}, {robot.name!r} and {law.name!r}: use backend='auto'"
         )
     if terms is not None:

@@ -9,25 +9,27 @@ innermost, contiguous axis, so that each loop over trials is a plain SIMD loop. 
 1. **model**: the points the law acts on (:func:`formationlab.models.stage.points`;
    unicycles' headings carried from step to step, :func:`~formationlab.models.stage.turn`);
 2. **law**: its field over every pair (:func:`formationlab.controllers.stage.law_field`,
-   the law's :class:`~formationlab.controllers.terms.KernelTerms`); or, when the robots
-   sense each other (local frames, noise, delay, losses, range, mismatch, faults), every
-   robot's command from its own measurements
-   (:func:`formationlab.sensing.stage.sensed_field`);
-3. **obstacles and filter** (only when the run has them), trial by trial
+   the law's :class:`~formationlab.controllers.terms.KernelTerms`) or over its lists
+   (:func:`.lists.list_field`); or, when the robots sense each other (local frames, noise,
+   delay, losses, range, mismatch, faults), every robot's command from its own
+   measurements (:func:`formationlab.sensing.stage.sensed_field`);
+3. **marching**: the reference velocity, the leader's or the motion parameters' term
+   (:func:`formationlab.marching.stage.march`; nothing when the run does not march);
+4. **obstacles and filter** (only when the run has them), trial by trial
    (:func:`formationlab.safety.stage.filter_command`); a trial whose QP rounding defeats
    pauses its chunk, and the host answers (:mod:`.trials`);
-4. **model**: the state's rate from the command
+5. **model**: the state's rate from the command
    (:func:`formationlab.models.stage.rates`); zero for robots stopped by a fault
    (:func:`formationlab.sensing.stage.halt`);
-5. **drift window**: the positions at ``window_step`` (``Stepped.q_window``);
-6. **stop rule** (:class:`~formationlab.integrators.StopRule`): at a check, the
+6. **drift window**: the positions at ``window_step`` (``Stepped.q_window``);
+7. **stop rule** (:class:`~formationlab.integrators.StopRule`): at a check, the
    instantaneous speed (:func:`formationlab.models.stage.speed`) or the net speed since
    the previous check at most ``speed`` (with sensing, only while every robot sees its
    neighbours, now and at the previous check);
-7. **step and verdict**: the Euler step, judged by the contact rule
+8. **step and verdict**: the Euler step, judged by the contact rule
    (:mod:`.contact`, and :func:`formationlab.safety.stage.obstacle_contact`): not finite,
    contact at its end, contact along it; a rejected step is not taken;
-8. **bookkeeping**: the trials that ended are written out and swapped out of the live
+9. **bookkeeping**: the trials that ended are written out and swapped out of the live
    range (compaction), so that early stopping saves work instead of masking it.
 
 Everything a chunk carries from one call to the next is in :class:`ChunkState` (so the loop
@@ -46,6 +48,8 @@ from numba.extending import overload
 from numpy.typing import NDArray
 
 from ..controllers.stage import law_field
+from ..marching.stage import march
+from ..marching.terms import STILL
 from ..models.stage import headings, points, rates, speed, turn
 from ..models.terms import HEADING, NEAR_IDENTITY, SINGLE
 from ..safety.stage import CENTRALIZED, WAIT, filter_command, filter_scratch, obstacle_contact
@@ -122,9 +126,12 @@ class TrialOutputs(NamedTuple):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run, lists, sv):
+def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
     """Steps of chunk ``c`` until every trial has ended, one needs a QP, or ``run.k_end``.
 
+    ``mt`` is the run's marching (:class:`~formationlab.marching.terms.MarchTerms`; kind
+    STILL when it does not march: a stage small enough to compile into every run, so that
+    marching needs no loop of its own);
     ``obs`` and ``flt`` are the run's obstacle and filter terms, or both None when it has
     neither obstacles nor a filter; ``sn`` and ``ss`` its sensing terms and state
     (:mod:`formationlab.sensing.stage`), or None when its robots see the true positions:
@@ -166,6 +173,7 @@ def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run, lists, sv):
         S = filter_scratch(n, obs, flt)
     if sn is not None:
         ul = np.empty((n, 2))  # one trial's commands in its robots' frames
+    acc = np.empty((n, 2))  # one trial's motion-parameter sums
     if lists is not None:  # (taken apart once: each taking apart counts its arrays' uses)
         lay, ls, par = lists
     radius = robot_radii(law, lists)
@@ -196,6 +204,8 @@ def step_chunk(c, law, model, obs, flt, sn, ss, st, out, run, lists, sv):
                 sensed_field(src, x, hc, hs, u, ul, nact, ids, k, law, sn, ss)
             else:
                 law_field(src, u, scratch, nact, law)
+        if mt.kind != STILL:  # the formation marches
+            march(src, u, nact, k, mt, acc)
         if obs is not None:  # obstacles' repulsion and the filter, trial by trial
             pause = False
             for b in range(nact):
@@ -362,8 +372,8 @@ def _pause(st, c, nact, step, kc, status):
 
 
 @njit(cache=True, error_model="numpy", nogil=True, parallel=True)
-def run_chunks(law, model, obs, flt, sn, ss, st, out, run):
+def run_chunks(law, model, mt, obs, flt, sn, ss, st, out, run):
     """Every running chunk until it ends, pauses or reaches ``run.k_end``, in parallel."""
     for c in prange(st.x.shape[0]):
         if st.meta[c, 4] == RUNNING and st.meta[c, 1] < run.k_end:
-            step_chunk(c, law, model, obs, flt, sn, ss, st, out, run, None, None)
+            step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, None, None)

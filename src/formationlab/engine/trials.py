@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from ..analysis import Tolerances
 from ..controllers import Law
 from ..dynamics import System
+from ..marching.terms import march_terms
 from ..models import RobotModel
 from ..models.terms import HEADING, NEAR_IDENTITY, model_terms
 from ..safety.obstacle_terms import obstacle_terms
@@ -31,7 +32,15 @@ from ..sensing.stage import sensing_arrays, trial_bytes
 from ..spec import Formation
 from .loop import DONE, RUNNING, ChunkState, RunNumbers, TrialOutputs, run_chunks
 
-__all__ = ["GROUP_BYTES", "TrialRun", "chunk_state", "run_trials", "safety_stage", "trial_outputs"]
+__all__ = [
+    "GROUP_BYTES",
+    "TrialRun",
+    "chunk_state",
+    "run_trials",
+    "safety_stage",
+    "sensing_channel",
+    "trial_outputs",
+]
 
 #: bytes of per-trial sensing arrays (noise and loss blocks, delay ring) a group may hold
 GROUP_BYTES = 64 * 2**20
@@ -93,16 +102,7 @@ def run_trials(
     if not sensed:
         _run_group(q0, out, chunk, terms, robots, stage, None, numbers, safety, obstacles)
         return TrialRun(out.x, out.v, out.status, out.steps, out.mc, out.ns, out.qw, window_step)
-    channel = Channel(  # (faults alone: an ideal channel, for the stage's numbers)
-        sensing or Sensing(), formation, law, model,
-        [(sensing or Sensing()).seed] * B if seeds is None else list(seeds), dt,
-    )  # fmt: skip
-    if channel.B != B:
-        raise ValueError(f"run_trials: {channel.B} seeds for {B} trials")
-    stop_at = np.full(n, np.inf)
-    for s in (faults or Faults()).stop:
-        stop_at[s.robot - 1] = s.at
-    headed = model.has_heading and channel.fixed_angles is None
+    channel, stop_at, headed = sensing_channel(system, seeds, B, dt)
     group = int(min(B, max(64, GROUP_BYTES // trial_bytes(channel))))
     for g0 in range(0, B, group):
         ids = np.arange(g0, min(B, g0 + group))
@@ -110,6 +110,26 @@ def run_trials(
         part = TrialOutputs(*(a[g0 : g0 + ids.size] for a in out))  # views
         _run_group(q0[ids], part, chunk, terms, robots, stage, sense, numbers, safety, obstacles)
     return TrialRun(out.x, out.v, out.status, out.steps, out.mc, out.ns, out.qw, window_step)
+
+
+def sensing_channel(
+    system: System, seeds: Sequence[Seed] | None, B: int, dt: float
+) -> tuple[Channel, NDArray[np.float64], bool]:
+    """The measurement channel of ``B`` trials of ``system`` (``seeds``: each trial's,
+    default the sensing's), when each robot stops (inf: never) and whether the robots
+    measure in the frames of their headings: what :func:`~formationlab.sensing.stage.
+    sensing_arrays` makes the loop's sensing stage of."""
+    sensing = system.sensing or Sensing()  # (faults alone: an ideal channel, for its numbers)
+    channel = Channel(
+        sensing, system.formation, system.law, system.model,
+        [sensing.seed] * B if seeds is None else list(seeds), dt,
+    )  # fmt: skip
+    if channel.B != B:
+        raise ValueError(f"{channel.B} seeds for {B} trials")
+    stop_at = np.full(system.formation.n, np.inf)
+    for s in (system.faults or Faults()).stop:
+        stop_at[s.robot - 1] = s.at
+    return channel, stop_at, system.model.has_heading and channel.fixed_angles is None
 
 
 def safety_stage(law: Law, obstacles: Sequence[Any], safety: Any) -> tuple[Any, Any]:
@@ -148,6 +168,7 @@ def _run_group(
         sel = np.arange(g * C, min(B, (g + 1) * C))
         x[g, :, :, : sel.size] = np.moveaxis(q0[sel], 0, -1)
     flt = stage[1]
+    still = march_terms(None)  # (a batch does not march)
     st = chunk_state(
         x, B=B, mc=out.mc, turns=robots.kind in (HEADING, NEAR_IDENTITY),
         centralized=flt is not None and flt.kind == CENTRALIZED,
@@ -169,7 +190,7 @@ def _run_group(
                 sn.drop_block[live] = channel.block("drop", trials[live])
         run = numbers._replace(k_end=min(k_end, numbers.k_end))
         while True:
-            run_chunks(terms, robots, *stage, sn, ss, st, out, run)  # (the pairs layout)
+            run_chunks(terms, robots, still, *stage, sn, ss, st, out, run)  # (the pairs layout)
             wait_g, wait_b = np.nonzero(st.need)  # chunks paused, and their slots needing a QP
             if wait_g.size == 0:
                 break

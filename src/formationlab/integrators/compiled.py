@@ -41,11 +41,14 @@ from ..engine.layout import REORDER_FROM, RunLayout, robot_order, run_layout
 from ..engine.lists import grow, list_stage
 from ..engine.loop import DONE, GROW, PAUSED, RUNNING, RunNumbers, step_chunk
 from ..engine.saving import saving
-from ..engine.trials import chunk_state, safety_stage, trial_outputs
+from ..engine.trials import chunk_state, safety_stage, sensing_channel, trial_outputs
 from ..errors import ParameterError
+from ..marching.terms import march_terms, with_references
 from ..models import SingleIntegrator
 from ..models.terms import HEADING, NEAR_IDENTITY, model_terms
 from ..safety.stage import CENTRALIZED
+from ..sensing import BLOCK
+from ..sensing.stage import sensing_arrays
 from ..status import Status
 from .base import RawSolution, steps_for
 from .diagnostics import switching_diagnostics
@@ -103,7 +106,8 @@ def run_compiled(
     :data:`PARALLEL_FROM` robots the faster of the two as measured on the second and
     third segments (the same numbers either way).
     """
-    layout = terms if isinstance(terms, RunLayout) else run_layout(terms)
+    keep = isinstance(terms, RunLayout) or (system is not None and _measuring(system))
+    layout = terms if keep else run_layout(terms)  # type: ignore[arg-type]
     n = q0.shape[0]
     threads = numba.get_num_threads()
     # None: one thread, or (large formations) the faster of one thread and the threads
@@ -153,20 +157,32 @@ def run_compiled(
 
 
 class SingleRun:
-    """One formation's run on the compiled loop (:func:`formationlab.engine.loop.step_chunk`)
-    on the lists layout, one chunk of one trial, with its saving stage and, when ``system``
-    has them, its obstacles and filter: the state between segments of steps
-    (:meth:`advance`)."""
+    """One formation's run on the compiled loop (:func:`formationlab.engine.loop.step_chunk`),
+    one chunk of one trial with its saving stage: the state between segments of steps
+    (:meth:`advance`).
+
+    The law's field comes from its lists (``layout`` a :class:`RunLayout`: any size), or,
+    when the robots sense each other or a fault stops one (``layout`` the law's
+    :class:`KernelTerms` of every pair, :func:`compiled_terms`), from each robot's own
+    measurements on the pairs layout, as in batches; the noise and losses of each block of
+    :data:`~formationlab.sensing.BLOCK` steps are drawn here, between calls, from the
+    sensing's seed (the driver's draws). ``system`` (default: single integrators and the
+    law alone) gives the robot model, the marching (a reference that is a function of time
+    is tabulated here, segment by segment), the obstacles and the filter.
+    """
 
     def __init__(
-        self, layout: RunLayout, x0: NDArray[np.float64], *, dt: float, n_steps: int,
-        save_every: int, chunks: int = 1, system: System | None = None,
+        self, layout: RunLayout | KernelTerms, x0: NDArray[np.float64], *, dt: float,
+        n_steps: int, save_every: int, chunks: int = 1, system: System | None = None,
     ) -> None:  # fmt: skip
         n, k = x0.shape
         x = np.array(x0, dtype=float, order="C")  # the run's own (writable) copy
-        x = x[layout.perm] if layout.perm.size else x  # in the layout's numbers
+        self.pairs = system is not None and _measuring(system)
+        perm = np.zeros(0, np.int32) if self.pairs else layout.perm  # type: ignore[union-attr]
+        x = x[perm] if perm.size else x  # in the layout's numbers
         self.layout = layout
-        self.model = model_terms(system.model if system is not None else SingleIntegrator())
+        model = system.model if system is not None else SingleIntegrator()
+        self.model = model_terms(model)
         kind = self.model.kind
         self.obstacles = tuple(system.obstacles) if system is not None else ()
         self.safety = system.safety if system is not None and system.filtered else None
@@ -175,17 +191,34 @@ class SingleRun:
             if system is not None
             else (None, None)
         )
+        self.march = system.marching if system is not None else None
+        self.mt = march_terms(
+            self.march, system.formation if system is not None else None,
+            model.velocity_gain, perm,
+        )  # fmt: skip
         self.st = chunk_state(
             x[None, :, :, None], stop_rule=False, turns=kind in (HEADING, NEAR_IDENTITY),
             centralized=self.stage[1] is not None and self.stage[1].kind == CENTRALIZED,
         )  # fmt: skip
-        if self.obstacles:  # the start's clearance to the obstacles (the robots' in the loop)
+        if self.pairs:  # the start's clearance (the lists layout's loop finds it)
+            assert system is not None
+            self.st.mc[0, 0] = float(system.clearance(x0))
+        elif self.obstacles:  # the start's clearance to the obstacles (the robots' in the loop)
             assert system is not None
             self.st.mc[0, 0] = np.min(system.obstacle_clearances(x0), initial=np.inf)
         self.out = trial_outputs(1, n, k, kept=False)
-        extra = 2.0 * self.model.offset if kind == NEAR_IDENTITY else 0.0
-        self.ls = list_stage(layout, n, max(1, chunks), extra)
-        self.sv = saving(1, n, k, n_steps, save_every, layout.perm)
+        self.sense: tuple[Any, ...] = (None, None)
+        self.channel = None
+        self.blocks = -1  # the last block of steps whose noise and losses are drawn
+        if self.pairs:
+            assert system is not None
+            self.channel, stop_at, headed = sensing_channel(system, None, 1, float(dt))
+            self.sense = sensing_arrays(self.channel, np.zeros(1, np.intp), stop_at, headed)
+            self.ls = None
+        else:
+            extra = 2.0 * self.model.offset if kind == NEAR_IDENTITY else 0.0
+            self.ls = list_stage(layout, n, max(1, chunks), extra)
+        self.sv = saving(1, n, k, n_steps, save_every, perm)
         self.numbers = RunNumbers(float(dt), int(n_steps), 0, -1.0, -1, int(n_steps) + 1)
 
     @property
@@ -222,16 +255,41 @@ class SingleRun:
         self._call(self.numbers._replace(n_steps=k, k_end=k + 1), 1)
 
     def _call(self, numbers: RunNumbers, chunks: int) -> None:
+        """The loop from the step reached to ``numbers.k_end``, block by block of sensing
+        draws, answering its pauses."""
+        sn = self.sense[0]
+        blocks = sn is not None and (sn.noise > 0 or sn.drop > 0)
+        while not self.done and self.step < numbers.k_end:
+            k0 = self.step
+            run = numbers
+            if blocks:  # this block's draws, from the trial's own generator
+                block = k0 // BLOCK
+                if block > self.blocks:
+                    assert self.channel is not None
+                    one = np.zeros(1, np.intp)
+                    if sn.noise > 0:
+                        sn.noise_block[:] = self.channel.block("noise", one)
+                    if sn.drop > 0:
+                        sn.drop_block[:] = self.channel.block("drop", one)
+                    self.blocks = block
+                run = numbers._replace(k_end=min(numbers.k_end, (block + 1) * BLOCK))
+            self._segment(run, chunks)
+
+    def _segment(self, numbers: RunNumbers, chunks: int) -> None:
         par = chunks if chunks > 1 else None  # (None: the threads' code is not compiled)
         st = self.st
+        law, lists = (self.layout, None) if self.pairs else (None, (self.layout, self.ls, par))
+        last = min(numbers.k_end, numbers.n_steps)  # v_ref of the segment's steps (a function
+        mt = with_references(self.mt, self.march, self.step, last, numbers.dt)  # of time)
         while True:
             step_chunk(
-                0, None, self.model, *self.stage, None, None, st, self.out, numbers,
-                (self.layout, self.ls, par), self.sv,
+                0, law, self.model, mt, *self.stage, *self.sense, st, self.out, numbers,
+                lists, self.sv,
             )  # fmt: skip
             status = int(st.meta[0, 4])
             if status == GROW:
                 self.ls = grow(self.ls)  # room for the close list, and the step again
+                lists = (self.layout, self.ls, par)
             elif status == PAUSED:  # the centralized QP that rounding defeated: Clarabel's
                 from ..safety import barrier_filter  # (safety's package imports the loop)
 
@@ -285,15 +343,18 @@ def _signals_between_segments() -> Iterator[Callable[[], None]]:
         signal.raise_signal(sig)
 
 
-def compiled_terms(system: System, integrator: object) -> RunLayout | None:
-    """The law's kernel data laid out for the compiled run (:func:`.layout.run_layout`) when
-    ``system`` under ``integrator`` can run compiled, else None.
+def compiled_terms(system: System, integrator: object) -> RunLayout | KernelTerms | None:
+    """The law's kernel data laid out for the compiled run when ``system`` under
+    ``integrator`` can run compiled, else None: its lists (:func:`.layout.run_layout`), or,
+    when its robots sense each other or a fault stops one, its terms over every pair (the
+    sensing stage measures every pair; sensing is for at most
+    :data:`~formationlab.sensing.SENSING_LIMIT` robots).
 
     Explicit Euler (exactly, not a subclass) on any robot model the compiled loop steps
     (:func:`formationlab.models.terms.model_terms`: single integrators, unicycles of both
-    mappings, double integrators, with their limits), among obstacles and under a safety
-    filter or not, without marching, sensing or faults, with a law whose ``kernel_terms``
-    describe its control.
+    mappings, double integrators, with their limits), marching or not, among obstacles and
+    under a safety filter or not, sensing and with faults or not, with a law whose
+    ``kernel_terms`` describe its control.
     """
     from .explicit import Euler  # (explicit imports this module's package)
 
@@ -303,11 +364,12 @@ def compiled_terms(system: System, integrator: object) -> RunLayout | None:
         model_terms(system.model)
     except ParameterError:  # (a model of the user's own)
         return None
-    if system.marching is not None:
-        return None
-    if system.sensed or (system.faults is not None and system.faults.any):
-        return None
     f = system.formation
+    if _measuring(system):
+        try:
+            return system.law.compiled_terms(f).writable()
+        except ParameterError:
+            return None
     # the robots' order first: its scratch is gone before the law's arrays are made
     order = robot_order(f.edges[:, 0], f.edges[:, 1], f.n) if f.n >= REORDER_FROM else False
     try:
@@ -315,6 +377,12 @@ def compiled_terms(system: System, integrator: object) -> RunLayout | None:
     except ParameterError:
         return None
     return run_layout(terms, reorder=order)  # emptied as it is laid out
+
+
+def _measuring(system: System) -> bool:
+    """Whether the robots of ``system`` command from their measurements or a fault stops one
+    (the sensing stage, on the pairs layout)."""
+    return system.sensed or (system.faults is not None and system.faults.any)
 
 
 def run_euler_compiled(

@@ -36,9 +36,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import FormationError, ParameterError
-from .geometry import perp
-from .spec import Formation
+from ..errors import FormationError, ParameterError
+from ..geometry import perp
+from ..spec import Formation
 
 __all__ = [
     "March",
