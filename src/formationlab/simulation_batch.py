@@ -1,8 +1,10 @@
 """Several runs of one formation from different starts as one compiled batch.
 
 :func:`simulate_batch` is :func:`~formationlab.simulation.simulate` for ``B`` starts of
-the same formation, law and step: the runs go through the compiled single-run path as
-one batch (:mod:`formationlab.integrators.compiled_trials`) and each comes back as the
+the same formation, law and step: the law's data are laid out once
+(:func:`formationlab.integrators.compiled.compiled_terms`), each start runs on the compiled
+single-run path (:func:`~formationlab.integrators.compiled.run_euler_compiled`, the engine's
+loop) from that layout, and each comes back as the
 :class:`~formationlab.simulation.SimulationResult` its own ``simulate`` call returns,
 the same numbers bit for bit (tested). For the paper's symmetry scan and other small
 batches whose paths are wanted; many trials that need only their final states are the
@@ -18,8 +20,7 @@ from .controllers import LAWS, Law
 from .dynamics import System
 from .errors import FormationError, ParameterError
 from .integrators import INTEGRATORS, Euler, Integrator
-from .integrators.compiled import compiled_terms
-from .integrators.compiled_trials import run_euler_compiled_trials
+from .integrators.compiled import compiled_terms, run_euler_compiled
 from .models import SingleIntegrator
 from .registry import resolve
 from .simulation import SimulationResult, _result, initial_state
@@ -83,9 +84,12 @@ def simulate_batch(
             "simulate_batch runs explicit Euler on single integrators with a law that has "
             f"kernel data; got {integrator.name!r} and {law.name!r}: use simulate for each start"
         )
-    raws = run_euler_compiled_trials(
-        layout, system, x0, dt=integrator.dt, duration=float(duration),  # type: ignore[attr-defined]
-        save_every=int(save_every), diagnostics=False,
-    )  # fmt: skip
+    raws = [
+        run_euler_compiled(
+            layout, system, x, dt=integrator.dt, duration=float(duration),  # type: ignore[attr-defined]
+            save_every=int(save_every), diagnostics=False,
+        )  # fmt: skip
+        for x in x0
+    ]
     del layout  # the run's lists are let go before the post-processing
     return [_result(system, integrator, raw) for raw in raws]
