@@ -84,12 +84,8 @@ def simulate_batch(
             "simulate_batch runs explicit Euler on single integrators with a law that has "
             f"kernel data; got {integrator.name!r} and {law.name!r}: use simulate for each start"
         )
-    raws = [
-        run_euler_compiled(
-            layout, system, x, dt=integrator.dt, duration=float(duration),  # type: ignore[attr-defined]
-            save_every=int(save_every), diagnostics=False,
-        )  # fmt: skip
-        for x in x0
-    ]
+    dt = float(integrator.dt)  # type: ignore[attr-defined]
+    kw = {"dt": dt, "duration": float(duration), "save_every": int(save_every)}
+    raws = [run_euler_compiled(layout, system, x, diagnostics=False, **kw) for x in x0]
     del layout  # the run's lists are let go before the post-processing
     return [_result(system, integrator, raw) for raw in raws]

@@ -316,7 +316,7 @@ def _sensing_words(sc: Any) -> str:
 def _simulate(sc: Any, save_every: int, quiet: bool) -> Any:
     """Run ``sc`` (its closed loop: :func:`formationlab.scenario.run_scenario`) with a
     progress bar on a terminal (long runs only)."""
-    from ..scenario import run_scenario
+    from ..scenario.parse import run_scenario
 
     steps = sc.duration / getattr(sc.integrator, "dt", 1e-3)
     show = not quiet and err_console.is_terminal and steps * sc.n**2 > 2e5

@@ -33,7 +33,7 @@ from .continuation import Branch, follow
 from .search import random_starts, settle
 
 if TYPE_CHECKING:
-    from ..scenario import Scenario
+    from ..scenario.parse import Scenario
 
 __all__ = [
     "EquilibriaConfig",

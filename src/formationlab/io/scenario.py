@@ -6,7 +6,7 @@ import os
 from pathlib import Path
 
 from ..errors import ScenarioError
-from ..scenario import Scenario, parse_scenario
+from ..scenario.parse import Scenario, parse_scenario
 
 __all__ = ["load_scenario"]
 

@@ -60,7 +60,7 @@ from .groups import REPULSION_KEYS, ROBOT_KEYS, Group, study_groups
 from .summary import study_outcomes, summarize_groups
 
 if TYPE_CHECKING:
-    from ..scenario import Scenario
+    from ..scenario.parse import Scenario
 
 #: Euler step of a study whose scenario's integrator has none (``filippov``), seconds.
 DEFAULT_DT = 1e-3

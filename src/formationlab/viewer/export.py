@@ -21,7 +21,7 @@ import tomli_w
 from numpy.typing import NDArray
 
 from ..errors import UserInputError
-from ..scenario import Scenario, parse_scenario
+from ..scenario.parse import Scenario, parse_scenario
 
 __all__ = ["export_table", "finish_export", "plain"]
 

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import UserInputError
-from ..scenario import Scenario, parse_scenario
+from ..scenario.parse import Scenario, parse_scenario
 from .export import SessionError, export_table, finish_export
 from .frames import (
     EDGE_ERRORS_MAX,

@@ -10,7 +10,7 @@ import os
 from pathlib import Path
 
 from ..errors import UserInputError
-from ..scenario import Scenario
+from ..scenario.parse import Scenario
 from .replay import ReplaySession
 from .session import LiveSession
 

@@ -24,7 +24,7 @@ import numpy as np
 import traitlets
 from numpy.typing import NDArray
 
-from ..scenario import Scenario
+from ..scenario.parse import Scenario
 from .assets import bundle, read_asset
 from .controller import Controller, Reply
 from .frames import History

@@ -16,10 +16,10 @@ accepted without changing this module; the keys of ``[controller]`` and
 fields. A key of another law or integrator is ignored with an
 :class:`~formationlab.errors.IgnoredKeyWarning` (unless a law of ``[study] laws``
 takes it); a key none has is an error with a suggestion. The tables' pydantic
-models are in :mod:`formationlab._scenario_models`.
+models are in :mod:`formationlab.scenario.tables`.
 
 This module reads no files: :func:`formationlab.io.scenario.load_scenario` does.
-:func:`closed_loop` (:mod:`formationlab._scenario_loop`) is the one way from a scenario
+:func:`closed_loop` (:mod:`formationlab.scenario.loop`) is the one way from a scenario
 to the :class:`~formationlab.dynamics.System` it describes; :func:`run_scenario` runs it
 as ``formationlab run`` does.
 """
@@ -39,26 +39,26 @@ import tomli_w
 from numpy.typing import NDArray
 from pydantic import ValidationError
 
-from ._scenario_build import (
+from ..controllers import LAWS, Law
+from ..errors import IgnoredKeyWarning, ScenarioError, UserInputError
+from ..integrators import INTEGRATORS, FixedStepIntegrator, Integrator
+from ..marching import March
+from ..models import MODELS, RobotModel, SingleIntegrator
+from ..sensing import SENSING_LIMIT, Faults, Sensing, Stop, delay_steps
+from ..spec import Formation
+from ..validation import line_of, validation_error
+from .build import (
     FIXED,
     build_formation,
     initial_positions,
     restrictions_on_at_target,
     stem,
 )
-from ._scenario_loop import closed_loop, run_scenario
-from ._scenario_models import SECTIONS, ScenarioModel
-from ._scenario_parts import build_entry
-from ._scenario_robots import build_marching, build_robot_model
-from ._scenario_safety import build_safety
-from .controllers import LAWS, Law
-from .errors import IgnoredKeyWarning, ScenarioError, UserInputError
-from .integrators import INTEGRATORS, FixedStepIntegrator, Integrator
-from .marching import March
-from .models import MODELS, RobotModel, SingleIntegrator
-from .sensing import SENSING_LIMIT, Faults, Sensing, Stop, delay_steps
-from .spec import Formation
-from .validation import line_of, validation_error
+from .loop import closed_loop, run_scenario
+from .parts import build_entry
+from .robots import build_marching, build_robot_model
+from .safety import build_safety
+from .tables import SECTIONS, ScenarioModel
 
 __all__ = [
     "SECTIONS",
@@ -338,7 +338,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
     robot, initial, ignored_model = build_robot_model(
         rob, formation.n, source=source, text=text, fail=fail, warnings=warnings
     )
-    from .simulation import initial_state
+    from ..simulation import initial_state
 
     try:
         x0 = initial_state(formation, robot, q0, **initial)
@@ -485,7 +485,7 @@ def _asynchronous(
                 f"the asynchronous runner does not take {what} yet: remove it, or remove "
                 "[asynchronous] (the synchronous run takes it)",
             )
-    from .agents.asynchronous import check_schedule
+    from ..agents.asynchronous import check_schedule
 
     try:
         dt = float(integrator.dt)  # type: ignore[attr-defined]

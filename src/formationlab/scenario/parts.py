@@ -17,9 +17,9 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from .errors import ScenarioError, UnknownNameError, UserInputError
-from .registry import Registry, parameters_of
-from .validation import build_dataclass, nearest, validation_error
+from ..errors import ScenarioError, UnknownNameError, UserInputError
+from ..registry import Registry, parameters_of
+from ..validation import build_dataclass, nearest, validation_error
 
 __all__ = ["Fail", "build_entry", "nested_keys"]
 

@@ -3,7 +3,7 @@
 Structure only: types, shapes, finite numbers, known keys. The mathematics
 (distances against diameters, graphs, orientations) is checked by the builders
 of :class:`~formationlab.Formation`; the law's and the integrator's keys by
-:mod:`formationlab._scenario_parts`.
+:mod:`formationlab.scenario.parts`.
 """
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from .templates import LATTICES
-from .validation import choices, suggest
+from ..templates import LATTICES
+from ..validation import choices, suggest
 
 __all__ = [
     "EDGE_NAMES",
@@ -172,7 +172,7 @@ class RobotsModel(BaseModel):
     model and its keys.
 
     Keys other than these are kept as given and checked against the chosen
-    model's parameters and initial keys by :mod:`formationlab._scenario_robots`.
+    model's parameters and initial keys by :mod:`formationlab.scenario.robots`.
     """
 
     model_config = ConfigDict(strict=True, extra="allow", allow_inf_nan=False, frozen=True)
@@ -309,7 +309,7 @@ class MarchingModel(BaseModel):
 class SafetyModel(BaseModel):
     """``[safety]``: the safety filter between the law and the robots (``docs/safety.md``).
 
-    Contact distances and obstacles are checked by :mod:`formationlab._scenario_safety`.
+    Contact distances and obstacles are checked by :mod:`formationlab.scenario.safety`.
     """
 
     model_config = _STRICT

@@ -21,14 +21,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ._scenario_parts import Fail, build_entry
-from .controllers import LAWS
-from .errors import IgnoredKeyWarning, UserInputError
-from .marching import March, Marching, MotionParameters
-from .models import MODELS, RobotModel
-from .models.unicycle import MAPPING_KEYS
-from .spec import Formation
-from .validation import line_of
+from ..controllers import LAWS
+from ..errors import IgnoredKeyWarning, UserInputError
+from ..marching import March, Marching, MotionParameters
+from ..models import MODELS, RobotModel
+from ..models.unicycle import MAPPING_KEYS
+from ..spec import Formation
+from ..validation import line_of
+from .parts import Fail, build_entry
 
 __all__ = ["ROBOT_FIXED", "build_marching", "build_robot_model", "initial_keys"]
 

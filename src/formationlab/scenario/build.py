@@ -1,7 +1,7 @@
 """Building a scenario's formation (private to :mod:`formationlab.scenario`).
 
 The formation comes from :class:`~formationlab.Formation`'s builders (the law
-and the integrator from :func:`formationlab._scenario_parts.build_entry`).
+and the integrator from :func:`formationlab.scenario.parts.build_entry`).
 Problems are raised through the caller's ``fail(where, message)``, which adds
 the file and line.
 """
@@ -14,15 +14,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ._scenario_models import Lattice, StartAround
-from ._scenario_parts import Fail
-from .errors import UserInputError
-from .graph import edges_connected
-from .graphs import build_edges, nearest_gap, overlapping_pairs
-from .realisability import realisability_problems
-from .spec import AlphaValues, Formation, check_alpha_signs
-from .templates import lattice
-from .validation import coordinates
+from ..errors import UserInputError
+from ..graph import edges_connected
+from ..graphs import build_edges, nearest_gap, overlapping_pairs
+from ..realisability import realisability_problems
+from ..spec import AlphaValues, Formation, check_alpha_signs
+from ..templates import lattice
+from ..validation import coordinates
+from .parts import Fail
+from .tables import Lattice, StartAround
 
 __all__ = [
     "FIXED",

@@ -1,6 +1,6 @@
 """A scenario's ``[[obstacles]]`` and ``[safety]`` tables (private to :mod:`formationlab.scenario`).
 
-The tables' structure is checked by pydantic (:class:`~formationlab._scenario_models.
+The tables' structure is checked by pydantic (:class:`~formationlab.scenario.tables.
 SafetyModel`; each obstacle is a table); here the obstacles are built (circle radius,
 simple polygons, through :mod:`formationlab.safety`), checked against the robots'
 starts, and the filter's distances against the contact distances. Every problem is a
@@ -16,12 +16,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import MissingExtraError, ScenarioError, UserInputError
-from .spec import Formation
-from .validation import line_of
+from ..errors import MissingExtraError, ScenarioError, UserInputError
+from ..spec import Formation
+from ..validation import line_of
 
 if TYPE_CHECKING:
-    from .safety import Obstacle, SafetyFilter
+    from ..safety import Obstacle, SafetyFilter
 
 __all__ = ["build_safety"]
 
@@ -63,7 +63,7 @@ def build_safety(
     """
     if not obstacles and safety is None:
         return (), None
-    from .safety import SafetyFilter, check_extra, clearances, obstacle_from_mapping
+    from ..safety import SafetyFilter, check_extra, clearances, obstacle_from_mapping
 
     try:
         check_extra()

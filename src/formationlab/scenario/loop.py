@@ -14,13 +14,13 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Literal
 
-from .errors import UserInputError
+from ..errors import UserInputError
 
 if TYPE_CHECKING:
-    from .dynamics import System
-    from .scenario import Scenario
-    from .sensing import Faults, Sensing
-    from .simulation import SimulationResult
+    from ..dynamics import System
+    from ..sensing import Faults, Sensing
+    from ..simulation import SimulationResult
+    from .parse import Scenario
 
 __all__ = ["SCENARIO", "closed_loop", "run_scenario"]
 
@@ -51,7 +51,7 @@ def closed_loop(
     ScenarioError
         A part that does not fit the others, placed at its key in the file.
     """
-    from .simulation import build_system
+    from ..simulation import build_system
 
     sensing = scenario.sensing if sensing is SCENARIO else sensing
     faults = scenario.faults if faults is SCENARIO else faults
@@ -82,7 +82,7 @@ def run_scenario(
         For a scenario with ``[asynchronous]`` (run it with
         :func:`formationlab.agents.run_async`, as ``formationlab run`` does).
     """
-    from .simulation import run_system
+    from ..simulation import run_system
 
     if scenario.asynchronous is not None:
         raise scenario.error(
