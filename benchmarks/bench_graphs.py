@@ -23,16 +23,16 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from formationlab.graph import is_rigid
-from formationlab.graphs import (
+from formationlab.formation.graph import is_rigid
+from formationlab.formation.graphs import (
     delaunay_edges,
     henneberg_edges,
     knn_edges,
     overlapping_pairs,
     within_edges,
 )
+from formationlab.formation.templates import lattice
 from formationlab.scenario import parse_scenario
-from formationlab.templates import lattice
 
 SCENARIO = (Path(__file__).resolve().parents[1] / "examples" / "lattice-1000.toml").read_text(
     encoding="utf-8"

@@ -49,9 +49,9 @@ import numpy as np
 from scipy.spatial import Delaunay
 
 from formationlab.controllers import DistanceLaw
+from formationlab.formation.spec import Formation
 from formationlab.potentials import dphi_dr
 from formationlab.safety import SafetyFilter, sensed_pairs
-from formationlab.spec import Formation
 
 
 def lattice(n: int, rng: np.random.Generator) -> tuple[Formation, np.ndarray]:

@@ -46,9 +46,9 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import minimum_spanning_tree
 
-from formationlab.graph import is_rigid
-from formationlab.graphs import build_edges
-from formationlab.templates import lattice
+from formationlab.formation.graph import is_rigid
+from formationlab.formation.graphs import build_edges
+from formationlab.formation.templates import lattice
 
 ROOT = Path(__file__).resolve().parents[1]
 FOLDER = ROOT / "examples" / "graph-families"

@@ -41,8 +41,8 @@ def part1() -> None:
     both kinds of law (one by one and as a batch), the filters of single runs, the rigidity
     check."""
     fl, f, q0 = _triangle()
+    from formationlab.formation.rigidity import is_generically_rigid
     from formationlab.models import DoubleIntegrator, Unicycle
-    from formationlab.rigidity import is_generically_rigid
     from formationlab.safety import SafetyFilter
     from formationlab.sensing import Sensing
     from formationlab.simulation_batch import simulate_batch

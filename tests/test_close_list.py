@@ -13,9 +13,9 @@ import formationlab as fl
 from formationlab.engine.close_list import close_list
 from formationlab.engine.layout import run_layout
 from formationlab.engine.saving import saved_rows
+from formationlab.formation.templates import lattice
 from formationlab.integrators.compiled import run_compiled
 from formationlab.neighbours import non_edges
-from formationlab.templates import lattice
 
 
 def brute(q, radius, reach, exclude):

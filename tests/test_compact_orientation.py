@@ -11,9 +11,9 @@ import pytest
 
 import formationlab as fl
 from formationlab.engine.layout import run_layout
+from formationlab.formation.orientation import alpha_from_shape, switching_surfaces
+from formationlab.formation.templates import lattice
 from formationlab.integrators.compiled import run_compiled
-from formationlab.orientation import alpha_from_shape, switching_surfaces
-from formationlab.templates import lattice
 
 
 def patch(n: int, values: str, seed: int = 0) -> fl.Formation:
@@ -106,7 +106,7 @@ def test_positive_beta_with_exchanged_corners_decides_every_surface_alike():
 
 def test_a_formation_beyond_the_held_limit_holds_only_its_halves(monkeypatch):
     # the same lists, built at each access instead of kept; the same compiled run
-    import formationlab.spec as spec
+    import formationlab.formation.spec as spec
 
     f = patch(300, "sign", seed=6)
     lists = (f.restricted_triples, f.restricted_alpha, *f.surfaces, f.restricted_sign)

@@ -11,7 +11,7 @@ import pytest
 
 import formationlab as fl
 from formationlab.controllers import LAWS
-from formationlab.spec import DENSE_LIMIT
+from formationlab.formation.spec import DENSE_LIMIT
 
 TRIANGLE = fl.Formation.from_template(
     [[0.0, 0.0], [1.0, 0.0], [0.5, np.sqrt(3) / 2]], diameters=0.2

@@ -15,10 +15,10 @@ import pytest
 from test_compiled import TRIANGLE, ladder
 
 import formationlab as fl
+from formationlab.formation.spec import DENSE_LIMIT
 from formationlab.integrators import compiled
 from formationlab.marching import Marching
 from formationlab.models import DoubleIntegrator, SingleIntegrator, Unicycle
-from formationlab.spec import DENSE_LIMIT
 
 MODELS = {
     "single-limited": SingleIntegrator(max_speed=0.5),

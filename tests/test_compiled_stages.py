@@ -20,13 +20,13 @@ from test_compiled_models import assert_follows
 
 import formationlab as fl
 from formationlab.errors import FormationlabWarning
+from formationlab.formation.spec import DENSE_LIMIT
 from formationlab.integrators import compiled
 from formationlab.marching import Marching, MotionParameters
 from formationlab.models import DoubleIntegrator, SingleIntegrator, Unicycle
 from formationlab.safety import SafetyFilter
 from formationlab.safety.obstacles import Circle
 from formationlab.sensing import BLOCK, Faults, Sensing, Stop
-from formationlab.spec import DENSE_LIMIT
 
 MODELS = {
     "single": SingleIntegrator(),

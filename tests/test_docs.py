@@ -7,10 +7,10 @@ from pathlib import Path
 import pytest
 
 import formationlab
+import formationlab.formation.spec
+import formationlab.formation.templates
 import formationlab.registry
 import formationlab.simulation
-import formationlab.spec
-import formationlab.templates
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -34,8 +34,8 @@ def test_readme_python_example_runs(capsys, tmp_path, monkeypatch):
         formationlab,
         formationlab.registry,
         formationlab.simulation,
-        formationlab.spec,
-        formationlab.templates,
+        formationlab.formation.spec,
+        formationlab.formation.templates,
     ],
 )
 def test_docstring_examples(module):

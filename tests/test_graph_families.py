@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from formationlab.graph import edges_connected, is_rigid
+from formationlab.formation.graph import edges_connected, is_rigid
 from formationlab.io.scenario import load_scenario
 
 FOLDER = Path(__file__).resolve().parents[1] / "examples" / "graph-families"

@@ -9,8 +9,8 @@ import pytest
 from scipy.spatial import Delaunay
 
 from formationlab.errors import FormationError
-from formationlab.graph import as_edges, edges_connected, is_rigid
-from formationlab.graphs import (
+from formationlab.formation.graph import as_edges, edges_connected, is_rigid
+from formationlab.formation.graphs import (
     build_edges,
     delaunay_edges,
     henneberg_edges,
@@ -19,13 +19,13 @@ from formationlab.graphs import (
     overlapping_pairs,
     within_edges,
 )
-from formationlab.rigidity import (
+from formationlab.formation.rigidity import (
     generic_rank_deficit,
     independent_edges,
     rigid_bodies,
     rigidity_matrix,
 )
-from formationlab.templates import lattice
+from formationlab.formation.templates import lattice
 
 
 def _check_layout(e: np.ndarray, n: int) -> None:

@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 import formationlab as fl
 from formationlab.cli import _load_commands, app
-from formationlab.realisability import best_realisation, realisability_problems
+from formationlab.formation.realisability import best_realisation, realisability_problems
 
 _load_commands()
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from formationlab.controllers import DistanceLaw, SquaredDistanceLaw
+from formationlab.formation.spec import Formation
 from formationlab.safety import (
     Circle,
     Polygon,
@@ -18,7 +19,6 @@ from formationlab.safety import (
     grad_obstacle_potential,
     obstacle_contacts,
 )
-from formationlab.spec import Formation
 
 SQUARE = Formation.from_template([[0, 0], [1, 0], [1, 1], [0, 1]], orientation="free")
 D_S = 0.25

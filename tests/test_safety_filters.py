@@ -6,6 +6,7 @@ import pytest
 import scipy.sparse as sp
 
 from formationlab.errors import ParameterError
+from formationlab.formation.spec import Formation
 from formationlab.safety import (
     Circle,
     FilterStatus,
@@ -18,7 +19,6 @@ from formationlab.safety import (
     solve_barrier_qp,
 )
 from formationlab.safety.pairs import _dense_pairs
-from formationlab.spec import Formation
 
 OBSTACLES = (
     Circle(center=[0.0, 0.0], radius=0.3),

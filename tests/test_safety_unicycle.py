@@ -15,9 +15,9 @@ import pytest
 
 from formationlab.controllers import SquaredDistanceLaw
 from formationlab.dynamics import System
+from formationlab.formation.spec import Formation
 from formationlab.models import Unicycle
 from formationlab.safety import SafetyFilter, point_safety_distance, unicycle_points
-from formationlab.spec import Formation
 from formationlab.studies.batch import run_batch
 
 SQUARE = Formation.from_template([[0, 0], [1, 0], [1, 1], [0, 1]], orientation="free")

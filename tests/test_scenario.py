@@ -15,7 +15,7 @@ import pytest
 import formationlab as fl
 from formationlab.controllers import LAWS, Law, register
 from formationlab.errors import ScenarioError
-from formationlab.graph import edges_connected
+from formationlab.formation.graph import edges_connected
 from formationlab.io.scenario import load_scenario
 from formationlab.scenario import Scenario, parse_scenario
 

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from formationlab.errors import ScenarioError
-from formationlab.graphs import delaunay_edges, henneberg_edges, knn_edges, within_edges
+from formationlab.formation.graphs import delaunay_edges, henneberg_edges, knn_edges, within_edges
+from formationlab.formation.templates import lattice
 from formationlab.scenario import parse_scenario
-from formationlab.templates import lattice
 
 TAIL = """
 [controller]

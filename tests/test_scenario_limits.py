@@ -18,9 +18,9 @@ import formationlab as fl
 from formationlab import resources
 from formationlab.cli import _load_commands, app
 from formationlab.errors import ScenarioError
+from formationlab.formation.spec import check_alpha_signs
 from formationlab.integrators.base import steps_for
 from formationlab.scenario import parse_scenario
-from formationlab.spec import check_alpha_signs
 
 _load_commands()
 

@@ -112,7 +112,7 @@ def square_lattice(side: int) -> tuple[np.ndarray, list[tuple[int, int]]]:
 def test_an_orientation_from_a_lattice_skips_exactly_its_collinear_triples():
     tpl, edges = square_lattice(4)
     f = fl.Formation.from_template(tpl, edges=edges, one_based=False)
-    from formationlab.orientation import neighbour_triples
+    from formationlab.formation.orientation import neighbour_triples
 
     t = neighbour_triples(f.edges, f.n)
     r1 = tpl[t[:, 1]] - tpl[t[:, 0]]

@@ -78,7 +78,7 @@ def test_check_positions_names_overlapping_pair():
 
 
 def test_connectivity_is_decided_in_one_place_for_matrices_and_edge_lists():
-    from formationlab.graph import edges_connected, is_connected
+    from formationlab.formation.graph import edges_connected, is_connected
 
     rng = np.random.default_rng(4)
     for _ in range(50):
@@ -99,7 +99,7 @@ def test_connectivity_is_decided_in_one_place_for_matrices_and_edge_lists():
 def test_index_arrays_are_int32_and_the_kernels_still_get_int64():
     """Edges, restricted triples and surfaces in int32 (half the bytes); the same values as
     the int64 lists they are made from; every array of the law's kernel data int64."""
-    from formationlab.orientation import alpha_from_shape, switching_surfaces
+    from formationlab.formation.orientation import alpha_from_shape, switching_surfaces
 
     tpl = fl.lattice("triangular", 150, 1.0)
     edges = fl.build_edges("delaunay", tpl)

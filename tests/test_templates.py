@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from formationlab.errors import FormationError
-from formationlab.templates import LATTICES, lattice
+from formationlab.formation.templates import LATTICES, lattice
 
 #: neighbours of an interior point: triangular 6, square 4, honeycomb 3
 COORDINATION = {"triangular": 6, "square": 4, "hexagonal": 3}

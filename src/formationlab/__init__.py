@@ -21,7 +21,9 @@ from . import (
 from .analysis import OUTCOMES, Tolerances, classify, distance_errors, triangle_orientation
 from .controllers import LAWS, AngleRestrictedLaw, DistanceLaw, Law, Repulsion, get_law
 from .dynamics import SingleIntegrator, System
-from .graphs import build_edges
+from .formation.graphs import build_edges
+from .formation.spec import Formation, FormationError
+from .formation.templates import lattice
 from .integrators import (
     INTEGRATORS,
     RK4,
@@ -34,8 +36,6 @@ from .integrators import (
 from .potentials import dphi_dr, khatib, phi, psi, triple_products
 from .sensing import Faults, Sensing, Stop
 from .simulation import SimulationResult, simulate
-from .spec import Formation, FormationError
-from .templates import lattice
 
 try:
     __version__ = version("formationlab")

@@ -47,10 +47,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .chunked import over_time, time_slices
-from .geometry import cross
+from .formation.geometry import cross
+from .formation.spec import DENSE_LIMIT, Formation
 from .neighbours import close_pairs
 from .rigid_motion import DRIFTING, NOT_RIGID, ROTATING, RigidMotion, rigid_motion, rigid_outcome
-from .spec import DENSE_LIMIT, Formation
 from .validation import positive
 
 __all__ = [

@@ -14,8 +14,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .analysis import OUTCOMES, Tolerances
+from .formation.spec import Formation
 from .rigid_motion import DRIFTING, ROTATING, RigidMotion, rigid_motion, rigid_outcome
-from .spec import Formation
 from .status import DIVERGED_SCALE, Status
 from .validation import COORDINATE_LIMIT
 

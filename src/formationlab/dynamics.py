@@ -43,10 +43,10 @@ from numpy.typing import NDArray
 
 from .chunked import over_time, row_bytes
 from .controllers import Law
+from .formation.spec import DENSE_LIMIT, Formation
 from .marching import March
 from .models import RobotModel, SingleIntegrator
 from .sensing import Channel, Faults, Seed, Sensing
-from .spec import DENSE_LIMIT, Formation
 from .status import Status
 from .validation import COORDINATE_LIMIT
 

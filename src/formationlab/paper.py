@@ -31,9 +31,9 @@ from numpy.typing import NDArray
 from .analysis import Tolerances, triangle_orientation
 from .controllers import AngleRestrictedLaw
 from .errors import ParameterError
+from .formation.spec import Formation
 from .integrators import get_integrator
 from .simulation import SimulationResult, simulate
-from .spec import Formation
 from .status import Status
 
 __all__ = [

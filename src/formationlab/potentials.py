@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 from .controllers.kinds.khatib import dkhatib_ds, khatib
 from .controllers.kinds.log_barrier import dphi_dr, phi
 from .controllers.kinds.restriction import psi, triangle_products, upsilon
-from .geometry import cross, pair_vectors, parity, perp, scatter_rows, triple_products
+from .formation.geometry import cross, pair_vectors, parity, perp, scatter_rows, triple_products
 
 __all__ = [
     "collinear_minimizer",

@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .geometry import cross, perp
+from .formation.geometry import cross, perp
 
 if TYPE_CHECKING:
     from .analysis import Tolerances

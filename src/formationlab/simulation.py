@@ -35,6 +35,7 @@ from .chunked import over_time
 from .controllers import LAWS, Law
 from .dynamics import System
 from .errors import FormationError, ParameterError
+from .formation.spec import Formation
 from .integrators import INTEGRATORS, Euler, Integrator, RawSolution
 from .integrators.compiled import compiled_terms, run_euler_compiled
 from .integrators.diagnostics import switching_diagnostics
@@ -43,7 +44,6 @@ from .models import MODELS, RobotModel, SingleIntegrator
 from .registry import resolve
 from .rigid_motion import RigidMotion
 from .sensing import Faults, Sensing
-from .spec import Formation
 from .status import Status
 from .validation import whole
 

@@ -19,12 +19,12 @@ from numpy.typing import ArrayLike
 from .controllers import LAWS, Law
 from .dynamics import System
 from .errors import FormationError, ParameterError
+from .formation.spec import Formation
 from .integrators import INTEGRATORS, Euler, Integrator
 from .integrators.compiled import compiled_terms, run_euler_compiled
 from .models import SingleIntegrator
 from .registry import resolve
 from .simulation import SimulationResult, _result, initial_state
-from .spec import Formation
 from .validation import whole
 
 __all__ = ["simulate_batch"]

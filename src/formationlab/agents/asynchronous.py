@@ -51,13 +51,13 @@ from numpy.typing import ArrayLike, NDArray
 from ..controllers import LAWS, Law
 from ..dynamics import System
 from ..errors import ParameterError
+from ..formation.spec import Formation
 from ..integrators import Euler
 from ..integrators.base import steps_for
 from ..models import MODELS, RobotModel, SingleIntegrator
 from ..registry import resolve
 from ..sensing import Channel, Faults, Sensing, local_controls, rotate
 from ..simulation import SimulationResult, build_system, initial_state
-from ..spec import Formation
 from ..status import Status
 from ..validation import nonnegative, positive, whole
 from ..validation import seed as check_seed

@@ -80,12 +80,12 @@ from numpy.typing import ArrayLike, NDArray
 from ..analysis import distance_errors, orientation_agreement
 from ..controllers import Law
 from ..errors import ParameterError
-from ..geometry import cross, perp
+from ..formation.geometry import cross, perp
+from ..formation.realisability import best_realisation
+from ..formation.spec import Formation
 from ..models import SingleIntegrator
-from ..realisability import best_realisation
 from ..rigid_motion import RigidMotion, field_motion
 from ..sensing import Channel, Sensing, local_controls, measured
-from ..spec import Formation
 
 __all__ = [
     "DriftTable",

@@ -27,8 +27,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import ParameterError
+from ..formation.spec import Formation
 from ..registry import Registry
-from ..spec import Formation
 from ..validation import check_fields
 from .terms import KernelTerms
 

@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from ..geometry import pair_vectors, scatter_rows
+from ..formation.geometry import pair_vectors, scatter_rows
+from ..formation.spec import DENSE_LIMIT, Formation
 from ..neighbours import close_pairs, non_edges
-from ..spec import DENSE_LIMIT, Formation
 from ..validation import check_fields
 from .base import Law, ObstacleRepulsion, Repulsion, register
 from .kinds.khatib import dkhatib_ds, khatib

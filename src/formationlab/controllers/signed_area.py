@@ -38,8 +38,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import FormationError
-from ..geometry import cross, parity, perp
-from ..spec import Formation
+from ..formation.geometry import cross, parity, perp
+from ..formation.spec import Formation
 from ..validation import check_fields
 from .base import Law, ObstacleRepulsion, Repulsion, register
 from .kinds.signed_area import signed_area

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from ..spec import DENSE_LIMIT, Formation
+from ..formation.spec import DENSE_LIMIT, Formation
 from ..validation import check_fields
 from .base import Law, ObstacleRepulsion, Repulsion, register
 from .distance import _grad_listed, pair_geometry, repulsion_pairs

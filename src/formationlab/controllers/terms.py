@@ -27,7 +27,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from ..spec import Formation
+from ..formation.spec import Formation
 from .kinds.edges import LOG_BARRIER, SQUARED
 
 __all__ = ["LOG_BARRIER", "PAIR_LIMIT", "SQUARED", "KernelTerms", "build_terms"]

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from ..analysis import Tolerances
 from ..controllers import Law
 from ..dynamics import System
+from ..formation.spec import Formation
 from ..marching.terms import march_terms
 from ..models import RobotModel
 from ..models.terms import HEADING, NEAR_IDENTITY, model_terms
@@ -29,7 +30,6 @@ from ..safety.obstacle_terms import obstacle_terms
 from ..safety.stage import CENTRALIZED, NONE, filter_terms
 from ..sensing import BLOCK, Channel, Faults, Seed, Sensing
 from ..sensing.stage import sensing_arrays, trial_bytes
-from ..spec import Formation
 from .loop import DONE, RUNNING, ChunkState, RunNumbers, TrialOutputs, run_chunks
 
 __all__ = [

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from ..analysis import Tolerances
 from ..controllers import Law
 from ..dynamics import System
-from ..spec import Formation
+from ..formation.spec import Formation
 from .classify import Equilibrium, classify_equilibrium
 from .dedup import canonical_pose, same_equilibrium
 from .refine import refine

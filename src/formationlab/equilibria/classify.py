@@ -39,8 +39,8 @@ from numpy.typing import NDArray
 
 from ..analysis import Tolerances, classify
 from ..controllers import Law
+from ..formation.spec import Formation
 from ..rigid_motion import field_motion
-from ..spec import Formation
 from .jacobian import jacobian, reduced_eigenvalues
 from .refine import Refined
 

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from ..analysis import Tolerances
 from ..controllers import Law
-from ..spec import Formation
+from ..formation.spec import Formation
 from .classify import Equilibrium, classify_equilibrium
 from .refine import refine
 

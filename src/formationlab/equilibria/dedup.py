@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from ..spec import Formation
+from ..formation.spec import Formation
 
 __all__ = ["canonical_pose", "group_equilibria", "same_equilibrium"]
 

@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from ..controllers import Law
-from ..spec import Formation
+from ..formation.spec import Formation
 from .relative import MAX_NEAR, all_subsets, attracts, rigid_field, rigid_guess
 
 __all__ = ["Refined", "refine", "rigid_field"]

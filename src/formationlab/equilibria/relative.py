@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..controllers import Law
-from ..spec import Formation
+from ..formation.spec import Formation
 
 __all__ = ["MAX_NEAR", "all_subsets", "attracts", "rigid_field", "rigid_guess"]
 

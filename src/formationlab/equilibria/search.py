@@ -22,9 +22,9 @@ from ..batch_outcomes import BatchResult
 from ..controllers import Law
 from ..dynamics import System
 from ..errors import ParameterError
+from ..formation.spec import Formation
 from ..integrators import RK4, FixedStepIntegrator, ImplicitEuler, StopRule, drive
 from ..integrators.substeps import Substepped
-from ..spec import Formation
 from ..validation import fraction, whole
 
 __all__ = ["random_starts", "settle"]

@@ -37,8 +37,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import FormationError, ParameterError
-from ..geometry import perp
-from ..spec import Formation
+from ..formation.geometry import perp
+from ..formation.spec import Formation
 
 __all__ = [
     "March",

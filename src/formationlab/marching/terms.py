@@ -13,7 +13,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from ..spec import Formation
+from ..formation.spec import Formation
 from .config import March, Marching
 
 __all__ = [

@@ -15,11 +15,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import UserInputError
-from ..graph import edges_connected
-from ..graphs import build_edges, nearest_gap, overlapping_pairs
-from ..realisability import realisability_problems
-from ..spec import AlphaValues, Formation, check_alpha_signs
-from ..templates import lattice
+from ..formation.graph import edges_connected
+from ..formation.graphs import build_edges, nearest_gap, overlapping_pairs
+from ..formation.realisability import realisability_problems
+from ..formation.spec import AlphaValues, Formation, check_alpha_signs
+from ..formation.templates import lattice
 from ..validation import coordinates
 from .parts import Fail
 from .tables import Lattice, StartAround

@@ -41,11 +41,11 @@ from pydantic import ValidationError
 
 from ..controllers import LAWS, Law
 from ..errors import IgnoredKeyWarning, ScenarioError, UserInputError
+from ..formation.spec import Formation
 from ..integrators import INTEGRATORS, FixedStepIntegrator, Integrator
 from ..marching import March
 from ..models import MODELS, RobotModel, SingleIntegrator
 from ..sensing import SENSING_LIMIT, Faults, Sensing, Stop, delay_steps
-from ..spec import Formation
 from ..validation import line_of, validation_error
 from .build import (
     FIXED,

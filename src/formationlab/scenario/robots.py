@@ -23,10 +23,10 @@ from numpy.typing import NDArray
 
 from ..controllers import LAWS
 from ..errors import IgnoredKeyWarning, UserInputError
+from ..formation.spec import Formation
 from ..marching import March, Marching, MotionParameters
 from ..models import MODELS, RobotModel
 from ..models.unicycle import MAPPING_KEYS
-from ..spec import Formation
 from ..validation import line_of
 from .parts import Fail, build_entry
 

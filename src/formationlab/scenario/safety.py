@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import MissingExtraError, ScenarioError, UserInputError
-from ..spec import Formation
+from ..formation.spec import Formation
 from ..validation import line_of
 
 if TYPE_CHECKING:

@@ -15,7 +15,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from ..templates import LATTICES
+from ..formation.templates import LATTICES
 from ..validation import choices, suggest
 
 __all__ = [

@@ -31,8 +31,8 @@ from numpy.typing import NDArray
 from ..controllers import Law
 from ..controllers.terms import PAIR_LIMIT, KernelTerms
 from ..errors import ParameterError
+from ..formation.spec import Formation
 from ..models import RobotModel
-from ..spec import Formation
 from .config import Sensing, delay_steps
 from .local import local_controls, measured, rotate
 

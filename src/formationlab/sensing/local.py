@@ -43,7 +43,7 @@ from ..controllers.kinds.restriction import (
 )
 from ..controllers.kinds.signed_area import area_force, area_gain, signed_area
 from ..controllers.terms import KernelTerms
-from ..geometry import scatter_rows
+from ..formation.geometry import scatter_rows
 
 __all__ = ["local_controls", "rotate"]
 

@@ -50,11 +50,11 @@ from ..controllers import Law
 from ..dynamics import System
 from ..engine.trials import TrialRun, run_trials
 from ..errors import FormationError, ParameterError
+from ..formation.spec import Formation
 from ..integrators import Euler, StopRule, drive
 from ..integrators.base import steps_for
 from ..models import RobotModel, SingleIntegrator
 from ..sensing import Faults, Seed, Sensing
-from ..spec import Formation
 from ..validation import positive, whole
 
 __all__ = [

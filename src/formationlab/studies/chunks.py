@@ -21,9 +21,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..analysis import Tolerances
 from ..controllers import Law
+from ..formation.spec import Formation
 from ..models import RobotModel, SingleIntegrator
 from ..rigid_motion import RigidMotion
-from ..spec import Formation
 from .config import BoxInitial, GaussianInitial, SettleModel, StudyConfig
 from .groups import Group
 from .sampling import model_initial_states, trial_initial_states

@@ -20,8 +20,8 @@ from typing import Any
 
 from ..controllers import LAWS, Law
 from ..errors import ParameterError, UserInputError
+from ..formation.spec import Formation
 from ..sensing import Faults, Sensing, Stop
-from ..spec import Formation
 from ..validation import choices, nearest
 from .config import StudyConfig
 

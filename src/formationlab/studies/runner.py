@@ -48,9 +48,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..controllers import LAWS, Law
 from ..errors import ParameterError
+from ..formation.spec import Formation
 from ..models import RobotModel, SingleIntegrator
 from ..sensing import Faults, Sensing, delay_steps
-from ..spec import Formation
 from ..validation import positive, whole
 from ..validation import seed as check_seed
 from .chunks import ChunkTask, plan_chunks, run_chunk

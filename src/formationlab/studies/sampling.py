@@ -31,8 +31,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import ParameterError
+from ..formation.spec import Formation
 from ..models import RobotModel
-from ..spec import Formation
 from ..validation import seed as check_seed
 from .config import BoxInitial, GaussianInitial
 

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..dynamics import System
-from ..spec import Formation
+from ..formation.spec import Formation
 
 __all__ = [
     "EDGE_ERRORS_MAX",

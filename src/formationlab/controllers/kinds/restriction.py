@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ...geometry import cross2
+from ...formation.geometry import cross2
 from . import formula
 
 __all__ = [

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import FormationError
+from ..errors import FormationError
 from .geometry import cross
 
 __all__ = [

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._jit import formula
+from .._jit import formula
 
 __all__ = ["cross", "cross2", "pair_vectors", "parity", "perp", "scatter_rows", "triple_products"]
 

@@ -25,9 +25,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
-from .errors import FormationError
+from ..errors import FormationError
+from ..validation import suggest
 from .graph import complete_edges
-from .validation import suggest
 
 __all__ = [
     "BUILDERS",

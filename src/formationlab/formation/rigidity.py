@@ -183,7 +183,7 @@ def independent_edges(edges: NDArray[np.int64], n: int) -> int:
     pebbles a search needs are usually close; the game stops once ``2n - 3``
     edges are independent.
     """
-    from ._pebble import pebble_game
+    from .pebble import pebble_game
 
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     if n < 2 or len(edges) == 0:

@@ -32,9 +32,9 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import FormationError
-from .resources import check_memory
-from .validation import choices
+from ..errors import FormationError
+from ..resources import check_memory
+from ..validation import choices
 
 __all__ = ["LATTICES", "LatticeKind", "lattice"]
 

@@ -33,11 +33,11 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import FormationError
+from ..errors import FormationError
+from ..validation import coordinates
 from .geometry import parity
 from .graph import as_edges, complete_edges, edges_connected, is_rigid
 from .orientation import alpha_from_shape, both_orders, neighbour_triples, switching_surfaces
-from .validation import coordinates
 
 __all__ = [
     "DENSE_LIMIT",
@@ -749,7 +749,7 @@ class Formation:
             iu = np.triu_indices(self.n, k=1)
             pi, pj = iu
         else:  # only pairs that could touch
-            from .neighbours import close_pairs
+            from ..neighbours import close_pairs
 
             pi, pj = close_pairs(arr, float(self.diameters.max())).T
         diff = arr[..., pj, :] - arr[..., pi, :]

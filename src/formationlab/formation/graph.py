@@ -2,8 +2,8 @@
 
 Edges are pairs ``(i, j)`` with ``i < j``, 0-based, shape ``(m, 2)``; users give
 them 1-based (``one_based=True``). Builders of graphs from points (Delaunay,
-k-nearest, ...) are in :mod:`formationlab.graphs`; the rigidity check for large
-graphs in :mod:`formationlab.rigidity`.
+k-nearest, ...) are in :mod:`formationlab.formation.graphs`; the rigidity check for large
+graphs in :mod:`formationlab.formation.rigidity`.
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import FormationError
-from .resources import check_memory
+from ..errors import FormationError
+from ..resources import check_memory
 
 __all__ = [
     "DENSE_RIGIDITY_MAX",
@@ -119,7 +119,7 @@ def is_rigid(edges: NDArray[np.integer], n: int, *, method: str = "auto") -> boo
         ``"dense"``: the rank of the dense rigidity matrix at a generic (seeded
         random) placement, so the answer is the graph's, not a particular
         shape's; ``"pebble"``: rigid bodies and the pebble game
-        (:func:`formationlab.rigidity.is_generically_rigid`, exact, for any
+        (:func:`formationlab.formation.rigidity.is_generically_rigid`, exact, for any
         size); ``"auto"``: dense up to :data:`DENSE_RIGIDITY_MAX` robots.
     """
     if method not in ("auto", "dense", "pebble"):

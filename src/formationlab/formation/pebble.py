@@ -1,4 +1,4 @@
-"""The (2, 3) pebble game, compiled (private to :mod:`formationlab.rigidity`).
+"""The (2, 3) pebble game, compiled (private to :mod:`formationlab.formation.rigidity`).
 
 Jacobs and Hendrickson, "An algorithm for two-dimensional rigidity
 percolation: the pebble game", J. Computational Physics 137 (1997). Every
