@@ -28,9 +28,9 @@ import time
 import numpy as np
 
 import formationlab as fl
-from formationlab.analysis import Tolerances
 from formationlab.equilibria import settle
 from formationlab.integrators import ImplicitEuler
+from formationlab.outcomes.analysis import Tolerances
 from formationlab.studies.batch import run_batch
 from formationlab.studies.config import BoxInitial
 from formationlab.studies.sampling import trial_initial_states

@@ -32,9 +32,9 @@ import numba
 import numpy as np
 
 import formationlab as fl
-from formationlab.analysis import Tolerances
 from formationlab.engine.trials import run_trials
 from formationlab.models import DoubleIntegrator, SingleIntegrator, Unicycle
+from formationlab.outcomes.analysis import Tolerances
 from formationlab.studies.config import BoxInitial
 from formationlab.studies.sampling import model_initial_states, trial_initial_states
 

@@ -80,9 +80,10 @@ def test_the_law_policy_reaches_the_triangle_and_is_simulate():
     assert all(term.values()) and not any(trunc.values())
     assert {i["outcome"] for i in info.values()} == {"desired"}
     assert env.agents == [] and env.t < sc.duration
-    errors = fl.analysis.distance_errors(sc.formation, xs[-1])
-    assert np.abs(errors).max() <= fl.analysis.Tolerances().distance
-    assert np.abs(fl.analysis.distance_errors(sc.formation, xs[-2])).max() > 1e-2  # first time
+    errors = fl.outcomes.analysis.distance_errors(sc.formation, xs[-1])
+    assert np.abs(errors).max() <= fl.outcomes.analysis.Tolerances().distance
+    first = fl.outcomes.analysis.distance_errors(sc.formation, xs[-2])
+    assert np.abs(first).max() > 1e-2  # first time
     # the reward is the negative local error: robot 1's edges are 1-2 and 1-3
     for robot, (e, f) in {"robot_1": (0, 1), "robot_2": (0, 2), "robot_3": (1, 2)}.items():
         assert rew[robot] == pytest.approx(-(abs(errors[e]) + abs(errors[f])), abs=1e-15)
@@ -299,4 +300,4 @@ def test_the_example_reaches_the_desired_formation(capsys):
     out = capsys.readouterr().out
     assert out.startswith("outcome: desired at t = ")
     errors = [float(e) for e in re.findall(r"= ([+-]\d\.\d+) m", out)]
-    assert len(errors) == 3 and max(map(abs, errors)) <= fl.analysis.Tolerances().distance
+    assert len(errors) == 3 and max(map(abs, errors)) <= fl.outcomes.analysis.Tolerances().distance

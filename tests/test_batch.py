@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 import formationlab as fl
-from formationlab.analysis import classify
 from formationlab.controllers import SignedAreaLaw, SquaredDistanceLaw
 from formationlab.errors import FormationError, ParameterError
+from formationlab.outcomes.analysis import classify
 from formationlab.studies import batch
 from formationlab.studies.batch import BatchResult, classify_batch, run_batch
 

@@ -310,7 +310,7 @@ import importlib.abc, runpy, sys
 
 class Pause(importlib.abc.MetaPathFinder):
     def find_spec(self, name, path, target=None):
-        if name == "formationlab.analysis":
+        if name == "formationlab.outcomes.analysis":
             print("paused in the package import", file=sys.stderr, flush=True)
             sys.stdin.readline()
         return None

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import formationlab as fl
-from formationlab.batch_outcomes import BatchResult
+from formationlab.outcomes.batch import BatchResult
 from formationlab.status import DIVERGED_SCALE, Status
 from formationlab.studies.batch import run_batch
 

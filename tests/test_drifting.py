@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 import formationlab as fl
-from formationlab.analysis import classify, final_motion
-from formationlab.batch_outcomes import classify_batch
 from formationlab.io.scenario import load_scenario
-from formationlab.rigid_motion import rigid_motion
+from formationlab.outcomes.analysis import classify, final_motion
+from formationlab.outcomes.batch import classify_batch
+from formationlab.outcomes.rigid_motion import rigid_motion
 from formationlab.studies.batch import run_batch
 from formationlab.studies.config import BoxInitial
 from formationlab.studies.sampling import trial_initial_states

@@ -34,7 +34,7 @@ from formationlab.agents import (
 )
 from formationlab.dynamics import System
 from formationlab.errors import ParameterError
-from formationlab.rigid_motion import rigid_motion
+from formationlab.outcomes.rigid_motion import rigid_motion
 from formationlab.scenario import parse_scenario
 from formationlab.sensing import Sensing
 

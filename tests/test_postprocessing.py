@@ -74,8 +74,9 @@ def ten_run():
 def test_sliced_sparse_postprocessing_equals_the_dense_whole(ten_run, monkeypatch):
     """V, sigma, distance errors, speeds and the outcome: over the lists (DENSE_LIMIT
     patched to 0) and seven states at a time, against the dense arithmetic at once."""
-    from formationlab import analysis, chunked
+    from formationlab import chunked
     from formationlab.controllers import angle_restricted, distance
+    from formationlab.outcomes import analysis
 
     res = ten_run
     f, law = res.formation, res.law
@@ -142,7 +143,7 @@ def test_the_slice_budget_follows_the_saved_states() -> None:
 
 @pytest.mark.parametrize("seed", range(8))
 def test_sparse_contact_test_equals_all_pairs(seed: int, monkeypatch) -> None:
-    from formationlab import analysis
+    from formationlab.outcomes import analysis
 
     rng = np.random.default_rng(seed)
     n = 40
@@ -162,7 +163,7 @@ def test_sparse_contact_test_equals_all_pairs(seed: int, monkeypatch) -> None:
 
 
 def test_error_statistics_against_numbers_by_hand() -> None:
-    from formationlab.analysis import error_statistics
+    from formationlab.outcomes.analysis import error_statistics
 
     e = [-0.3, 0.1, 0.0, 0.2, -0.05]  # |e| sorted: 0, 0.05, 0.1, 0.2, 0.3
     s = error_statistics(e, tolerance=0.1)

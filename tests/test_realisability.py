@@ -82,7 +82,7 @@ def test_a_template_formation_is_realisable_by_construction(rng: np.random.Gener
     assert realisability_problems(f) == []
     best, err = best_realisation(f)
     assert err < 1e-9
-    np.testing.assert_allclose(fl.analysis.distance_errors(f, best), 0.0, atol=1e-9)
+    np.testing.assert_allclose(fl.outcomes.analysis.distance_errors(f, best), 0.0, atol=1e-9)
 
 
 BAD_TRIANGLE = """\

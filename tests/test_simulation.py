@@ -155,16 +155,16 @@ def test_net_speed_of_sampled_chatter_and_of_steady_motion():
     t = dt * np.arange(40)
     chatter = np.zeros((40, 1, 2))
     chatter[:, 0, 0] = 0.25 + 5e-4 * (-1.0) ** np.arange(40)
-    ns = fl.analysis.net_speed(t, chatter, 0.01)  # 10 steps back: an even number
+    ns = fl.outcomes.analysis.net_speed(t, chatter, 0.01)  # 10 steps back: an even number
     assert np.isnan(ns[:10]).all()  # no sample 10 ms back: unknown
     assert np.all(ns[10:] < 1e-12)
-    odd = fl.analysis.net_speed(t, chatter, 0.009)  # 9 steps: one kick of 1e-3 remains
+    odd = fl.outcomes.analysis.net_speed(t, chatter, 0.009)  # 9 steps: one kick of 1e-3 remains
     np.testing.assert_allclose(odd[9:], 1e-3 / 0.009, rtol=1e-9)
     steady = np.zeros((40, 2, 2))
     steady[:, :, 1] = 0.3 * t[:, None]
-    np.testing.assert_allclose(fl.analysis.net_speed(t, steady, 0.01)[10:], 0.3, rtol=1e-9)
+    np.testing.assert_allclose(fl.outcomes.analysis.net_speed(t, steady, 0.01)[10:], 0.3, rtol=1e-9)
     # samples sparser than the window: over the shortest saved interval >= window
-    sparse = fl.analysis.net_speed(t[::4], steady[::4], 0.01)
+    sparse = fl.outcomes.analysis.net_speed(t[::4], steady[::4], 0.01)
     assert np.isnan(sparse[:3]).all()
     np.testing.assert_allclose(sparse[3:], 0.3, rtol=1e-9)
 

@@ -121,7 +121,7 @@ def test_an_orientation_from_a_lattice_skips_exactly_its_collinear_triples():
     assert f.collinear_skipped == int(collinear.sum()) > 0
     np.testing.assert_array_equal(f.restricted_triples, t[~collinear])
     # the orientation still drives the lattice to itself: every kept triple agrees
-    assert fl.analysis.orientation_agreement(f, tpl) == (len(t) - collinear.sum(), 0)
+    assert fl.outcomes.analysis.orientation_agreement(f, tpl) == (len(t) - collinear.sum(), 0)
 
 
 def test_a_component_whose_triples_are_all_collinear_is_refused():

@@ -13,9 +13,9 @@ import pandas as pd
 import pytest
 
 import formationlab as fl
-from formationlab.analysis import OUTCOMES
 from formationlab.errors import ParameterError, ScenarioError
 from formationlab.io.trials import ChunkFolder, read_trials, write_trials
+from formationlab.outcomes.analysis import OUTCOMES
 from formationlab.studies import parse_study, run_study, study_groups, wilson_interval
 from formationlab.studies.config import BoxInitial, GaussianInitial
 from formationlab.studies.runner import StudySetup, study_identity

@@ -31,7 +31,7 @@ import numpy as np
 import formationlab as fl
 from formationlab.agents import measure_drift, own_distances, steady_motion
 from formationlab.plotting.fonts import font_context
-from formationlab.rigid_motion import rigid_motion
+from formationlab.outcomes.rigid_motion import rigid_motion
 from formationlab.scenario import parse_scenario
 from formationlab.sensing import Sensing
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from formationlab.agents import law_policy, parallel_env
-from formationlab.analysis import distance_errors, edge_labels
+from formationlab.outcomes.analysis import distance_errors, edge_labels
 from formationlab.io.scenario import load_scenario
 
 scenario = load_scenario(Path(__file__).resolve().parents[1] / "paper-simulation-1.toml")

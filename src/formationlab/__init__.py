@@ -18,7 +18,6 @@ from . import (
     _command_start,  # noqa: F401 - Ctrl-C while the command starts: no traceback
     _numba_cache,  # noqa: F401 - checks numba's cache before any kernel is imported
 )
-from .analysis import OUTCOMES, Tolerances, classify, distance_errors, triangle_orientation
 from .controllers import LAWS, AngleRestrictedLaw, DistanceLaw, Law, Repulsion, get_law
 from .dynamics import SingleIntegrator, System
 from .formation.graphs import build_edges
@@ -33,6 +32,7 @@ from .integrators import (
     Integrator,
     get_integrator,
 )
+from .outcomes.analysis import OUTCOMES, Tolerances, classify, distance_errors, triangle_orientation
 from .potentials import dphi_dr, khatib, phi, psi, triple_products
 from .sensing import Faults, Sensing, Stop
 from .simulation import SimulationResult, simulate

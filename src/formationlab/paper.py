@@ -28,11 +28,11 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from .analysis import Tolerances, triangle_orientation
 from .controllers import AngleRestrictedLaw
 from .errors import ParameterError
 from .formation.spec import Formation
 from .integrators import get_integrator
+from .outcomes.analysis import Tolerances, triangle_orientation
 from .simulation import SimulationResult, simulate
 from .status import Status
 

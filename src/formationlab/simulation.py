@@ -20,17 +20,6 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .analysis import (
-    Outcome,
-    Tolerances,
-    classify,
-    converged_time,
-    distance_errors,
-    edge_labels,
-    error_statistics,
-    final_motion,
-    net_speed,
-)
 from .chunked import over_time
 from .controllers import LAWS, Law
 from .dynamics import System
@@ -41,8 +30,19 @@ from .integrators.compiled import compiled_terms, run_euler_compiled
 from .integrators.diagnostics import switching_diagnostics
 from .marching import March, centroid_velocity, heading_spread
 from .models import MODELS, RobotModel, SingleIntegrator
+from .outcomes.analysis import (
+    Outcome,
+    Tolerances,
+    classify,
+    converged_time,
+    distance_errors,
+    edge_labels,
+    error_statistics,
+    final_motion,
+    net_speed,
+)
+from .outcomes.rigid_motion import RigidMotion
 from .registry import resolve
-from .rigid_motion import RigidMotion
 from .sensing import Faults, Sensing
 from .status import Status
 from .validation import whole
@@ -222,7 +222,7 @@ class SimulationResult:
         """Net speed over the last ``tolerances.window`` seconds of the run.
 
         ``max_i |q_i(t_end) - q_i(t_j)| / (t_end - t_j)`` with ``t_j`` the latest saved
-        time at least ``window`` before the end (:func:`formationlab.analysis.net_speed`):
+        time at least ``window`` before the end (:func:`formationlab.outcomes.analysis.net_speed`):
         with ``save_every`` thinning the samples, over the shortest saved interval of at
         least ``window``; None when the saved run is shorter than ``window``.
         """
@@ -235,7 +235,7 @@ class SimulationResult:
         return final_motion(self.t, self.q, tolerances)
 
     def outcome(self, tolerances: Tolerances | None = None) -> Outcome:
-        """Outcome of the final state (see :mod:`formationlab.analysis`), at the law's points.
+        """Outcome of the final state (:mod:`formationlab.outcomes.analysis`), at the law's points.
 
         With marching, the state is judged in the frame of the points' centroid.
 
@@ -268,7 +268,7 @@ class SimulationResult:
         ``message``, ``n_robots``, ``n_edges``, ``final_positions`` (``[[x, y], ...]``,
         robot 1 first), ``distance_errors`` (final ``r_ij - d_ij`` keyed by edge label
         ``"i-j"``, 1-based), ``max_distance_error``, ``distance_error_stats``
-        (:func:`~formationlab.analysis.error_statistics` of the final errors: max, mean,
+        (:func:`~formationlab.outcomes.analysis.error_statistics` of the final errors: max, mean,
         rms, percentiles, how many within the tolerance), ``converged_time`` (or None),
         ``final_time``, ``orientation`` (``"ccw"``/``"cw"`` of robots 1, 2, 3),
         ``active_restrictions_final`` (labels) and ``active_restrictions_final_count``,
@@ -291,7 +291,7 @@ class SimulationResult:
         up to :data:`LIST_LIMIT` surfaces; beyond, the statistics and counts remain
         (:meth:`edge_table` holds every edge; ``formationlab run`` writes it to a file).
         """
-        from .analysis import triangle_orientation
+        from .outcomes.analysis import triangle_orientation
 
         tol = tolerances or Tolerances()
         n, m = self.formation.n, len(self.formation.edges)

@@ -44,7 +44,7 @@ step is rejected by the package's contact rule (:meth:`formationlab.System.step_
 contact at the end of the step, robots passing through each other, non-finite states).
 
 Every agent terminates when the desired formation is reached
-(:func:`formationlab.analysis.classify` gives ``"desired"`` at the given tolerances)
+(:func:`formationlab.outcomes.analysis.classify` gives ``"desired"`` at the given tolerances)
 or at a rejected step (the state stays the last accepted one, as in the stepping
 driver); every agent is truncated after ``duration / dt`` steps. ``infos`` hold the
 time ``t``, the episode's ``seed``, the agent's ``error`` and, at the end, the
@@ -76,10 +76,10 @@ except ImportError as exc:  # pragma: no cover - the extra is installed where te
         "extra: pip install formationlab[agents]"
     ) from exc
 
-from ..analysis import Tolerances, classify, distance_errors
 from ..errors import FormationError, ParameterError
 from ..models import DoubleIntegrator, Unicycle
 from ..models.transforms import NearIdentity, heading_vectors
+from ..outcomes.analysis import Tolerances, classify, distance_errors
 from ..scenario.parse import Scenario, closed_loop, parse_scenario
 from ..sensing import Channel, Faults, Seed, Sensing, rotate
 from ..simulation import initial_state
@@ -153,7 +153,7 @@ class FormationEnv(ParallelEnv):
             )
         if not isinstance(tolerances, Tolerances | None):
             raise ParameterError(
-                f"tolerances must be formationlab.analysis.Tolerances, got {tolerances!r}"
+                f"tolerances must be formationlab.outcomes.analysis.Tolerances, got {tolerances!r}"
             )
         dt = getattr(scenario.integrator, "dt", None)
         if dt is None:
@@ -470,7 +470,7 @@ def parallel_env(
     jitter : float
         Standard deviation (m) of a random perturbation of the start, per position.
     tolerances : Tolerances, optional
-        When the formation counts as reached (:mod:`formationlab.analysis`).
+        When the formation counts as reached (:mod:`formationlab.outcomes.analysis`).
 
     Returns
     -------

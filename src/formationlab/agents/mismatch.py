@@ -77,14 +77,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..analysis import distance_errors, orientation_agreement
 from ..controllers import Law
 from ..errors import ParameterError
 from ..formation.geometry import cross, perp
 from ..formation.realisability import best_realisation
 from ..formation.spec import Formation
 from ..models import SingleIntegrator
-from ..rigid_motion import RigidMotion, field_motion
+from ..outcomes.analysis import distance_errors, orientation_agreement
+from ..outcomes.rigid_motion import RigidMotion, field_motion
 from ..sensing import Channel, Sensing, local_controls, measured
 
 __all__ = [
@@ -227,7 +227,8 @@ class SteadyMotion:
 
     @property
     def motion(self) -> RigidMotion:
-        """As the :class:`~formationlab.rigid_motion.RigidMotion` of an exact rigid field."""
+        """As the :class:`~formationlab.outcomes.rigid_motion.RigidMotion` of an exact rigid
+        field."""
         return field_motion(self.q, self.velocity, self.omega)
 
 

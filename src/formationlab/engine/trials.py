@@ -19,13 +19,13 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from ..analysis import Tolerances
 from ..controllers import Law
 from ..dynamics import System
 from ..formation.spec import Formation
 from ..marching.terms import march_terms
 from ..models import RobotModel
 from ..models.terms import HEADING, NEAR_IDENTITY, model_terms
+from ..outcomes.analysis import Tolerances
 from ..safety.obstacle_terms import obstacle_terms
 from ..safety.stage import CENTRALIZED, NONE, filter_terms
 from ..sensing import BLOCK, Channel, Faults, Seed, Sensing

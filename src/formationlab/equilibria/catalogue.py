@@ -18,10 +18,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..analysis import Tolerances
 from ..controllers import Law
 from ..dynamics import System
 from ..formation.spec import Formation
+from ..outcomes.analysis import Tolerances
 from .classify import Equilibrium, classify_equilibrium
 from .dedup import canonical_pose, same_equilibrium
 from .refine import refine

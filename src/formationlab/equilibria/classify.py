@@ -37,10 +37,10 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from ..analysis import Tolerances, classify
 from ..controllers import Law
 from ..formation.spec import Formation
-from ..rigid_motion import field_motion
+from ..outcomes.analysis import Tolerances, classify
+from ..outcomes.rigid_motion import field_motion
 from .jacobian import jacobian, reduced_eigenvalues
 from .refine import Refined
 

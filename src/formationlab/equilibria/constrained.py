@@ -44,8 +44,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from ..analysis import Tolerances, classify
 from ..dynamics import System
+from ..outcomes.analysis import Tolerances, classify
 from .classify import Equilibrium, Stability
 from .jacobian import complement, rigid_modes
 

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..analysis import Tolerances
 from ..controllers import Law
 from ..formation.spec import Formation
+from ..outcomes.analysis import Tolerances
 from .classify import Equilibrium, classify_equilibrium
 from .refine import refine
 

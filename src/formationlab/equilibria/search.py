@@ -17,14 +17,14 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from ..analysis import Tolerances
-from ..batch_outcomes import BatchResult
 from ..controllers import Law
 from ..dynamics import System
 from ..errors import ParameterError
 from ..formation.spec import Formation
 from ..integrators import RK4, FixedStepIntegrator, ImplicitEuler, StopRule, drive
 from ..integrators.substeps import Substepped
+from ..outcomes.analysis import Tolerances
+from ..outcomes.batch import BatchResult
 from ..validation import fraction, whole
 
 __all__ = ["random_starts", "settle"]
@@ -100,7 +100,7 @@ def settle(
     ``speed`` (the driver's stop rule, checked every 10 steps: on a sliding-mode
     equilibrium the one-sided fields do not vanish, the motion does). A trial that
     never stops but keeps its shape over the last ``tolerances.drift_window`` seconds
-    is ``drifting`` or ``rotating`` (:mod:`formationlab.rigid_motion`).
+    is ``drifting`` or ``rotating`` (:mod:`formationlab.outcomes.rigid_motion`).
 
     The default integrator is ``RK4(dt=0.01)`` for a smooth law and
     ``ImplicitEuler(dt=0.01)`` for a switching one: explicit schemes chatter

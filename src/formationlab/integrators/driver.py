@@ -25,7 +25,7 @@ its own:
 With ``window`` the positions of the live trials at step ``n_steps - window`` (if
 it is not negative) are kept (``Stepped.q_window``): the start of the drift window over which the
 rigid motion of a formation that never stops is fitted
-(:mod:`formationlab.rigid_motion`).
+(:mod:`formationlab.outcomes.rigid_motion`).
 
 With sensing (:attr:`System.sensed`) the driver makes the measurement channel of its
 trials (:meth:`System.channel`, one seed per trial) and binds it to the system at each

@@ -105,7 +105,7 @@ def _layout(
     result: Any, attrs: dict[str, Any] | None
 ) -> tuple[dict[str, Any], dict[str, Any], dict[str, Series], dict[str, Any]]:
     """Coordinates, the variables that do not grow with time, the time series, attributes."""
-    from ..analysis import distance_errors
+    from ..outcomes.analysis import distance_errors
 
     f = result.formation
     n = f.n

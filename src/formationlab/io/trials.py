@@ -21,7 +21,7 @@ one per swept parameter   its value; NaN for a law the parameter does not apply 
 ``steps``                 Euler steps taken (a trial stops once converged)
 ``drift_vx, drift_vy``    velocity of the centroid at the end, m/s, of the rigid motion
                           fitted over the last ``drift_window`` seconds
-                          (:mod:`formationlab.rigid_motion`): the drift of a
+                          (:mod:`formationlab.outcomes.rigid_motion`): the drift of a
                           ``drifting`` or ``rotating`` trial; NaN when the trial
                           stopped before that window (or the run is shorter)
 ``drift_speed``           largest robot speed in that rigid motion, m/s

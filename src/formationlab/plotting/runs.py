@@ -16,7 +16,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
-from ..analysis import distance_errors
+from ..outcomes.analysis import distance_errors
 from .fonts import displayable, font_context
 from .many import (
     COLLECTION_LIMIT,

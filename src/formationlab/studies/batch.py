@@ -13,7 +13,7 @@ surface across which Euler chatters), when a step is rejected by the contact
 rule of :meth:`formationlab.dynamics.System.step_verdict` (outcome
 ``"collision"``, the simulator's ``"step-collision"`` or ``"step-too-large"``),
 or at ``duration``. The final states are classified exactly as
-:func:`formationlab.analysis.classify` does (:func:`classify_batch` is its
+:func:`formationlab.outcomes.analysis.classify` does (:func:`classify_batch` is its
 vectorised twin).
 
 Two backends compute the same thing: ``"numba"`` (compiled, parallel over
@@ -44,8 +44,6 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..analysis import Tolerances
-from ..batch_outcomes import BatchResult, classify_batch, max_distance_errors
 from ..controllers import Law
 from ..dynamics import System
 from ..engine.trials import TrialRun, run_trials
@@ -54,6 +52,8 @@ from ..formation.spec import Formation
 from ..integrators import Euler, StopRule, drive
 from ..integrators.base import steps_for
 from ..models import RobotModel, SingleIntegrator
+from ..outcomes.analysis import Tolerances
+from ..outcomes.batch import BatchResult, classify_batch, max_distance_errors
 from ..sensing import Faults, Seed, Sensing
 from ..validation import positive, whole
 

@@ -19,11 +19,11 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
-from ..analysis import Tolerances
 from ..controllers import Law
 from ..formation.spec import Formation
 from ..models import RobotModel, SingleIntegrator
-from ..rigid_motion import RigidMotion
+from ..outcomes.analysis import Tolerances
+from ..outcomes.rigid_motion import RigidMotion
 from .config import BoxInitial, GaussianInitial, SettleModel, StudyConfig
 from .groups import Group
 from .sampling import model_initial_states, trial_initial_states

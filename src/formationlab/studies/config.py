@@ -25,7 +25,8 @@ Every key, its default and its meaning (``docs/studies.md`` shows examples):
 shape = 2e-2, drift_window = 2.0 }``)
     Of the outcome classification (:class:`formationlab.Tolerances`); ``window``
     is also the interval of the kernel's convergence test, ``shape`` and
-    ``drift_window`` decide ``drifting`` and ``rotating`` (:mod:`formationlab.rigid_motion`).
+    ``drift_window`` decide ``drifting`` and ``rotating``
+    (:mod:`formationlab.outcomes.rigid_motion`).
 ``chunk_size`` (int >= 1, default 1000)
     Trials per unit of work (a chunk is what a worker runs and what ``--resume``
     keeps). Results do not depend on it.
@@ -58,7 +59,7 @@ from pydantic import (
     model_validator,
 )
 
-from ..analysis import Tolerances
+from ..outcomes.analysis import Tolerances
 from ..validation import validation_error
 
 __all__ = ["BoxInitial", "GaussianInitial", "SettleModel", "StudyConfig", "parse_study"]

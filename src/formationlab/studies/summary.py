@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
-from ..analysis import OUTCOMES
+from ..outcomes.analysis import OUTCOMES
 
 __all__ = ["Z95", "study_outcomes", "summarize_groups", "wilson_interval"]
 

@@ -32,15 +32,12 @@ the default 2 s).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .formation.geometry import cross, perp
-
-if TYPE_CHECKING:
-    from .analysis import Tolerances
+from ..formation.geometry import cross, perp
+from .tolerances import Tolerances
 
 __all__ = ["RigidMotion", "field_motion", "rigid_motion", "rigid_outcome"]
 
@@ -169,7 +166,7 @@ def rigid_outcome(motion: RigidMotion, tolerances: Tolerances) -> NDArray[np.int
     Rigid: ``shape_rate <= tolerances.shape < speed`` (the shape kept while some
     robot moves faster than that). Rotating: rigid and ``spin > tolerances.shape``.
     An unknown motion (NaN) is not rigid. Only states whose distances are not met
-    and that have not stopped reach this decision (:func:`formationlab.analysis.classify`).
+    and that have not stopped reach this decision (:func:`formationlab.outcomes.analysis.classify`).
     """
     with np.errstate(invalid="ignore"):
         rigid = (motion.shape_rate <= tolerances.shape) & (motion.speed > tolerances.shape)

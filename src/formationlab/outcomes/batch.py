@@ -3,7 +3,7 @@
 Every path that ends many trials at once (the studies' kernel and driver, the
 settling of equilibria) returns a :class:`BatchResult`, classified by
 :func:`classify_batch`, the vectorised twin of
-:func:`formationlab.analysis.classify` (same outcomes, same tolerances).
+:func:`formationlab.outcomes.analysis.classify` (same outcomes, same tolerances).
 """
 
 from __future__ import annotations
@@ -13,11 +13,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..formation.spec import Formation
+from ..status import DIVERGED_SCALE, Status
+from ..validation import COORDINATE_LIMIT
 from .analysis import OUTCOMES, Tolerances
-from .formation.spec import Formation
 from .rigid_motion import DRIFTING, ROTATING, RigidMotion, rigid_motion, rigid_outcome
-from .status import DIVERGED_SCALE, Status
-from .validation import COORDINATE_LIMIT
 
 __all__ = ["BatchResult", "classify_batch", "max_distance_errors"]
 
@@ -36,7 +36,7 @@ class BatchResult:
     u_final : ndarray, shape (B, n, 2)
         Controls at ``q_final``.
     outcome : ndarray of str, shape (B,)
-        One of :data:`formationlab.analysis.OUTCOMES` per trial.
+        One of :data:`formationlab.outcomes.analysis.OUTCOMES` per trial.
     max_distance_error : ndarray, shape (B,)
         Largest ``|r_ij - d_ij|`` over the edges at ``q_final``.
     converged_time : ndarray, shape (B,)
@@ -61,7 +61,7 @@ class BatchResult:
     motion : RigidMotion
         Batch ``(B,)``: the rigid motion fitted between the positions at step
         ``window_step`` (``drift_window`` before the end of the full duration) and
-        the final ones (:func:`formationlab.rigid_motion.rigid_motion`); NaN for a
+        the final ones (:func:`formationlab.outcomes.rigid_motion.rigid_motion`); NaN for a
         trial that ended before ``window_step``. Its ``velocity`` and ``omega``
         are the drift of a ``drifting`` or ``rotating`` trial.
     """
@@ -186,14 +186,14 @@ def classify_batch(
     net_speed: NDArray[np.float64] | None = None,
     motion: RigidMotion | None = None,
 ) -> NDArray[np.str_]:
-    """:func:`formationlab.analysis.classify` of every trial: ``(B, n, 2) -> (B,)`` str.
+    """:func:`formationlab.outcomes.analysis.classify` of every trial: ``(B, n, 2) -> (B,)`` str.
 
     ``contact`` ``(B,)`` marks trials stopped at a step rejected for reaching contact;
     ``net_speed`` ``(B,)`` is each trial's net speed over its last check interval (NaN
     where unknown), which counts the trial as stopped when ``<= tolerances.speed``,
     as the instantaneous speed does; ``motion`` (batch ``(B,)``) the rigid motion over
     the drift window, which makes a moving trial ``drifting`` or ``rotating``
-    (:func:`formationlab.rigid_motion.rigid_outcome`).
+    (:func:`formationlab.outcomes.rigid_motion.rigid_outcome`).
     """
     tol = tolerances or Tolerances()
     q = np.asarray(q, dtype=float)

@@ -18,7 +18,7 @@ One classification is shared by every command (``run``, ``paper``, ``study``,
     distances not met, not stopped, but moving as a rigid body: the shape kept
     over the last ``Tolerances.drift_window`` seconds while the formation
     translates (a relative equilibrium of the closed loop,
-    :mod:`formationlab.rigid_motion`, ``docs/drifting.md``);
+    :mod:`formationlab.outcomes.rigid_motion`, ``docs/drifting.md``);
 ``rotating``
     the same with a rotation: an angular velocity about a centre;
 ``not-converged``
@@ -32,26 +32,23 @@ Euler: the iterates chatter across a switching surface with a large ``|u_i|``
 at every step while the net motion, like the Filippov velocity there, is zero.
 A smooth motion faster than ``speed`` fails both tests.
 
-**Moving rigidly** is decided by :func:`formationlab.rigid_motion.rigid_outcome`
+**Moving rigidly** is decided by :func:`formationlab.outcomes.rigid_motion.rigid_outcome`
 from the positions ``drift_window`` seconds before the end
-(:func:`formationlab.rigid_motion.rigid_motion`): shape rate at most
+(:func:`formationlab.outcomes.rigid_motion.rigid_motion`): shape rate at most
 ``Tolerances.shape`` while the rigid motion is faster than that.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Literal
-
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .chunked import over_time, time_slices
-from .formation.geometry import cross
-from .formation.spec import DENSE_LIMIT, Formation
-from .neighbours import close_pairs
+from ..chunked import over_time, time_slices
+from ..formation.geometry import cross
+from ..formation.spec import DENSE_LIMIT, Formation
+from ..neighbours import close_pairs
 from .rigid_motion import DRIFTING, NOT_RIGID, ROTATING, RigidMotion, rigid_motion, rigid_outcome
-from .validation import positive
+from .tolerances import OUTCOMES, Outcome, Tolerances
 
 __all__ = [
     "OUTCOMES",
@@ -69,62 +66,6 @@ __all__ = [
     "touching",
     "triangle_orientation",
 ]
-
-Outcome = Literal[
-    "desired", "mirror", "incorrect", "collision", "drifting", "rotating", "not-converged",
-    "diverged",
-]  # fmt: skip
-OUTCOMES: tuple[Outcome, ...] = (
-    "desired", "mirror", "incorrect", "collision", "drifting", "rotating", "not-converged",
-    "diverged",
-)  # fmt: skip
-
-
-@dataclass(frozen=True, kw_only=True)
-class Tolerances:
-    """Tolerances of the outcome classification.
-
-    Parameters
-    ----------
-    distance : float
-        Largest ``|r_ij - d_ij|`` over the edges for the distances to count as met.
-    speed : float
-        Largest speed for the robots to count as stopped: instantaneous,
-        ``max_i |u_i|``, or net over the last ``window`` seconds (module docstring).
-    window : float
-        Length ``T`` of the check interval of the net speed
-        ``max_i |q_i(t) - q_i(t - T)| / T``, seconds. The batched studies test
-        convergence every ``window`` seconds (``round(window / dt)`` steps).
-    shape : float
-        Largest shape rate, m/s, for a moving formation to count as rigid
-        (``drifting`` or ``rotating``): ``max_i |B_i - R A_i| / T`` after the best
-        rigid fit of the positions ``T = drift_window`` seconds apart
-        (:mod:`formationlab.rigid_motion`); the rigid motion must also move some
-        robot faster than this, and a rotation must move the robots about their
-        centroid faster than this to count as ``rotating``. The default 2e-2 m/s
-        (4 cm over the default window) lies above the shape rate that explicit
-        Euler's chatter on a switching surface leaves at ``dt = 1e-3`` (at most
-        1.1e-2 m/s, median 3e-3, over the moving trials of the hexagon's study) and
-        far below the drift speeds seen (0.24 to 1.2 m/s).
-    drift_window : float
-        The window ``T`` of the rigid-motion fit, seconds: the positions this long
-        before the end are compared with the final ones (a run shorter than this is
-        never ``drifting`` or ``rotating``). Rotations faster than ``pi / T`` rad/s alias.
-    """
-
-    distance: float = 1e-2
-    speed: float = 1e-3
-    window: float = 1e-2
-    shape: float = 2e-2
-    drift_window: float = 2.0
-
-    def __post_init__(self) -> None:
-        for name in ("distance", "speed", "window", "shape", "drift_window"):
-            positive(getattr(self, name), name, owner="tolerance")
-
-    def drift_steps(self, dt: float) -> int:
-        """Steps of ``dt`` in the drift window, ``max(1, round(drift_window / dt))``."""
-        return max(1, round(self.drift_window / dt))
 
 
 def distance_errors(formation: Formation, q: ArrayLike) -> NDArray[np.float64]:
