@@ -12,8 +12,6 @@ repulsion, and the angle-restricted sliding-mode law) and goes beyond it.
 ('desired', 'success')
 """
 
-from importlib.metadata import PackageNotFoundError, version
-
 from . import (
     _command_start,  # noqa: F401 - Ctrl-C while the command starts: no traceback
     _numba_cache,  # noqa: F401 - checks numba's cache before any kernel is imported
@@ -34,13 +32,11 @@ from .integrators import (
 )
 from .outcomes.analysis import OUTCOMES, Tolerances, classify, distance_errors, triangle_orientation
 from .potentials import dphi_dr, khatib, phi, psi, triple_products
+from .resources import package_version
 from .sensing import Faults, Sensing, Stop
 from .simulation import SimulationResult, simulate
 
-try:
-    __version__ = version("formationlab")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree
-    __version__ = "0.0.0"
+__version__ = package_version()
 
 
 def __getattr__(name: str) -> object:

@@ -8,10 +8,19 @@ numpy's allocation error after minutes, or the system's out-of-memory killer.
 from __future__ import annotations
 
 import os
+from importlib.metadata import PackageNotFoundError, version
 
 from .errors import FormationError
 
-__all__ = ["SHARE", "available_memory", "check_memory", "size"]
+__all__ = ["SHARE", "available_memory", "check_memory", "package_version", "size"]
+
+
+def package_version() -> str:
+    """The installed package's version ("0.0.0" when run from a source tree)."""
+    try:
+        return version("formationlab")
+    except PackageNotFoundError:  # pragma: no cover - running from a source tree
+        return "0.0.0"
 
 
 def available_memory() -> float | None:

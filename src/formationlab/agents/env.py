@@ -80,7 +80,7 @@ from ..errors import FormationError, ParameterError
 from ..models import DoubleIntegrator, Unicycle
 from ..models.transforms import NearIdentity, heading_vectors
 from ..outcomes.analysis import Tolerances, classify, distance_errors
-from ..scenario.parse import Scenario, closed_loop, parse_scenario
+from ..scenario import Scenario, closed_loop, parse_scenario
 from ..sensing import Channel, Faults, Seed, Sensing, rotate
 from ..simulation import initial_state
 from ..status import Status

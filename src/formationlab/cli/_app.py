@@ -192,9 +192,9 @@ app = typer.Typer(
 
 def _print_version(value: bool) -> None:
     if value:
-        from .. import __version__
+        from ..resources import package_version
 
-        typer.echo(f"formationlab {__version__}")
+        typer.echo(f"formationlab {package_version()}")
         raise typer.Exit(0)
 
 

@@ -244,8 +244,8 @@ def _write_summary(
     save_every: int,
     manifest: list[str],
 ) -> list[str]:
-    from .. import __version__
     from ..io.files import MANIFEST, atomic_write_json
+    from ..resources import package_version
     from ..simulation import LIST_LIMIT
 
     edges = sc.formation.edges
@@ -258,7 +258,7 @@ def _write_summary(
         **({"edges": (edges + 1).tolist()} if len(edges) <= LIST_LIMIT else {}),
         "save_every": save_every,
         "warnings": list(sc.warnings),
-        "formationlab_version": __version__,
+        "formationlab_version": package_version(),
         MANIFEST: manifest,
     }
     atomic_write_json(folder / "summary.json", data)
@@ -316,7 +316,7 @@ def _sensing_words(sc: Any) -> str:
 def _simulate(sc: Any, save_every: int, quiet: bool) -> Any:
     """Run ``sc`` (its closed loop: :func:`formationlab.scenario.run_scenario`) with a
     progress bar on a terminal (long runs only)."""
-    from ..scenario.parse import run_scenario
+    from ..scenario import run_scenario
 
     steps = sc.duration / getattr(sc.integrator, "dt", 1e-3)
     show = not quiet and err_console.is_terminal and steps * sc.n**2 > 2e5

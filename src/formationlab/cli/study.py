@@ -252,11 +252,11 @@ def _run_with_progress(run: Any, *args: Any, store: Any, quiet: bool = False, **
 def _write_outputs(
     out: Path, sc: Any, result: Any, identity: dict[str, Any], quiet: bool = False
 ) -> None:
-    from .. import __version__
     from ..io import atomic_write_json, atomic_write_text, save_figure
     from ..io.files import MANIFEST
     from ..io.trials import write_trials
     from ..plotting.studies import study_figures
+    from ..resources import package_version
 
     write_trials(result.trials, out / "trials.parquet")
     atomic_write_text(out / "scenario.toml", sc.text)
@@ -268,7 +268,7 @@ def _write_outputs(
         "scenario": sc.name,
         "scenario_file": sc.source,
         "command": "formationlab " + shlex.join(sys.argv[1:]) if sys.argv else None,
-        "formationlab_version": __version__,
+        "formationlab_version": package_version(),
         "fingerprint": identity["fingerprint"],
         **result.summary,
         MANIFEST: ["trials.parquet", "scenario.toml", *figures, "summary.json", "chunks"],

@@ -48,7 +48,7 @@ import functools
 import time
 from collections.abc import Callable
 from contextlib import nullcontext
-from typing import TYPE_CHECKING, Any, Concatenate, ParamSpec, TypeVar
+from typing import Any, Concatenate, ParamSpec, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -59,15 +59,29 @@ from ..status import Status
 from .diagnostics import SwitchMonitor
 from .stepped import Stepped, StopRule
 
-if TYPE_CHECKING:
-    from .base import FixedStepIntegrator
-
 __all__ = ["Stepped", "Stepping", "StopRule", "drive"]
 
 P = ParamSpec("P")
 R = TypeVar("R")
 
 Progress = Callable[[float], None]
+
+
+class Scheme(Protocol):
+    """What the driver needs of a fixed-step scheme (the contract of
+    :class:`formationlab.integrators.base.FixedStepIntegrator`, which the schemes subclass)."""
+
+    name: str
+    dt: float
+    explicit: bool  #: may step a sensed system (commands held over a step)
+    evaluations_per_step: int
+
+    def advance(
+        self, system: System, x: NDArray[np.float64], dt: float, counters: dict[str, float],
+        t: float = 0.0,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...  # fmt: skip
+
+
 #: the progress callback is called at least this often (seconds of wall time)
 PROGRESS_EVERY_S = 0.5
 
@@ -114,7 +128,7 @@ class Stepping:
     def __init__(
         self,
         system: System,
-        stepper: FixedStepIntegrator,
+        stepper: Scheme,
         x0: NDArray[np.float64],
         *,
         n_steps: int,
@@ -305,7 +319,7 @@ class Stepping:
 @_holding_formation
 def drive(
     system: System,
-    stepper: FixedStepIntegrator,
+    stepper: Scheme,
     x0: NDArray[np.float64],
     *,
     n_steps: int,

@@ -178,11 +178,11 @@ def _layout(
 
 def _attributes(result: Any, attrs: dict[str, Any] | None) -> dict[str, Any]:
     """The global attributes (module docstring), with ``attrs`` added."""
-    from .. import __version__
+    from ..resources import package_version
 
     glob: dict[str, Any] = {
         "title": "formationlab trajectory",
-        "formationlab_version": __version__,
+        "formationlab_version": package_version(),
         "law": json.dumps(to_jsonable(_params(result.law))),
         "integrator": json.dumps(to_jsonable(_params(result.integrator))),
         "model": json.dumps(to_jsonable(_params(result.model))),

@@ -15,7 +15,8 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 from numpy.typing import NDArray
 
-from .runs import _draw_graph, robot_colors
+from .colors import robot_colors
+from .runs import _draw_graph
 
 __all__ = ["agent_frame"]
 

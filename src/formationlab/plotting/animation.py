@@ -21,6 +21,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 from numpy.typing import ArrayLike, NDArray
 
+from .colors import robot_colors
 from .fonts import displayable, font_context
 from .many import (
     COLLECTION_LIMIT,
@@ -30,7 +31,6 @@ from .many import (
     even_indices,
     segments,
 )
-from .runs import robot_colors
 from .safety import ACTIVE_COLOR, draw_obstacles
 
 __all__ = ["TRAIL_VERTICES", "animate_run", "frame_indices", "path_indices", "used_indices"]

@@ -17,6 +17,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
 from ..outcomes.analysis import distance_errors
+from .colors import ROBOT_MAP, robot_colors
 from .fonts import displayable, font_context
 from .many import (
     COLLECTION_LIMIT,
@@ -40,21 +41,6 @@ __all__ = [
 
 
 #: colour map of robot numbers beyond ten robots
-_CMAP = "viridis"
-
-
-def robot_colors(n: int) -> Any:
-    """One colour per robot (tab10, then a continuous map for larger formations).
-
-    A list of RGBA tuples up to ten robots, an ``(n, 4)`` array beyond (indexable the same
-    way, and what collections take).
-    """
-    import matplotlib as mpl
-
-    if n <= 10:
-        cmap = mpl.colormaps["tab10"]
-        return [cmap(i) for i in range(n)]
-    return mpl.colormaps[_CMAP](np.linspace(0.0, 1.0, n))
 
 
 def _axes(ax: Axes | None, figsize: tuple[float, float] = (6.0, 4.0)) -> Axes:
@@ -219,7 +205,7 @@ def _many_robots(ax: Axes, result: Any, colors: Any) -> list[Any]:
     ax.update_datalim(np.concatenate([q[0], q[-1]]))
     norm = mpl.colors.Normalize(1, f.n)
     bar = ax.figure.colorbar(  # type: ignore[union-attr]
-        mpl.cm.ScalarMappable(norm=norm, cmap=_CMAP), ax=ax, shrink=0.8, pad=0.02
+        mpl.cm.ScalarMappable(norm=norm, cmap=ROBOT_MAP), ax=ax, shrink=0.8, pad=0.02
     )
     bar.set_label("robot")
     return [*artists, bar]

@@ -16,7 +16,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.patches import Circle, Polygon
 
-from .runs import robot_colors
+from .colors import robot_colors
 
 __all__ = [
     "ACTIVE_COLOR",

@@ -52,10 +52,10 @@ from scipy.sparse.csgraph import connected_components
 
 from ..errors import require_extra
 from .closed_form import closed_form
-from .config import SafetyFilter
+from .config import SafetyFilter, register_filter
 from .obstacles import Obstacle, obstacle_barrier_rows
 from .pairs import sensed_pairs
-from .result import FilterResult, FilterStatus, summarise
+from .result import FilterResult, FilterStatus, summarise, unchanged
 
 __all__ = [
     "BarrierConstraints",
@@ -317,19 +317,6 @@ def _in_trial(t: int, rows: NDArray[np.int64]) -> NDArray[np.int64]:
     return np.column_stack([np.full(len(rows), t, np.int64), rows]).astype(np.int64)
 
 
-def unchanged(u_hat: NDArray[np.float64]) -> FilterResult:
-    """The result of a filter that changes nothing: ``u_hat`` copied, status ``UNCHANGED``."""
-    u_hat = np.asarray(u_hat, dtype=float)
-    return FilterResult(
-        u=u_hat.copy(),
-        status=np.zeros(u_hat.shape[:-2], np.int8),
-        active=np.zeros(u_hat.shape[:-1], bool),
-        active_pairs=np.zeros((0, 3), np.int64),
-        active_obstacles=np.zeros((0, 3), np.int64),
-        message="no filter",
-    )
-
-
 def _maybe_violated(
     config: SafetyFilter,
     q: NDArray[np.float64],
@@ -447,3 +434,6 @@ def barrier_filter(
         active_obstacles=np.concatenate([np.zeros((0, 3), np.int64), *act_obs]),
         message=msg,
     )
+
+
+register_filter("barrier", barrier_filter)

@@ -13,25 +13,45 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import FormationlabWarning, ParameterError
 from ..validation import number, whole
+from .result import unchanged
 
 if TYPE_CHECKING:
     from ..models import RobotModel
     from .obstacles import Obstacle
     from .result import FilterResult
 
-__all__ = ["FILTERS", "FilterKind", "SafetyFilter"]
+__all__ = ["FILTERS", "FilterKind", "SafetyFilter", "register_filter"]
 
 FilterKind = Literal["none", "barrier", "barrier-decentralized"]
 FILTERS: tuple[str, ...] = ("none", "barrier", "barrier-decentralized")
+
+
+class _Filter(NamedTuple):
+    apply: Callable[..., Any]  #: (config, q, u_hat, obstacles) -> FilterResult
+    commands: Callable[..., Any] | None  #: the commands alone, or None: apply's u
+
+
+#: each filter's functions by name, registered by its module (``barrier.py``,
+#: ``decentralized.py``, both imported with the package): the configuration below them
+#: names a filter, and the filter imports its configuration, not the other way round
+_FILTERS: dict[str, _Filter] = {}
+
+
+def register_filter(
+    name: str, apply: Callable[..., Any], commands: Callable[..., Any] | None = None
+) -> None:
+    """Make ``SafetyFilter(filter=name)`` run ``apply`` (and ``commands`` for the commands
+    alone)."""
+    _FILTERS[name] = _Filter(apply, commands)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -200,12 +220,10 @@ class SafetyFilter:
         statuses and active set.
         """
         if self.filter == "barrier-decentralized":
-            from .decentralized import decentralized_commands
-
             q_arr = np.asarray(q, dtype=float)
             u_arr = np.asarray(u_hat, dtype=float)
             if q_arr.shape == u_arr.shape and q_arr.ndim >= 2 and q_arr.shape[-1] == 2:
-                return decentralized_commands(self, q_arr, u_arr, obstacles)
+                return _FILTERS[self.filter].commands(self, q_arr, u_arr, obstacles)  # type: ignore[misc]
         return self.apply(q, u_hat, obstacles=obstacles).u
 
     def apply(
@@ -232,10 +250,6 @@ class SafetyFilter:
         FilterResult
             The filtered command (``(..., n, 2)``), a status per trial and the active set.
         """
-        # The filters import this module for their configuration, hence the late import.
-        from .barrier import barrier_filter, unchanged
-        from .decentralized import decentralized_filter
-
         if contact is not None:
             self.check_contact(contact)
         q_arr = np.asarray(q, dtype=float)
@@ -246,6 +260,4 @@ class SafetyFilter:
             )
         if self.filter == "none":
             return unchanged(u_arr)
-        if self.filter == "barrier":
-            return barrier_filter(self, q_arr, u_arr, obstacles)
-        return decentralized_filter(self, q_arr, u_arr, obstacles)
+        return _FILTERS[self.filter].apply(self, q_arr, u_arr, obstacles)

@@ -54,7 +54,7 @@ from numpy.typing import NDArray
 
 from ..errors import require_extra
 from .cell_grid import build_grid, neighbours_of
-from .config import SafetyFilter
+from .config import SafetyFilter, register_filter
 from .obstacle_terms import obstacle_terms
 from .obstacles import Obstacle, obstacle_barrier_rows
 from .pairs import DENSE_BELOW, sensed_pairs
@@ -348,3 +348,6 @@ def project_onto_halfplanes(
     b = np.ascontiguousarray(b, dtype=float).reshape(-1)
     code = _project(float(u_hat[0]), float(u_hat[1]), A, b, len(b), u)
     return u, int(code)
+
+
+register_filter("barrier-decentralized", decentralized_filter, decentralized_commands)

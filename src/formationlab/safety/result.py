@@ -14,7 +14,7 @@ from enum import IntEnum
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["FilterResult", "FilterStatus"]
+__all__ = ["FilterResult", "FilterStatus", "unchanged"]
 
 
 class FilterStatus(IntEnum):
@@ -88,3 +88,16 @@ def summarise(status: NDArray[np.int8]) -> str:
     pairs = zip(values, counts, strict=True)
     parts = [f"{c} {FilterStatus(int(v)).name.lower()}" for v, c in pairs]
     return ", ".join(parts) if parts else "no trials"
+
+
+def unchanged(u_hat: NDArray[np.float64]) -> FilterResult:
+    """The result of a filter that changes nothing: ``u_hat`` copied, status ``UNCHANGED``."""
+    u_hat = np.asarray(u_hat, dtype=float)
+    return FilterResult(
+        u=u_hat.copy(),
+        status=np.zeros(u_hat.shape[:-2], np.int8),
+        active=np.zeros(u_hat.shape[:-1], bool),
+        active_pairs=np.zeros((0, 3), np.int64),
+        active_obstacles=np.zeros((0, 3), np.int64),
+        message="no filter",
+    )

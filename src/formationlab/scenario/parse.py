@@ -54,7 +54,6 @@ from .build import (
     restrictions_on_at_target,
     stem,
 )
-from .loop import closed_loop, run_scenario
 from .parts import build_entry
 from .robots import build_marching, build_robot_model
 from .safety import build_safety
@@ -64,9 +63,7 @@ __all__ = [
     "SECTIONS",
     "Scenario",
     "ScenarioModel",
-    "closed_loop",
     "parse_scenario",
-    "run_scenario",
 ]
 
 

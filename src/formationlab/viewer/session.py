@@ -36,7 +36,7 @@ from ..dynamics import System
 from ..errors import UserInputError, ViewerWarning
 from ..integrators import FixedStepIntegrator, Integrator, get_integrator
 from ..integrators.driver import Stepping
-from ..scenario.parse import Scenario, closed_loop
+from ..scenario import Scenario, closed_loop
 from ..status import Status
 from .export import SessionError, export_table, finish_export, plain
 from .frames import (
