@@ -49,8 +49,8 @@ import numpy as np
 from scipy.spatial import Delaunay
 
 from formationlab.controllers import DistanceLaw
+from formationlab.controllers.potentials import dphi_dr
 from formationlab.formation.spec import Formation
-from formationlab.potentials import dphi_dr
 from formationlab.safety import SafetyFilter, sensed_pairs
 
 

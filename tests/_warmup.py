@@ -45,7 +45,7 @@ def part1() -> None:
     from formationlab.models import DoubleIntegrator, Unicycle
     from formationlab.safety import SafetyFilter
     from formationlab.sensing import Sensing
-    from formationlab.simulation_batch import simulate_batch
+    from formationlab.simulation.batch import simulate_batch
     from formationlab.studies.batch import run_batch
 
     law = fl.get_law("angle-restricted")

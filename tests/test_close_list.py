@@ -15,7 +15,7 @@ from formationlab.engine.layout import run_layout
 from formationlab.engine.saving import saved_rows
 from formationlab.formation.templates import lattice
 from formationlab.integrators.compiled import run_compiled
-from formationlab.neighbours import non_edges
+from formationlab.neighbours.kdtree import non_edges
 
 
 def brute(q, radius, reach, exclude):
@@ -117,7 +117,7 @@ def test_threads_give_the_same_bits_as_one_thread(law):
     assert one.min_clearance == many.min_clearance
     # repulsion acts: some non-neighbours are within s0
     q = one.x[0]
-    from formationlab.neighbours import close_pairs
+    from formationlab.neighbours.kdtree import close_pairs
 
     p = non_edges(close_pairs(q, 0.3 + lw.repulsion.influence), f.edges, f.n)
     assert len(p) > 50

@@ -9,7 +9,7 @@ from test_compiled import ladder
 
 import formationlab as fl
 from formationlab.integrators import compiled
-from formationlab.simulation_batch import simulate_batch
+from formationlab.simulation.batch import simulate_batch
 
 KEYS = ("steps", "rhs_evaluations", "switch_count", "diagnostics_from", "backend", "threads")
 

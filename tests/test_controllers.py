@@ -5,7 +5,7 @@ import pytest
 
 import formationlab as fl
 from formationlab.controllers import grad_phi, grad_psi, phi_sum, psi_sum
-from formationlab.potentials import khatib, phi, psi, triple_products
+from formationlab.controllers.potentials import khatib, phi, psi, triple_products
 
 H = 1e-6
 

@@ -10,7 +10,7 @@ import formationlab
 import formationlab.formation.spec
 import formationlab.formation.templates
 import formationlab.registry
-import formationlab.simulation
+import formationlab.simulation.run
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -33,7 +33,7 @@ def test_readme_python_example_runs(capsys, tmp_path, monkeypatch):
     [
         formationlab,
         formationlab.registry,
-        formationlab.simulation,
+        formationlab.simulation.run,
         formationlab.formation.spec,
         formationlab.formation.templates,
     ],

@@ -19,7 +19,7 @@ from _scenarios import triangle
 
 import formationlab as fl
 from formationlab.errors import FormationError, UserInputError
-from formationlab.simulation_batch import simulate_batch
+from formationlab.simulation.batch import simulate_batch
 
 TEMPLATE = [[0.0, 0.0], [1.0, 0.0], [0.5, np.sqrt(3) / 2]]
 START = np.array([[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]])

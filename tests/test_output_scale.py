@@ -14,13 +14,13 @@ from PIL import Image
 from typer.testing import CliRunner, Result
 
 import formationlab as fl
-from formationlab import simulation
 from formationlab.cli import _load_commands, app
 from formationlab.io.edges import EDGE_TABLE, read_edge_table
 from formationlab.io.figures import save_figure
 from formationlab.io.netcdf import COMPRESSION, load_trajectory, write_trajectory
 from formationlab.plotting.animation import frame_indices, path_indices, used_indices
 from formationlab.plotting.runs import run_figures
+from formationlab.simulation import run as simulation
 
 _load_commands()
 runner = CliRunner()
@@ -217,7 +217,7 @@ def test_many_robots_in_an_animation_mark_stopped_and_constrained_ones() -> None
 
 
 def test_write_trajectory_of_a_paper_run_round_trips(tmp_path: Path) -> None:
-    from formationlab.paper import PaperSetup
+    from formationlab.simulation.paper import PaperSetup
 
     res = PaperSetup(duration=1.0).run(2, perturbation=1e-6)
     write_trajectory(res, tmp_path / "t.nc")

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import formationlab as fl
-from formationlab.chunked import over_time, row_bytes, time_slices
+from formationlab.formation.chunked import over_time, row_bytes, time_slices
 from formationlab.integrators.diagnostics import SwitchMonitor, switching_diagnostics
 
 
@@ -74,8 +74,8 @@ def ten_run():
 def test_sliced_sparse_postprocessing_equals_the_dense_whole(ten_run, monkeypatch):
     """V, sigma, distance errors, speeds and the outcome: over the lists (DENSE_LIMIT
     patched to 0) and seven states at a time, against the dense arithmetic at once."""
-    from formationlab import chunked
     from formationlab.controllers import angle_restricted, distance
+    from formationlab.formation import chunked
     from formationlab.outcomes import analysis
 
     res = ten_run
@@ -120,7 +120,7 @@ def test_slices_cover_the_rows_once_and_respect_the_budget() -> None:
 
 def test_the_slice_budget_follows_the_saved_states() -> None:
     """A slice's scratch: SCALE times the states it reads, between FLOOR and BUDGET."""
-    from formationlab import chunked
+    from formationlab.formation import chunked
 
     def states(t: int, n: int) -> np.ndarray:
         return np.broadcast_to(0.0, (t, n, 2))  # the size without the memory
@@ -179,7 +179,7 @@ def test_error_statistics_against_numbers_by_hand() -> None:
 
 
 def test_the_summary_lists_up_to_the_limit_and_counts_beyond(ten_run, monkeypatch) -> None:
-    from formationlab import simulation
+    from formationlab.simulation import run as simulation
 
     res = ten_run
     full = res.summary()

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize_scalar
 
-from formationlab.potentials import (
+from formationlab.controllers.potentials import (
     collinear_minimizer,
     dkhatib_ds,
     dphi_dr,

@@ -13,7 +13,7 @@ import pytest
 
 import formationlab as fl
 from formationlab.controllers import angle_restricted, distance, squared_distance
-from formationlab.neighbours import close_pairs, non_edges
+from formationlab.neighbours.kdtree import close_pairs, non_edges
 
 
 def random_formation(n: int, rng) -> tuple[fl.Formation, np.ndarray]:

@@ -17,6 +17,7 @@ from . import (
     _numba_cache,  # noqa: F401 - checks numba's cache before any kernel is imported
 )
 from .controllers import LAWS, AngleRestrictedLaw, DistanceLaw, Law, Repulsion, get_law
+from .controllers.potentials import dphi_dr, khatib, phi, psi, triple_products
 from .dynamics import SingleIntegrator, System
 from .formation.graphs import build_edges
 from .formation.spec import Formation, FormationError
@@ -31,10 +32,9 @@ from .integrators import (
     get_integrator,
 )
 from .outcomes.analysis import OUTCOMES, Tolerances, classify, distance_errors, triangle_orientation
-from .potentials import dphi_dr, khatib, phi, psi, triple_products
 from .resources import package_version
 from .sensing import Faults, Sensing, Stop
-from .simulation import SimulationResult, simulate
+from .simulation.run import SimulationResult, simulate
 
 __version__ = package_version()
 

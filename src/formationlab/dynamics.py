@@ -41,8 +41,8 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from .chunked import over_time, row_bytes
 from .controllers import Law
+from .formation.chunked import over_time, row_bytes
 from .formation.spec import DENSE_LIMIT, Formation
 from .marching import March
 from .models import RobotModel, SingleIntegrator
@@ -261,7 +261,8 @@ class System:
         ``law.potential`` plus ``weight Gamma_o`` (:class:`~formationlab.controllers.base.
         ObstacleRepulsion`), so that the obstacle-repelled law still descends it. A safety
         filter only removes descent directions, so it is not part of ``V``. A long history
-        ``(T, n, k)`` is evaluated slice by slice (:func:`formationlab.chunked.over_time`).
+        ``(T, n, k)`` is evaluated slice by slice
+        (:func:`formationlab.formation.chunked.over_time`).
         """
         return over_time(self._potential, np.asarray(x, dtype=float), self._row_bytes)
 
@@ -298,7 +299,7 @@ class System:
 
     def sigma(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """The law's switching functions at ``x``, ``(..., s)`` (slice by slice along a long
-        leading axis: :func:`formationlab.chunked.over_time`)."""
+        leading axis: :func:`formationlab.formation.chunked.over_time`)."""
         return over_time(self._sigma, np.asarray(x, dtype=float), self._row_bytes)
 
     def _sigma(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -328,7 +329,7 @@ class System:
         f = self.formation
         if f.n <= DENSE_LIMIT:
             return (*self._all_pairs, np.inf)
-        from .neighbours import close_pairs
+        from .neighbours.kdtree import close_pairs
 
         qs = [np.asarray(self.positions(x), dtype=float) for x in states]
         move = max((float(np.nanmax(np.abs(b - a))) for a, b in pairwise(qs)), default=0.0)

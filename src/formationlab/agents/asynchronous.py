@@ -57,7 +57,7 @@ from ..integrators.base import steps_for
 from ..models import MODELS, RobotModel, SingleIntegrator
 from ..registry import resolve
 from ..sensing import Channel, Faults, Sensing, local_controls, rotate
-from ..simulation import SimulationResult, build_system, initial_state
+from ..simulation.run import SimulationResult, build_system, initial_state
 from ..status import Status
 from ..validation import nonnegative, positive, whole
 from ..validation import seed as check_seed

@@ -82,7 +82,7 @@ from ..models.transforms import NearIdentity, heading_vectors
 from ..outcomes.analysis import Tolerances, classify, distance_errors
 from ..scenario import Scenario, closed_loop, parse_scenario
 from ..sensing import Channel, Faults, Seed, Sensing, rotate
-from ..simulation import initial_state
+from ..simulation.run import initial_state
 from ..status import Status
 from ..validation import nonnegative, positive
 from ..validation import seed as check_seed

@@ -7,7 +7,7 @@ unless ``--force``, and suggests the ``--save-every`` that makes it fit.
 The memory of a run is what the integrator keeps per saved state (the state
 and its Python list entry) plus what the post-processing (controls, Lyapunov
 function, switching functions) allocates per state, for at most the states of
-one slice of the post-processing (:mod:`formationlab.chunked`: it works slice by
+one slice of the post-processing (:mod:`formationlab.formation.chunked`: it works slice by
 slice along time). The latter depends on the law and the formation, so it is
 measured, not guessed: the law is evaluated on a small stack of copies of the
 initial state under :mod:`tracemalloc`, which counts numpy's allocations.
@@ -28,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from ..chunked import BUDGET, row_bytes
 from ..errors import ParameterError
+from ..formation.chunked import BUDGET, row_bytes
 from ..resources import available_memory
 from ..resources import size as _size
 

@@ -45,8 +45,8 @@ def paper(
     """
     from ..io import atomic_write_json, prepare_output_dir, save_figure
     from ..io.files import MANIFEST, earlier_files, remove_stale
-    from ..paper import PaperSetup, reproduce
     from ..plotting.paper import paper_figures
+    from ..simulation.paper import PaperSetup, reproduce
 
     setup = PaperSetup(
         diameter=diameter,

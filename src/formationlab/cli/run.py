@@ -193,7 +193,7 @@ def _write_data(
     from ..io.edges import EDGE_TABLE, write_edge_table
     from ..io.files import atomic_write_text
     from ..io.netcdf import write_trajectory
-    from ..simulation import LIST_LIMIT
+    from ..simulation.run import LIST_LIMIT
 
     large = result.q.size / 2 > _LARGE
     atomic_write_text(folder / "scenario.toml", sc.text)
@@ -246,7 +246,7 @@ def _write_summary(
 ) -> list[str]:
     from ..io.files import MANIFEST, atomic_write_json
     from ..resources import package_version
-    from ..simulation import LIST_LIMIT
+    from ..simulation.run import LIST_LIMIT
 
     edges = sc.formation.edges
     data: dict[str, Any] = {

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from ..formation.geometry import pair_vectors, scatter_rows
 from ..formation.spec import DENSE_LIMIT, Formation
-from ..neighbours import close_pairs, non_edges
+from ..neighbours.kdtree import close_pairs, non_edges
 from ..validation import check_fields
 from .base import Law, ObstacleRepulsion, Repulsion, register
 from .kinds.khatib import dkhatib_ds, khatib

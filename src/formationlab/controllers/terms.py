@@ -12,7 +12,7 @@ arrays and numbers that the compiled loop (:mod:`formationlab.engine.loop`, thro
   restriction it switches and their weight ``2 k_a alpha_ijk``
   (``psi_ikj = psi_ijk``: the ordered pairs ``(j, k)`` and ``(k, j)`` of eq. 13
   contribute alike). The kernel decides each surface with the arithmetic of
-  :func:`formationlab.potentials.triangle_products`, so that it switches
+  :func:`formationlab.controllers.potentials.triangle_products`, so that it switches
   exactly where the numpy law does;
 * **area triangles** ``(a, b, c, A*)`` of the signed-area penalty.
 

@@ -26,7 +26,7 @@ from pydantic.dataclasses import dataclass as pydantic_dataclass
 from ..controllers import Law
 from ..errors import ParameterError
 from ..integrators import INTEGRATORS, RK4, FixedStepIntegrator, ImplicitEuler
-from ..simulation import simulate
+from ..simulation.run import simulate
 from ..validation import validation_error
 from .catalogue import Catalogue, catalogue
 from .continuation import Branch, follow

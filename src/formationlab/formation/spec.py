@@ -749,7 +749,7 @@ class Formation:
             iu = np.triu_indices(self.n, k=1)
             pi, pj = iu
         else:  # only pairs that could touch
-            from ..neighbours import close_pairs
+            from ..neighbours.kdtree import close_pairs
 
             pi, pj = close_pairs(arr, float(self.diameters.max())).T
         diff = arr[..., pj, :] - arr[..., pi, :]

@@ -1,7 +1,7 @@
 """The per-edge table of a run with many edges: ``distance_errors.parquet``.
 
 A run's ``summary.json`` lists the final distance error of every edge by label
-(``"1-2": -0.003``) up to :data:`formationlab.simulation.LIST_LIMIT` edges. A larger
+(``"1-2": -0.003``) up to :data:`formationlab.simulation.run.LIST_LIMIT` edges. A larger
 formation (a 1,000-robot lattice has 2,883 edges) keeps the statistics there
 (``distance_error_stats``) and writes every edge to this table instead, one row per
 edge in the order of the formation's edges:

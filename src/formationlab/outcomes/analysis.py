@@ -43,10 +43,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..chunked import over_time, time_slices
+from ..formation.chunked import over_time, time_slices
 from ..formation.geometry import cross
 from ..formation.spec import DENSE_LIMIT, Formation
-from ..neighbours import close_pairs
+from ..neighbours.kdtree import close_pairs
 from .rigid_motion import DRIFTING, NOT_RIGID, ROTATING, RigidMotion, rigid_motion, rigid_outcome
 from .tolerances import OUTCOMES, Outcome, Tolerances
 
@@ -134,7 +134,7 @@ def touching(formation: Formation, q: ArrayLike) -> bool:
     """Whether some pair of robots at positions ``q`` ``(n, 2)`` is at ``r_ij <= a_ij``.
 
     Every pair up to ``DENSE_LIMIT`` robots; beyond, only the pairs a k-d tree finds
-    closer than the largest diameter (:func:`formationlab.neighbours.close_pairs`), the
+    closer than the largest diameter (:func:`formationlab.neighbours.kdtree.close_pairs`), the
     only ones that can touch: nothing ``n x n``.
     """
     q = np.asarray(q, dtype=float)

@@ -27,7 +27,7 @@ from matplotlib.axes import Axes
 from matplotlib.collections import EllipseCollection, LineCollection
 from numpy.typing import ArrayLike, NDArray
 
-from ..chunked import time_slices
+from ..formation.chunked import time_slices
 
 __all__ = [
     "BAND_TIMES",
@@ -136,7 +136,7 @@ def quantile_bands(
     """The :data:`QUANTILES` of ``values(rows)`` ``(len(rows), width)`` over its last axis.
 
     Evaluated at most at :data:`BAND_TIMES` times evenly spaced in ``t``, in slices of
-    them whose values and scratch fit :data:`formationlab.chunked.BUDGET` (the values of
+    them whose values and scratch fit :data:`formationlab.formation.chunked.BUDGET` (the values of
     all of them are never held at once). Returns the rows and the quantiles
     ``(len(QUANTILES), len(rows))``.
     """

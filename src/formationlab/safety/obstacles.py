@@ -7,7 +7,7 @@ Every obstacle offers, for robot centres ``q`` of shape ``(..., n, 2)``:
   collision (:func:`obstacle_contacts`), like ``r_ij <= a_ij`` between robots;
 * **Khatib's repulsion** ``gamma = eta/2 (1/s - 1/s0)^2`` for ``s < s0`` (Khatib, "Real-time
   obstacle avoidance for manipulators and mobile robots", IJRR 5(1), 1986), the same
-  :func:`~formationlab.potentials.khatib` the laws use between robots
+  :func:`~formationlab.controllers.potentials.khatib` the laws use between robots
   (:func:`obstacle_potential`, :func:`grad_obstacle_potential`);
 * **barrier constraints** for the safety filter (:func:`obstacle_barrier_rows`).
 

@@ -4,7 +4,7 @@
 :class:`~formationlab.dynamics.System` it describes, with every part it holds: the
 formation, the law, the robot model, marching, obstacles, the safety filter, sensing
 and faults (obstacles and filter checked against the start by
-:func:`formationlab.simulation.build_system`, the builder :func:`~formationlab.simulate`
+:func:`formationlab.simulation.run.build_system`, the builder :func:`~formationlab.simulate`
 uses). ``formationlab run`` (:func:`run_scenario`), the live viewer, the notebook
 widget and the PettingZoo environment call it, so none of them can drop a part.
 """
@@ -19,7 +19,7 @@ from ..errors import UserInputError
 if TYPE_CHECKING:
     from ..dynamics import System
     from ..sensing import Faults, Sensing
-    from ..simulation import SimulationResult
+    from ..simulation.run import SimulationResult
     from .parse import Scenario
 
 __all__ = ["SCENARIO", "closed_loop", "run_scenario"]
@@ -51,7 +51,7 @@ def closed_loop(
     ScenarioError
         A part that does not fit the others, placed at its key in the file.
     """
-    from ..simulation import build_system
+    from ..simulation.run import build_system
 
     sensing = scenario.sensing if sensing is SCENARIO else sensing
     faults = scenario.faults if faults is SCENARIO else faults
@@ -74,7 +74,7 @@ def run_scenario(
     backend: Literal["auto", "numpy", "numba"] = "auto",
 ) -> SimulationResult:
     """Simulate ``scenario`` as ``formationlab run`` does: its closed loop, its integrator,
-    its duration (:func:`formationlab.simulation.run_system`).
+    its duration (:func:`formationlab.simulation.run.run_system`).
 
     Raises
     ------
@@ -82,7 +82,7 @@ def run_scenario(
         For a scenario with ``[asynchronous]`` (run it with
         :func:`formationlab.agents.run_async`, as ``formationlab run`` does).
     """
-    from ..simulation import run_system
+    from ..simulation.run import run_system
 
     if scenario.asynchronous is not None:
         raise scenario.error(

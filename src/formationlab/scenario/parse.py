@@ -335,7 +335,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
     robot, initial, ignored_model = build_robot_model(
         rob, formation.n, source=source, text=text, fail=fail, warnings=warnings
     )
-    from ..simulation import initial_state
+    from ..simulation.run import initial_state
 
     try:
         x0 = initial_state(formation, robot, q0, **initial)

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .formation.spec import DENSE_LIMIT, Formation
+from .spec import DENSE_LIMIT, Formation
 
 __all__ = ["BUDGET", "FLOOR", "SCALE", "over_time", "row_bytes", "slice_budget", "time_slices"]
 

@@ -17,10 +17,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .controllers.kinds.khatib import dkhatib_ds, khatib
-from .controllers.kinds.log_barrier import dphi_dr, phi
-from .controllers.kinds.restriction import psi, triangle_products, upsilon
-from .formation.geometry import cross, pair_vectors, parity, perp, scatter_rows, triple_products
+from ..formation.geometry import cross, pair_vectors, parity, perp, scatter_rows, triple_products
+from .kinds.khatib import dkhatib_ds, khatib
+from .kinds.log_barrier import dphi_dr, phi
+from .kinds.restriction import psi, triangle_products, upsilon
 
 __all__ = [
     "collinear_minimizer",

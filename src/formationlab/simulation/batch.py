@@ -1,11 +1,11 @@
 """Several runs of one formation from different starts as one compiled batch.
 
-:func:`simulate_batch` is :func:`~formationlab.simulation.simulate` for ``B`` starts of
+:func:`simulate_batch` is :func:`~formationlab.simulation.run.simulate` for ``B`` starts of
 the same formation, law and step: the law's data are laid out once
 (:func:`formationlab.integrators.compiled.compiled_terms`), each start runs on the compiled
 single-run path (:func:`~formationlab.integrators.compiled.run_euler_compiled`, the engine's
 loop) from that layout, and each comes back as the
-:class:`~formationlab.simulation.SimulationResult` its own ``simulate`` call returns,
+:class:`~formationlab.simulation.run.SimulationResult` its own ``simulate`` call returns,
 the same numbers bit for bit (tested). For the paper's symmetry scan and other small
 batches whose paths are wanted; many trials that need only their final states are the
 study kernel's (:func:`formationlab.studies.run_batch`).
@@ -16,16 +16,16 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .controllers import LAWS, Law
-from .dynamics import System
-from .errors import FormationError, ParameterError
-from .formation.spec import Formation
-from .integrators import INTEGRATORS, Euler, Integrator
-from .integrators.compiled import compiled_terms, run_euler_compiled
-from .models import SingleIntegrator
-from .registry import resolve
-from .simulation import SimulationResult, _result, initial_state
-from .validation import whole
+from ..controllers import LAWS, Law
+from ..dynamics import System
+from ..errors import FormationError, ParameterError
+from ..formation.spec import Formation
+from ..integrators import INTEGRATORS, Euler, Integrator
+from ..integrators.compiled import compiled_terms, run_euler_compiled
+from ..models import SingleIntegrator
+from ..registry import resolve
+from ..validation import whole
+from .run import SimulationResult, _result, initial_state
 
 __all__ = ["simulate_batch"]
 

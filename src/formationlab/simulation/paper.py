@@ -28,13 +28,13 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from .controllers import AngleRestrictedLaw
-from .errors import ParameterError
-from .formation.spec import Formation
-from .integrators import get_integrator
-from .outcomes.analysis import Tolerances, triangle_orientation
-from .simulation import SimulationResult, simulate
-from .status import Status
+from ..controllers import AngleRestrictedLaw
+from ..errors import ParameterError
+from ..formation.spec import Formation
+from ..integrators import get_integrator
+from ..outcomes.analysis import Tolerances, triangle_orientation
+from ..status import Status
+from .run import SimulationResult, simulate
 
 __all__ = [
     "PAPER_ALPHA",
@@ -308,12 +308,12 @@ def symmetry_scan(setup: PaperSetup, *, batch: bool = True) -> list[dict[str, An
     orientation, exchanged pairs and converged time of each run.
 
     ``batch``: the runs as one batch of the compiled single-run path
-    (:func:`formationlab.simulation_batch.simulate_batch`: explicit Euler; each run the
+    (:func:`formationlab.simulation.batch.simulate_batch`: explicit Euler; each run the
     same numbers as its single run, tested); otherwise single runs (any integrator).
     """
     tol = setup.tolerances
     if batch:
-        from .simulation_batch import simulate_batch
+        from .batch import simulate_batch
 
         runs = simulate_batch(
             paper_formation(2, diameter=setup.diameter), paper_law(),
@@ -357,7 +357,7 @@ def diameter_scan(setup: PaperSetup, *, batch: bool = True) -> list[dict[str, An
                 }
             out.append(row)
             continue
-        from .studies import run_batch
+        from ..studies import run_batch
 
         for sim in (1, 2):
             mine = [(key, eps) for key, s, eps in cases if s == sim]

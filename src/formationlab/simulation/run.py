@@ -20,17 +20,17 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .chunked import over_time
-from .controllers import LAWS, Law
-from .dynamics import System
-from .errors import FormationError, ParameterError
-from .formation.spec import Formation
-from .integrators import INTEGRATORS, Euler, Integrator, RawSolution
-from .integrators.compiled import compiled_terms, run_euler_compiled
-from .integrators.diagnostics import switching_diagnostics
-from .marching import March, centroid_velocity, heading_spread
-from .models import MODELS, RobotModel, SingleIntegrator
-from .outcomes.analysis import (
+from ..controllers import LAWS, Law
+from ..dynamics import System
+from ..errors import FormationError, ParameterError
+from ..formation.chunked import over_time
+from ..formation.spec import Formation
+from ..integrators import INTEGRATORS, Euler, Integrator, RawSolution
+from ..integrators.compiled import compiled_terms, run_euler_compiled
+from ..integrators.diagnostics import switching_diagnostics
+from ..marching import March, centroid_velocity, heading_spread
+from ..models import MODELS, RobotModel, SingleIntegrator
+from ..outcomes.analysis import (
     Outcome,
     Tolerances,
     classify,
@@ -41,14 +41,14 @@ from .outcomes.analysis import (
     final_motion,
     net_speed,
 )
-from .outcomes.rigid_motion import RigidMotion
-from .registry import resolve
-from .sensing import Faults, Sensing
-from .status import Status
-from .validation import whole
+from ..outcomes.rigid_motion import RigidMotion
+from ..registry import resolve
+from ..sensing import Faults, Sensing
+from ..status import Status
+from ..validation import whole
 
 if TYPE_CHECKING:
-    from .safety import Obstacle, SafetyFilter, SafetyRecord
+    from ..safety import Obstacle, SafetyFilter, SafetyRecord
 
 __all__ = ["LIST_LIMIT", "SimulationResult", "build_system", "run_system", "simulate"]
 
@@ -291,7 +291,7 @@ class SimulationResult:
         up to :data:`LIST_LIMIT` surfaces; beyond, the statistics and counts remain
         (:meth:`edge_table` holds every edge; ``formationlab run`` writes it to a file).
         """
-        from .outcomes.analysis import triangle_orientation
+        from ..outcomes.analysis import triangle_orientation
 
         tol = tolerances or Tolerances()
         n, m = self.formation.n, len(self.formation.edges)
@@ -377,7 +377,7 @@ class SimulationResult:
 
     def _marching_summary(self) -> dict[str, Any]:
         """Final shape error and centroid velocity (against the reference, when there is one)."""
-        from .marching import Marching
+        from ..marching import Marching
 
         vc = self.centroid_velocity()[-1]
         out: dict[str, Any] = {
@@ -396,7 +396,7 @@ class SimulationResult:
 
         Needs matplotlib (imported here, not at package import). Returns the artists.
         """
-        from . import plotting
+        from .. import plotting
 
         return plotting.plot_result(self, kind, ax=ax, **kwargs)
 
@@ -565,7 +565,7 @@ def _result(
     points = robot.points(raw.x)
     record = None
     if system.obstacles or system.filtered:
-        from .safety import SafetyRecord
+        from ..safety import SafetyRecord
 
         clear = system.obstacle_clearances(raw.x)
         least = clear.min(axis=(-2, -1)) if clear.size else np.full(len(raw.t), np.inf)
@@ -690,7 +690,7 @@ def build_system(
             formation=formation, law=law, model=model, marching=marching, sensing=sensing,
             faults=faults,
         )  # fmt: skip
-    from .safety import SafetyFilter, check_obstacle_starts
+    from ..safety import SafetyFilter, check_obstacle_starts
 
     if isinstance(safety, str):
         safety = SafetyFilter(filter=safety)  # type: ignore[arg-type]
