@@ -99,3 +99,59 @@ def test_tiny_positions_are_refused_as_overlapping() -> None:
     f = fl.Formation.from_template(TEMPLATE, diameters=0.2)
     with pytest.raises(FormationError, match="robots 1 and 2 overlap in the initial positions"):
         run(f, LAW, START * 1e-150)
+
+
+def test_a_delay_whose_measurements_do_not_fit_is_refused_by_validate(tmp_path: Path) -> None:
+    # [sensing] delay = 1e6 s at dt = 1e-3: a ring of 1e9 steps of every robot's measurement
+    # of every other (about 140 GB) was allocated at the run's first step, in a traceback
+    scenario = tmp_path / "late.toml"
+    scenario.write_text(triangle("late", "1.0") + "\n[sensing]\ndelay = 1e6\n")
+    proc = subprocess.run(
+        [*CLI, "validate", str(scenario)], capture_output=True, text=True, timeout=600, check=False
+    )
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    message = proc.stderr.strip()
+    assert message.startswith(f"error: {scenario}: sensing.delay (line ")
+    assert "1e+09 steps of dt = 0.001 s" in message and "use a shorter delay" in message
+    # a delay that fits runs, in Python as on the command line
+    f = triangle_formation()
+    ok = fl.simulate(f, LAW, START, duration=0.05, sensing=fl.Sensing(delay=0.01))
+    assert ok.status == "success"
+    with pytest.raises(FormationError, match=r"sensing\.delay = 1e\+06 s"):
+        fl.simulate(f, LAW, START, duration=0.05, sensing=fl.Sensing(delay=1e6))
+
+
+def triangle_formation() -> fl.Formation:
+    return fl.Formation.from_template(TEMPLATE, diameters=0.2)
+
+
+#: a key set to a value that sizes the work beyond reason, and the key the refusal names
+HUGE_WORK = {
+    "simulation-dt": ("dt = 1e-300\n", "simulation.dt", "1e+300 steps"),
+    "study-dt": ("[study]\ntrials = 4\ndt = 1e-300\n", "study.dt", "1e+300 steps"),
+    "study-duration": ("[study]\ntrials = 4\nduration = 1e300\n", "study.duration", "steps"),
+    "equilibria-dt": ("[equilibria]\ndt = 1e-300\n", "equilibria.dt", "6e+301 steps"),
+    "equilibria-duration": ("[equilibria]\nduration = 1e300\n", "equilibria.duration", "10000000"),
+    "equilibria-starts": ("[equilibria]\nstarts = 1000000000000000\n", "equilibria.starts", ""),
+}
+
+
+@pytest.mark.parametrize("case", sorted(HUGE_WORK))
+def test_work_beyond_reason_is_refused_by_validate_with_its_key(case: str, tmp_path: Path) -> None:
+    # these went through validate and then ended in OverflowError, numba's "Int value is
+    # too large" or an allocation of petabytes
+    table, key, figure = HUGE_WORK[case]
+    text = triangle("huge", "1.0")
+    if not table.startswith("["):  # the triangle's own [simulation] table
+        text = text.replace("dt = 1e-3\n", table)
+    else:
+        text += "\n" + table
+    scenario = tmp_path / "huge.toml"
+    scenario.write_text(text)
+    proc = subprocess.run(
+        [*CLI, "validate", str(scenario)], capture_output=True, text=True, timeout=600, check=False
+    )
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    message = proc.stderr.strip()
+    assert message.startswith(f"error: {scenario}: {key} (line "), message
+    assert figure in message and len(message) < 400, message

@@ -105,6 +105,22 @@ def fraction(value: Any, name: str, *, owner: str | None = None) -> float:
 COORDINATE_LIMIT = 1e150
 
 
+#: The most steps of ``dt`` one run or trial may take: more is a step or a duration
+#: mistyped (a billion steps of three robots take about an hour on the compiled loop).
+STEP_LIMIT = 1e9
+
+
+def steps_within(duration: float, dt: float, key: str) -> None:
+    """Refuse a ``duration`` of more than :data:`STEP_LIMIT` steps of ``dt`` (with ``key``)."""
+    steps = duration / dt
+    if not steps <= STEP_LIMIT:
+        raise ParameterError(
+            f"duration / dt = {duration:g} s / {dt:g} s = {steps:.3g} steps, more than "
+            f"{STEP_LIMIT:.0e} for one run: lengthen dt or shorten the duration",
+            key=key,
+        )
+
+
 def coordinates(q: Any, name: str) -> None:
     """Refuse positions ``(..., n, d)`` with a coordinate beyond :data:`COORDINATE_LIMIT`."""
     largest = float(np.max(np.abs(q), initial=0.0))

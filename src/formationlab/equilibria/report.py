@@ -20,17 +20,20 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import ConfigDict, Field, ValidationError, field_validator
+from pydantic import ConfigDict, Field, ValidationError, ValidationInfo, field_validator
 from pydantic.dataclasses import dataclass as pydantic_dataclass
 
 from ..controllers import Law
 from ..errors import ParameterError
 from ..integrators import INTEGRATORS, RK4, FixedStepIntegrator, ImplicitEuler
 from ..simulation.run import simulate
-from ..validation import validation_error
+from ..validation import steps_within, validation_error
 from .catalogue import Catalogue, catalogue
 from .continuation import Branch, follow
 from .search import random_starts, settle
+
+#: the most random starts one search settles (each is a run of the formation)
+STARTS_LIMIT = 1_000_000
 
 if TYPE_CHECKING:
     from ..scenario.parse import Scenario
@@ -91,15 +94,23 @@ class EquilibriaConfig:
         Another law instead of the scenario's (with the ``[controller]`` keys it takes).
     """
 
-    starts: int = Field(default=200, ge=0)
+    starts: int = Field(default=200, ge=0, le=STARTS_LIMIT)
     seed: int = Field(default=0, ge=0)
-    duration: float = Field(default=60.0, gt=0)
+    duration: float = Field(default=60.0, gt=0, le=1e7)
     collinear: float = Field(default=0.2, ge=0, le=1)
     integrator: str | None = None
     dt: float = Field(default=0.01, gt=0)
     follow: str | None = None
     follow_steps: int = Field(default=24, ge=2)
     law: str | None = None
+
+    @field_validator("dt")
+    @classmethod
+    def _steps(cls, v: float, info: ValidationInfo) -> float:
+        duration = info.data.get("duration")
+        if duration is not None:
+            steps_within(duration, v, "dt")
+        return v
 
     @field_validator("follow")
     @classmethod

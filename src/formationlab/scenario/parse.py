@@ -45,8 +45,8 @@ from ..formation.spec import Formation
 from ..integrators import INTEGRATORS, FixedStepIntegrator, Integrator
 from ..marching import March
 from ..models import MODELS, RobotModel, SingleIntegrator
-from ..sensing import SENSING_LIMIT, Faults, Sensing, Stop, delay_steps
-from ..validation import line_of, validation_error
+from ..sensing import SENSING_LIMIT, Faults, Sensing, Stop, delay_ring
+from ..validation import line_of, steps_within, validation_error
 from .build import (
     FIXED,
     build_formation,
@@ -443,6 +443,10 @@ def _whole_steps(
             f"dt = {dt:g} s is longer than the duration, {duration:g} s: its one step would end "
             f"past the duration; use dt <= duration (e.g. dt = {duration / 1000:g})",
         )
+    try:
+        steps_within(duration, dt, "simulation.dt")
+    except UserInputError as exc:
+        raise fail("simulation.dt", str(exc)) from None
     steps = round(duration / dt)
     rounded = steps * dt
     if abs(rounded - duration) > 1e-9 * duration:
@@ -521,7 +525,8 @@ def _sensing(
                 )
             if sensing.delay > 0:
                 try:
-                    delay_steps(sensing.delay, float(integrator.dt))  # type: ignore[attr-defined]
+                    dt = float(integrator.dt)  # type: ignore[attr-defined]
+                    delay_ring(sensing.delay, dt, formation.n)
                 except UserInputError as exc:
                     raise fail("sensing.delay", str(exc)) from None
     if model.faults is not None:

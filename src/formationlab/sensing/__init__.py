@@ -12,7 +12,7 @@ The closed loop (:class:`formationlab.System`) takes a :class:`Sensing` and
 """
 
 from .channel import BLOCK, SENSING_LIMIT, Channel, Seed
-from .config import FRAMES, Faults, Sensing, Stop, delay_steps
+from .config import FRAMES, Faults, Sensing, Stop, delay_ring, delay_steps
 from .local import local_controls, measured, rotate
 
 __all__ = [
@@ -24,6 +24,7 @@ __all__ = [
     "Seed",
     "Sensing",
     "Stop",
+    "delay_ring",
     "delay_steps",
     "local_controls",
     "measured",

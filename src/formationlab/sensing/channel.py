@@ -33,7 +33,7 @@ from ..controllers.terms import PAIR_LIMIT, KernelTerms
 from ..errors import ParameterError
 from ..formation.spec import Formation
 from ..models import RobotModel
-from .config import Sensing, delay_steps
+from .config import Sensing, delay_ring
 from .local import local_controls, measured, rotate
 
 __all__ = ["BLOCK", "SENSING_LIMIT", "Channel", "Seed"]
@@ -87,7 +87,7 @@ class Channel:
         self.sensing, self.formation, self.model, self.n = sensing, formation, model, n
         self.terms: KernelTerms = law.compiled_terms(formation)
         self.B = len(seeds)
-        self.m = delay_steps(sensing.delay, dt) if sensing.delay > 0 else 0
+        self.m = delay_ring(sensing.delay, dt, n, self.B) if sensing.delay > 0 else 0
         self.k = -1  # the last step observed
         roots = [np.random.SeedSequence(_entropy(s)) for s in seeds]
         kids = [r.spawn(4) for r in roots]  # frames, mismatch, noise, drops

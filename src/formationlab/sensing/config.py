@@ -30,10 +30,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import ParameterError
+from ..resources import check_memory
 from ..validation import number
 from ..validation import seed as check_seed
 
-__all__ = ["FRAMES", "Faults", "Sensing", "Stop", "delay_steps"]
+__all__ = ["FRAMES", "Faults", "Sensing", "Stop", "delay_ring", "delay_steps"]
 
 FRAMES: tuple[str, ...] = ("global", "local")
 #: a delay is a whole number of steps when it is within this relative distance of one
@@ -138,6 +139,27 @@ def delay_steps(delay: float, dt: float) -> int:
             key="sensing.delay",
         )
     return int(k)
+
+
+#: bytes a delayed step holds per pair of robots and trial: the measurement and whether the
+#: other robot was in range (the channel's ring, and the compiled loop's)
+RING_BYTES = 17
+
+
+def delay_ring(delay: float, dt: float, n: int, trials: int = 1) -> int:
+    """:func:`delay_steps`, once the memory of what the delay holds is known to fit: each of
+    its ``m + 1`` steps keeps every robot's measurement of every other, for each trial
+    (a :class:`~formationlab.errors.FormationError` with key ``sensing.delay`` otherwise)."""
+    m = delay_steps(delay, dt)
+    check_memory(
+        float(m + 1) * n * n * RING_BYTES * max(trials, 1),
+        f"sensing.delay = {delay:g} s ({float(m):.3g} steps of dt = {dt:g} s, {n} robots"
+        + (f", {trials:,} trials)" if trials > 1 else ")"),
+        key="sensing.delay",
+        fix="use a shorter delay (each step of delay holds every robot's measurement of "
+        "every other)",
+    )
+    return m
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -51,7 +51,7 @@ from ..errors import ParameterError
 from ..formation.spec import Formation
 from ..models import RobotModel, SingleIntegrator
 from ..sensing import Faults, Sensing, delay_steps
-from ..validation import positive, whole
+from ..validation import positive, steps_within, whole
 from ..validation import seed as check_seed
 from .chunks import ChunkTask, plan_chunks, run_chunk
 from .config import GaussianInitial, StudyConfig, parse_study
@@ -212,6 +212,7 @@ class StudySetup:
             )
         object.__setattr__(self, "dt", positive(self.dt, "dt"))
         object.__setattr__(self, "duration", positive(self.duration, "duration"))
+        steps_within(self.duration, self.dt, "dt")
         center = self.center
         if isinstance(self.config.initial, GaussianInitial):
             if center is None:
@@ -254,20 +255,26 @@ class StudySetup:
             )
         names = [n for n in config.laws or (sc.law.name,) if n in LAWS]
         laws = {LAWS.canonical(n): sc.law_named(n) for n in names}
-        setup = cls(
-            formation=sc.formation,
-            law=sc.law,
-            config=config,
-            dt=dt,
-            duration=duration,
-            center=center,
-            laws=laws,
-            model=sc.model,
-            obstacles=sc.obstacles,
-            safety=sc.safety,
-            sensing=sc.sensing,
-            faults=sc.faults,
-        )
+        try:
+            setup = cls(
+                formation=sc.formation,
+                law=sc.law,
+                config=config,
+                dt=dt,
+                duration=duration,
+                center=center,
+                laws=laws,
+                model=sc.model,
+                obstacles=sc.obstacles,
+                safety=sc.safety,
+                sensing=sc.sensing,
+                faults=sc.faults,
+            )
+        except ParameterError as exc:
+            if exc.key != "dt":
+                raise
+            given = "study.dt" if config.dt is not None else "study.duration"
+            raise sc.locate(ParameterError(str(exc), key=given)) from None
         try:
             setup.groups  # noqa: B018 - checks laws and sweep keys now, with the file's lines
         except ParameterError as exc:
