@@ -19,6 +19,7 @@ from _scenarios import triangle
 
 import formationlab as fl
 from formationlab.errors import FormationError, UserInputError
+from formationlab.safety import SafetyFilter
 from formationlab.simulation.batch import simulate_batch
 
 TEMPLATE = [[0.0, 0.0], [1.0, 0.0], [0.5, np.sqrt(3) / 2]]
@@ -155,3 +156,40 @@ def test_work_beyond_reason_is_refused_by_validate_with_its_key(case: str, tmp_p
     message = proc.stderr.strip()
     assert message.startswith(f"error: {scenario}: {key} (line "), message
     assert figure in message and len(message) < 400, message
+
+
+def test_periods_that_would_never_end_are_refused_by_validate(tmp_path: Path) -> None:
+    # [asynchronous] periods = 1e-300: validate said "15,000 steps" and the run never ended
+    scenario = tmp_path / "eager.toml"
+    scenario.write_text(triangle("eager", "15.0") + "\n[asynchronous]\nperiods = 1e-300\n")
+    proc = subprocess.run(
+        [*CLI, "validate", str(scenario)], capture_output=True, text=True, timeout=600, check=False
+    )
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    message = proc.stderr.strip()
+    assert message.startswith(f"error: {scenario}: asynchronous.periods (line "), message
+    assert "4.5e+301 wake-ups in 15 s" in message
+
+
+def test_a_speed_polygon_of_a_hundred_million_sides_is_refused(tmp_path: Path) -> None:
+    # [safety] speed_sides = 100000000: 2.5 GB of rows, then an allocation traceback
+    table = '[safety]\nfilter = "barrier"\ndistance = 0.25\nmax_speed = 1.0\n'
+    scenario = tmp_path / "round.toml"
+    scenario.write_text(triangle("round", "1.0") + "\n" + table + "speed_sides = 100000000\n")
+    proc = subprocess.run(
+        [*CLI, "validate", str(scenario)], capture_output=True, text=True, timeout=600, check=False
+    )
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    message = proc.stderr.strip()
+    assert message.startswith(f"error: {scenario}: safety.speed_sides (line "), message
+    assert "at most 256, got 100,000,000" in message
+    assert (
+        fl.simulate(
+            triangle_formation(),
+            LAW,
+            START,
+            duration=0.01,
+            safety=SafetyFilter(filter="barrier", distance=0.25, max_speed=1.0, speed_sides=256),
+        ).status
+        == "success"
+    )

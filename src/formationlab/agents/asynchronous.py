@@ -266,11 +266,29 @@ async def _robot(i: int, world: _World, clock: VirtualClock, times: Iterator[flo
         world.control(i, t)
 
 
+#: the most wake-ups of all robots one run may hold (each is a task's turn in Python: about
+#: ten minutes for 1e7)
+WAKE_LIMIT = 1e7
+
+
 def check_schedule(
-    periods: float | ArrayLike | None, jitter: float, n: int, dt: float
-) -> tuple[NDArray[np.float64], float]:
-    """Each robot's period ``(n,)`` (default ``dt``) and the jitter, validated as by the runner."""
-    return _periods(periods, n, dt), _jitter(jitter)
+    periods: float | ArrayLike | None, jitter: float, n: int, dt: float,
+    duration: float | None = None,
+) -> tuple[NDArray[np.float64], float]:  # fmt: skip
+    """Each robot's period ``(n,)`` (default ``dt``) and the jitter, validated as by the runner;
+    with ``duration``, the wake-ups of the run (``sum_i duration / T_i``) at most
+    :data:`WAKE_LIMIT`."""
+    T = _periods(periods, n, dt)
+    if duration is not None:
+        wakes = float(np.sum(duration / T))
+        if not wakes <= WAKE_LIMIT:
+            raise ParameterError(
+                f"periods as short as {T.min():g} s make {wakes:.3g} wake-ups in "
+                f"{duration:g} s, more than {WAKE_LIMIT:.0e} for one run: lengthen the "
+                "periods (a robot's period is usually dt or a few times it)",
+                key="periods",
+            )
+    return T, _jitter(jitter)
 
 
 def _jitter(jitter: float) -> float:
@@ -322,7 +340,7 @@ async def arun(
         seed = check_seed(seed)
     law, robot = resolve(LAWS, law), resolve(MODELS, model or SingleIntegrator())
     n = formation.n
-    T = _periods(periods, n, dt)
+    T, _ = check_schedule(periods, 0.0, n, dt, duration)
     x0 = initial_state(formation, robot, q0, **initial)
     system = build_system(formation, law, robot, x0, faults=faults)
     # the synchronous channel's frames and mismatch; its delay is the bus's here

@@ -33,6 +33,8 @@ __all__ = ["FILTERS", "FilterKind", "SafetyFilter", "register_filter"]
 
 FilterKind = Literal["none", "barrier", "barrier-decentralized"]
 FILTERS: tuple[str, ...] = ("none", "barrier", "barrier-decentralized")
+#: the most sides of the polygon that stands for the filter's speed limit
+SIDES_LIMIT = 256
 
 
 class _Filter(NamedTuple):
@@ -111,6 +113,13 @@ class SafetyFilter:
         if self.max_speed is not None:
             number(self.max_speed, "max_speed", low=0.0, strict=True, owner="safety")
         whole(self.speed_sides, "speed_sides", minimum=4, owner="safety")
+        if self.speed_sides > SIDES_LIMIT:  # (each side is a row of every robot's QP)
+            raise ParameterError(
+                f"safety.speed_sides must be at most {SIDES_LIMIT}, got {self.speed_sides:,}: "
+                f"a polygon of {SIDES_LIMIT} sides is within "
+                f"{100 * (1 - math.cos(math.pi / SIDES_LIMIT)):.2g} % of the speed limit's disc",
+                key="speed_sides",
+            )
         number(self.sensing_radius, "sensing_radius", low=0.0, strict=True, allow_inf=True,
                owner="safety")  # fmt: skip
         if self.sensing_radius <= self.distance:

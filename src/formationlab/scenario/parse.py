@@ -490,7 +490,8 @@ def _asynchronous(
 
     try:
         dt = float(integrator.dt)  # type: ignore[attr-defined]
-        periods, jitter = check_schedule(table.periods, table.jitter, formation.n, dt)
+        duration = float(model.simulation.duration)
+        periods, jitter = check_schedule(table.periods, table.jitter, formation.n, dt, duration)
     except UserInputError as exc:
         raise fail(f"asynchronous.{exc.key or 'periods'}", str(exc)) from None
     return {"periods": periods, "jitter": jitter}
