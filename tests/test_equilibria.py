@@ -368,3 +368,24 @@ def test_equilibria_command_rejects_bad_options(tmp_path, capsys, args, message)
         )
     assert exc.value.code == 2
     assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("table", "key"),
+    [
+        ('law = "foo"', "equilibria.law"),  # was reported as controller.law, a valid line
+        ('law = "distance"\nfollow = "eta=0.1:1"', "equilibria.follow"),
+    ],
+)
+def test_a_bad_equilibria_table_is_reported_at_its_own_key_and_line(tmp_path, capsys, table, key):
+    from formationlab.cli import main
+
+    text = (EXAMPLES / "paper-simulation-1.toml").read_text() + f"\n[equilibria]\n{table}\n"
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    line = text.splitlines().index(table.splitlines()[-1]) + 1
+    with pytest.raises(SystemExit) as exc:
+        main(["validate", str(path)])
+    assert exc.value.code == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert f"{key} (line {line})" in err, err

@@ -23,8 +23,8 @@ from numpy.typing import NDArray
 from pydantic import ConfigDict, Field, ValidationError, ValidationInfo, field_validator
 from pydantic.dataclasses import dataclass as pydantic_dataclass
 
-from ..controllers import Law
-from ..errors import ParameterError
+from ..controllers import LAWS, Law
+from ..errors import ParameterError, UserInputError
 from ..integrators import INTEGRATORS, RK4, FixedStepIntegrator, ImplicitEuler
 from ..simulation.run import simulate
 from ..validation import steps_within, validation_error
@@ -257,11 +257,18 @@ def equilibria_scenario(sc: Scenario, config: EquilibriaConfig) -> Scenario:
         An unknown law, or a followed parameter the law does not have.
     """
     if config.law is not None:
+        try:
+            LAWS.canonical(config.law)  # (an unknown law is the equilibria table's key)
+        except UserInputError as exc:
+            raise sc.locate(ParameterError(str(exc), key="equilibria.law")) from None
         sc = dataclasses.replace(sc, law=sc.law_named(config.law))
     spec = config.follow_spec
     if spec and not hasattr(sc.law, spec[0]):
-        raise ParameterError(
-            f"the law {sc.law.name!r} has no parameter {spec[0]!r} to follow", key="follow"
+        raise sc.locate(
+            ParameterError(
+                f"the law {sc.law.name!r} has no parameter {spec[0]!r} to follow",
+                key="equilibria.follow",
+            )
         )
     return sc
 
