@@ -140,7 +140,7 @@ BAD = {
         "did you mean 'delaunay'?",
     ),
     "bad graph table": ({"edges": "{ nearest = 3 }"}, "formation.edges", "{ knn = k }"),
-    "within <= 0": ({"edges": "{ within = 0 }"}, "formation.edges", "needs r > 0"),
+    "within <= 0": ({"edges": "{ within = 0 }"}, "formation.edges", "edges.within must be > 0"),
     "around without template": (
         {"template": "none"},
         "robots.positions",

@@ -13,7 +13,7 @@ import unicodedata
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from ..formation.templates import LATTICES
 from ..validation import choices, suggest
@@ -64,6 +64,39 @@ def _points(v: Any, what: str) -> list[list[float]]:
     return out
 
 
+def _constraint(cls: type[BaseModel], err: Any) -> str:
+    """Words for a pydantic error of a field of ``cls`` (its constraint stated once, there)."""
+    ctx = err.get("ctx") or {}
+    name = str(err["loc"][0]) if err["loc"] else ""
+    field = cls.model_fields.get(name)
+    kind = "a whole number" if field is not None and field.annotation in (int, "int") else ""
+    for bound, word in (("ge", ">="), ("gt", ">"), ("le", "<="), ("lt", "<")):
+        if bound in ctx:
+            return f"must be {kind + ' ' if kind else ''}{word} {ctx[bound]:g}"
+    if err["type"] == "literal_error":
+        return "takes " + str(ctx.get("expected", "")).replace("'", '"')
+    if err["type"] in ("int_type", "int_from_float"):
+        return "must be a whole number"
+    if err["type"] in ("float_type", "finite_number"):
+        return "must be a finite number"
+    return str(err["msg"]).lower()
+
+
+def _sub_table(
+    cls: type[BaseModel], v: dict[str, Any], what: str, known: dict[str, str],
+    required: tuple[str, ...],
+) -> Any:  # fmt: skip
+    """An inline table ``v`` of the key ``what`` as the model ``cls``, whose fields state
+    its ranges; the first error names the sub-key (``template.count must be ...``)."""
+    _table(v, what, known, required)
+    try:
+        return cls.model_validate(v)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        key = ".".join([what, *(str(p) for p in err["loc"])])
+        raise ValueError(f"{key} {_constraint(cls, err)}, got {err.get('input')!r}") from None
+
+
 def _table(v: dict[str, Any], what: str, known: dict[str, str], required: tuple[str, ...]) -> None:
     """Check the keys of an inline table: only ``known`` ones, and the ``required`` ones."""
     for key in v:
@@ -99,17 +132,7 @@ _START_KEYS = {
 
 
 def _start_around(v: dict[str, Any]) -> StartAround:
-    what = "positions"
-    _table(v, what, _START_KEYS, ("around", "sigma"))
-    if v["around"] != "template":
-        raise ValueError(f'positions = {{ around = ... }} takes "template", got {v["around"]!r}')
-    sigma = _finite(v["sigma"], "positions.sigma")
-    if sigma < 0:
-        raise ValueError(f"positions.sigma must be >= 0, got {sigma:g}")
-    seed = v.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ValueError(f"positions.seed must be a whole number >= 0, got {seed!r}")
-    return StartAround(around="template", sigma=sigma, seed=seed)
+    return _sub_table(StartAround, v, "positions", _START_KEYS, ("around", "sigma"))
 
 
 class Lattice(BaseModel):
@@ -120,6 +143,13 @@ class Lattice(BaseModel):
     count: int = Field(ge=2)
     spacing: float = Field(default=1.0, gt=0)
 
+    @field_validator("lattice")
+    @classmethod
+    def _known(cls, kind: str) -> str:
+        if kind not in LATTICES:
+            raise ValueError(f"unknown lattice {kind!r}{choices(kind, LATTICES)}")
+        return kind
+
 
 _LATTICE_KEYS = {
     "lattice": '"' + '", "'.join(LATTICES) + '"',
@@ -129,18 +159,7 @@ _LATTICE_KEYS = {
 
 
 def _lattice(v: dict[str, Any]) -> Lattice:
-    what = "template"
-    _table(v, what, _LATTICE_KEYS, ("lattice", "count"))
-    kind = v["lattice"]
-    if not isinstance(kind, str) or kind not in LATTICES:
-        raise ValueError(f"unknown lattice {kind!r}{choices(str(kind), LATTICES)}")
-    count = v["count"]
-    if isinstance(count, bool) or not isinstance(count, int) or count < 2:
-        raise ValueError(f"template.count must be a whole number >= 2, got {count!r}")
-    spacing = _finite(v.get("spacing", 1.0), "template.spacing")
-    if spacing <= 0:
-        raise ValueError(f"template.spacing must be > 0, got {spacing:g}")
-    return Lattice(lattice=kind, count=count, spacing=spacing)
+    return _sub_table(Lattice, v, "template", _LATTICE_KEYS, ("lattice", "count"))
 
 
 #: The graph names of ``formation.edges`` (tables: ``{ knn = k }``, ``{ within = r }``).
@@ -151,20 +170,24 @@ _EDGE_FORMS = (
 )
 
 
+class _Knn(BaseModel):
+    model_config = _STRICT
+    knn: int = Field(ge=1)
+
+
+class _Within(BaseModel):
+    model_config = _STRICT
+    within: float = Field(gt=0)
+
+
 def _edge_rule(v: dict[str, Any]) -> dict[str, int | float]:
     if len(v) != 1 or next(iter(v)) not in ("knn", "within"):
         keys = ", ".join(repr(k) for k in v) or "none"
         hint = suggest(str(next(iter(v))), ("knn", "within")) if len(v) == 1 else ""
         raise ValueError(f"a graph table is {{ knn = k }} or {{ within = r }}, got {keys}{hint}")
-    if "knn" in v:
-        k = v["knn"]
-        if isinstance(k, bool) or not isinstance(k, int) or k < 1:
-            raise ValueError(f"edges = {{ knn = k }} needs a whole k >= 1, got {k!r}")
-        return {"knn": k}
-    r = _finite(v["within"], "edges.within")
-    if r <= 0:
-        raise ValueError(f"edges = {{ within = r }} needs r > 0, got {r:g}")
-    return {"within": r}
+    rule = _Knn if "knn" in v else _Within
+    known = {"knn": "whole number >= 1"} if "knn" in v else {"within": "distance > 0"}
+    return _sub_table(rule, v, "edges", known, tuple(known)).model_dump()
 
 
 class RobotsModel(BaseModel):
