@@ -1,6 +1,6 @@
 """The compiled run's lists: close pairs on a cell grid, rows by robot, threads.
 
-The close list (formationlab.engine.close_list) against a brute-force search over every pair on
+The close list (formationlab.neighbours.close_list) against a brute-force search over every pair on
 random and adversarial layouts; the compiled run on one thread against several, bit for
 bit; a list rebuilt at every step against one rebuilt rarely, bit for bit (each robot's
 sum has one order whatever the list holds beyond what acts); the run's memory layout.
@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 import formationlab as fl
-from formationlab.engine.close_list import close_list
 from formationlab.engine.layout import run_layout
 from formationlab.engine.saving import saved_rows
 from formationlab.formation.templates import lattice
 from formationlab.integrators.compiled import run_compiled
+from formationlab.neighbours.close_list import close_list
 from formationlab.neighbours.kdtree import non_edges
 
 
@@ -277,13 +277,13 @@ def test_the_cell_grid_stays_in_bounds_for_huge_or_non_finite_positions(kind):
     # The cell of a coordinate around 1e154 (the first Euler step of a scenario placed
     # there) was an integer conversion beyond int64: a negative cell count, writes out of
     # the grid's bounds and an abort (munmap_chunk) when the run's memory was freed.
-    from formationlab.engine.close_list import _bin
+    from formationlab.neighbours.cell_grid import bin_points
 
     q = np.array(EXTREME[kind])
     n = len(q)
     cell_of, items = np.zeros(n, np.int32), np.zeros(n, np.int32)
     start = np.full(4 * n + 17, -7, np.int32)
-    nx, ny = _bin(q, 0.5, cell_of, items, start)[:2]
+    nx, ny = bin_points(q, 0.5, cell_of, items, start)[:2]
     assert nx >= 1 and ny >= 1 and nx * ny <= start.size - 1
     assert np.all((cell_of >= 0) & (cell_of < nx * ny))
     assert sorted(items.tolist()) == list(range(n))  # each robot in exactly one cell

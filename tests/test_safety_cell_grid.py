@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from formationlab.neighbours.cell_grid import build_grid, neighbours_of
 from formationlab.safety import (
     SafetyFilter,
     decentralized_commands,
@@ -11,7 +12,6 @@ from formationlab.safety import (
     neighbour_lists,
     sensed_pairs,
 )
-from formationlab.safety.cell_grid import build_grid, neighbours_of
 
 
 def _swarm(rng, n, spread):

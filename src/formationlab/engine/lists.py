@@ -3,7 +3,8 @@
 For runs of many robots (one trial, ``C = 1``) the loop (:func:`.loop.step_chunk`) takes the
 law from its :class:`~formationlab.engine.layout.RunLayout` (lists by robot) instead of its
 pairs, and finds the pairs that can repel or touch in a close-pair (Verlet) list on a cell
-grid (:mod:`.close_list`). Nothing in it is ``n x n`` and nothing is allocated per step:
+grid (:mod:`formationlab.neighbours.close_list`). Nothing in it is ``n x n`` and nothing
+is allocated per step:
 
 1. **items** (:func:`items_chunk`), at each new state: each edge's force ``k_c phi'(r)/r
    r_ij`` (eqs. 7, 8; or Krick et al.'s), each close pair's Khatib repulsion, each switching
@@ -23,7 +24,8 @@ a pair that matters (Khatib's ``gamma_ij`` acts only within clearance ``s0``, an
 only carry two robots through each other if they end closer than twice its largest move,
 so every step needs the pairs of clearance below ``max(s0, 2.01 move)``: the list holds
 those plus a skin of ``(s0 + max a_ij) / 2``, and is rebuilt when a robot has moved more
-than half the skin since, :func:`~.close_list.list_holds`), then the items at the new state.
+than half the skin since, :func:`~formationlab.neighbours.close_list.list_holds`), then the
+items at the new state.
 A list that needs more room than its buffers stops the loop (``GROW``): the host grows them
 (:func:`grow`) and the step is taken again.
 
@@ -51,7 +53,7 @@ from ..controllers.kinds.restriction import (
     triangle_product,
 )
 from ..controllers.kinds.signed_area import area_force, area_gain, signed_area
-from .close_list import build_close_list, grown, list_holds, pair_rows
+from ..neighbours.close_list import build_close_list, grown, list_holds, pair_rows
 from .contact import SWEPT_MARGIN, segment_clearance
 from .euler import euler
 from .layout import RunLayout

@@ -28,7 +28,7 @@ neighbours (:mod:`.projection`). It runs batched over
 trials and robots in one serial numba loop (``nogil``, so callers may run chunks in
 threads; a ``prange`` launch cost more than the whole loop below a few thousand robots
 when benchmarked), each robot's neighbours found by a grid of cells of the sensing
-radius (:mod:`.cell_grid`; all robots when the radius is infinite or below
+radius (:mod:`formationlab.neighbours.cell_grid`; all robots when the radius is infinite or below
 ``DENSE_BELOW`` robots), and a robot whose command satisfies its rows is settled
 without building them (:func:`~.projection.unchanged_robot`).
 :func:`decentralized_commands` returns the commands only (what the closed loop needs);
@@ -53,7 +53,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from ..errors import require_extra
-from .cell_grid import build_grid, neighbours_of
+from ..neighbours.cell_grid import build_grid, neighbours_of
 from .config import SafetyFilter, register_filter
 from .obstacle_terms import obstacle_terms
 from .obstacles import Obstacle, obstacle_barrier_rows

@@ -28,7 +28,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from .cell_grid import build_grid, neighbours_of
+from ..neighbours.cell_grid import build_grid, neighbours_of
 from .dual_active_set import FALLBACK, NUMERICAL, centralized_command
 from .obstacle_terms import (
     barrier_row,

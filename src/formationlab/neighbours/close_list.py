@@ -4,8 +4,8 @@ Khatib's repulsion acts only between robots closer than ``a_ij + s0`` and contac
 only at ``r_ij <= a_ij``, so a run of many robots needs, at each step, only the
 pairs whose clearance ``r_ij - a_ij`` is below some ``c``. :func:`build_close_list`
 finds exactly the pairs with clearance below ``reach`` (robots binned into square
-cells at least ``max a_ij + reach`` wide, each robot looking at the 3 x 3 cells
-around its own), leaving out excluded partners (a formation's neighbours, whose
+cells at least ``max a_ij + reach`` wide by :mod:`.cell_grid`, each robot looking at the
+3 x 3 cells around its own), leaving out excluded partners (a formation's neighbours, whose
 edge potential has its own barrier). A list built with ``reach = c + skin`` still
 holds every pair of clearance below ``c`` while no robot has moved more than
 ``skin / 2`` since the build (a pair's clearance changes by at most the sum of
@@ -25,69 +25,12 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from .cell_grid import bin_points, cell
+
 __all__ = ["CloseList", "build_close_list", "close_list", "grown", "list_holds", "pair_rows"]
 
 #: relative slack of the list's guarantee against rounding of the clearances
 _SLACK = 1e-9
-
-
-@njit(cache=True)
-def _cell(v, v0, side, count):
-    """The cell ``0 <= c < count`` of coordinate ``v`` in cells of ``side`` from ``v0``.
-
-    Clamped before the conversion to an integer, which is undefined for a quotient that
-    is NaN or beyond the integers (a coordinate around 1e154 or not finite): such a
-    robot goes to an edge cell, where the list stays valid for the finite ones.
-    """
-    t = (v - v0) / side
-    if not t >= 0.0:  # NaN as well
-        return 0
-    if t >= count - 1:
-        return count - 1
-    return int(t)
-
-
-@njit(cache=True)
-def _bin(q, side, cell_of, items, start):
-    """Counting sort of the robots into square cells of side ``side``.
-
-    At most ``start.size - 1`` cells: the side is doubled until they fit (wider
-    cells still hold every pair within ``side``); positions whose extent is not
-    finite (NaN, infinite, or too far apart for their difference to be a float) all
-    go into one cell. Returns ``nx, ny, side, x0, y0``; the robots of cell ``c`` are
-    ``items[start[c]:start[c + 1]]``, in robot order.
-    """
-    n = q.shape[0]
-    x0, y0, x1, y1 = np.inf, np.inf, -np.inf, -np.inf
-    for i in range(n):
-        x0, x1 = min(x0, q[i, 0]), max(x1, q[i, 0])
-        y0, y1 = min(y0, q[i, 1]), max(y1, q[i, 1])
-    wide, high = x1 - x0, y1 - y0
-    nx, ny = 1, 1
-    if math.isfinite(wide) and math.isfinite(high) and math.isfinite(side) and side > 0.0:
-        # counted in floats: the cell counts of a huge extent are beyond the integers
-        while (math.floor(wide / side) + 1.0) * (math.floor(high / side) + 1.0) > start.size - 1:
-            side *= 2.0
-        nx = int(wide / side) + 1
-        ny = int(high / side) + 1
-    else:
-        x0, y0, side = 0.0, 0.0, np.inf
-    cells = nx * ny
-    start[: cells + 1] = 0
-    for i in range(n):
-        c = _cell(q[i, 0], x0, side, nx) * ny + _cell(q[i, 1], y0, side, ny)
-        cell_of[i] = c
-        start[c + 1] += 1
-    for c in range(cells):
-        start[c + 1] += start[c]
-    for i in range(n - 1, -1, -1):  # backwards, so that each cell lists its robots in order
-        c = cell_of[i]
-        start[c + 1] -= 1
-        items[start[c + 1]] = i
-    for c in range(cells):  # start[c + 1] now points at cell c's first robot; shift back
-        start[c] = start[c + 1]
-    start[cells] = n
-    return nx, ny, side, x0, y0
 
 
 @njit(cache=True)
@@ -112,14 +55,14 @@ def build_close_list(q, radius, reach, ex_ptr, ex_nbr, pairs, cell_of, items, st
     for i in range(n):
         top = max(top, radius[i])
     side = (2.0 * top + reach) * (1.0 + _SLACK) + 1e-300
-    nx, ny, side, x0, y0 = _bin(q, side, cell_of, items, start)
+    nx, ny, side, x0, y0 = bin_points(q, side, cell_of, items, start)
     stamp[:] = -1
     count = 0
     for i in range(n):
         for p in range(ex_ptr[i], ex_ptr[i + 1]):
             stamp[ex_nbr[p]] = i
-        cx = _cell(q[i, 0], x0, side, nx)
-        cy = _cell(q[i, 1], y0, side, ny)
+        cx = cell(q[i, 0], x0, side, nx)
+        cy = cell(q[i, 1], y0, side, ny)
         m = 0
         for gx in range(max(cx - 1, 0), min(cx + 2, nx)):
             for gy in range(max(cy - 1, 0), min(cy + 2, ny)):
