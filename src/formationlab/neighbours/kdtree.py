@@ -15,7 +15,14 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-__all__ = ["close_pairs", "non_edges"]
+__all__ = ["close_pairs", "non_edges", "pairs_within"]
+
+
+def pairs_within(state: NDArray[np.float64], radius: float) -> NDArray[np.int64]:
+    """Pairs ``i < j`` of one state ``(n, 2)`` at most ``radius`` apart, sorted; ``(p, 2)``."""
+    ij = cKDTree(state).query_pairs(r=float(radius), output_type="ndarray")
+    ij = np.sort(ij.astype(np.int64).reshape(-1, 2), axis=1)
+    return ij[np.lexsort((ij[:, 1], ij[:, 0]))]
 
 
 def close_pairs(q: NDArray[np.float64], cutoff: float) -> NDArray[np.int64]:
@@ -29,8 +36,7 @@ def close_pairs(q: NDArray[np.float64], cutoff: float) -> NDArray[np.int64]:
     for state in q.reshape(-1, n, 2):
         ok = np.all(np.isfinite(state), axis=-1)
         idx = np.flatnonzero(ok)
-        pairs = cKDTree(state[idx]).query_pairs(r=float(cutoff), output_type="ndarray")
-        found.append(idx[pairs].reshape(-1, 2))
+        found.append(idx[pairs_within(state[idx], cutoff)].reshape(-1, 2))
     p = np.sort(np.concatenate(found), axis=1) if found else np.zeros((0, 2), np.int64)
     return np.unique(p, axis=0).astype(np.int64).reshape(-1, 2)
 

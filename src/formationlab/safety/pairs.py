@@ -3,7 +3,7 @@
 A barrier constraint is only posed between robots closer than the sensing
 radius ``R`` (Wang, Ames and Egerstedt, IEEE T-RO 2017, section IV: each robot
 only needs its neighbours within range). Small formations use a dense distance
-matrix; large ones a k-d tree (``scipy.spatial.cKDTree.query_pairs``), which is
+matrix; large ones a k-d tree (:func:`formationlab.neighbours.kdtree.pairs_within`), which is
 ``O(n log n + m)`` instead of ``O(n^2)``.
 """
 
@@ -13,7 +13,8 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
+
+from ..neighbours.kdtree import pairs_within
 
 __all__ = ["neighbour_lists", "sensed_pairs"]
 
@@ -56,10 +57,8 @@ def sensed_pairs(q: NDArray[np.float64], radius: float) -> NDArray[np.int64]:
         return _dense_pairs(flat, radius)
     out = []
     for b in range(flat.shape[0]):
-        ij = cKDTree(flat[b]).query_pairs(radius, output_type="ndarray").astype(np.int64)
-        ij.sort(axis=1)
-        order = np.lexsort((ij[:, 1], ij[:, 0]))
-        out.append(np.column_stack([np.full(len(ij), b, np.int64), ij[order]]))
+        ij = pairs_within(flat[b], radius)
+        out.append(np.column_stack([np.full(len(ij), b, np.int64), ij]))
     return np.concatenate(out) if out else np.zeros((0, 3), np.int64)
 
 
