@@ -1,6 +1,8 @@
 """Barrier-certificate filters: KKT conditions, exactness, the decentralized kernel against
 Clarabel, hand-derived values, batching, statuses and configuration errors."""
 
+import re
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -224,3 +226,19 @@ def test_configuration_errors():
         )
     with pytest.raises(ParameterError, match=r"shape \(\.\.\., n, 2\)"):
         SafetyFilter(filter="barrier").apply(np.zeros((3, 2)), np.zeros((2, 2)))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_diameters_check_names_the_pair_of_the_largest_contact_distance(seed):
+    """``check_diameters`` (O(n): no n x n contact matrix for a swarm) refuses exactly when
+    the largest ``a_ij`` exceeds ``D_s`` and names the first such pair of the matrix."""
+    rng = np.random.default_rng(seed)
+    rho = rng.choice([0.1, 0.2, 0.3], size=7)  # ties on purpose
+    a = 0.5 * (rho[:, None] + rho[None, :]) - np.diag(np.full(7, np.inf))
+    i, j = np.unravel_index(np.argmax(a), a.shape)  # the first largest, row by row
+    words = f"a_{i + 1}{j + 1} = {a[i, j]:g} of robots {i + 1} and {j + 1}"
+    cfg = SafetyFilter(filter="barrier", distance=a[i, j] - 1e-3, obstacle_distance=1.0)
+    for check in (cfg.check_diameters, lambda d: cfg.check_contact(0.5 * (d[:, None] + d))):
+        with pytest.raises(ParameterError, match=re.escape(words)):
+            check(rho)
+    SafetyFilter(filter="barrier", distance=a[i, j], obstacle_distance=1.0).check_diameters(rho)

@@ -111,7 +111,7 @@ class System:
         if self.filtered:
             assert self.safety is not None
             self.safety.check_model(self.model)
-            self.safety.check_contact(self.formation.contact_matrix)
+            self.safety.check_diameters(self.formation.diameters)
         if self.obstacles:
             self.law.obstacle_repulsion()  # a law without one refuses obstacles now
 

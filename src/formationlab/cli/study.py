@@ -215,7 +215,7 @@ def _with_filter(sc: Any, name: str) -> Any:
     base = sc.safety if sc.safety is not None else SafetyFilter()
     try:
         safety = dataclasses.replace(base, filter=name)
-        safety.check_contact(sc.formation.contact_matrix)
+        safety.check_diameters(sc.formation.diameters)
         safety.check_model(sc.model)
     except UserInputError as exc:
         raise UserInputError(f"--filter {name}: {exc}") from None

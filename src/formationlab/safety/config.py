@@ -200,20 +200,30 @@ class SafetyFilter:
         a = np.asarray(contact, dtype=float)
         if a.ndim != 2 or a.shape[0] != a.shape[1]:
             raise ParameterError(f"contact distances must be an (n, n) matrix, got {a.shape}")
-        n = a.shape[0]
-        off = a + np.where(np.eye(n, dtype=bool), -np.inf, 0.0)
-        i, j = np.unravel_index(int(np.argmax(off)), off.shape) if n > 1 else (0, 0)
-        if n > 1 and self.distance < off[i, j]:
-            lo, hi = sorted((int(i), int(j)))
-            raise ParameterError(
-                f"safety distance D_s = {self.distance:g} is below the contact distance "
-                f"a_{lo + 1}{hi + 1} = {off[i, j]:g} of robots {lo + 1} and {hi + 1}; "
-                f"use distance >= {off[i, j]:g}",
-                key="distance",
-            )
-        radius = 0.5 * np.diag(a)
-        k = int(np.argmax(radius))
-        if self.d_obstacle < radius[k]:
+        self.check_diameters(np.diag(a))
+
+    def check_diameters(self, diameters: ArrayLike) -> None:
+        """:meth:`check_contact` from the robots' diameters ``(n,)`` alone, in ``O(n)``: the
+        largest contact distance is that of the two largest robots (a swarm's ``n x n``
+        contact matrix is never built)."""
+        rho = np.asarray(diameters, dtype=float).ravel()
+        n = rho.size
+        if n > 1:
+            first = int(np.argmax(rho))  # the largest robot, and the largest of the others
+            rest = np.where(np.arange(n) == first, -np.inf, rho)
+            second = int(np.argmax(rest))
+            lo, hi = sorted((first, second))
+            a = 0.5 * (rho[lo] + rho[hi])
+            if self.distance < a:
+                raise ParameterError(
+                    f"safety distance D_s = {self.distance:g} is below the contact distance "
+                    f"a_{lo + 1}{hi + 1} = {a:g} of robots {lo + 1} and {hi + 1}; "
+                    f"use distance >= {a:g}",
+                    key="distance",
+                )
+        radius = 0.5 * rho
+        k = int(np.argmax(radius)) if n else 0
+        if n and self.d_obstacle < radius[k]:
             raise ParameterError(
                 f"safety obstacle_distance D_o = {self.d_obstacle:g} is below the radius "
                 f"{radius[k]:g} of robot {k + 1}; use obstacle_distance >= {radius[k]:g}",

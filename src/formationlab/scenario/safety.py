@@ -102,7 +102,7 @@ def build_safety(
     given = safety.model_fields_set
     try:
         config = SafetyFilter(**values)
-        config.check_contact(formation.contact_matrix)
+        config.check_diameters(formation.diameters)
     except UserInputError as exc:
         key = f"safety.{exc.key or 'distance'}"
         raise ScenarioError(f"{where(key, line_of(text, key))}: {exc}", key=key) from None
