@@ -28,6 +28,15 @@ LAW = fl.AngleRestrictedLaw(k_c=2.0, k_a=3.0, theta=0.5)
 CLI = [sys.executable, "-c", "from formationlab.cli import main; main()"]
 
 
+def refused(scenario: Path) -> str:
+    """What ``validate`` says of ``scenario``, after checking that it refused it cleanly."""
+    proc = subprocess.run(
+        [*CLI, "validate", str(scenario)], capture_output=True, text=True, timeout=600, check=False
+    )
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    return proc.stderr.strip()
+
+
 def run(formation, law, q0, backend="numba"):
     with np.errstate(all="ignore"):
         return fl.simulate(
@@ -107,11 +116,7 @@ def test_a_delay_whose_measurements_do_not_fit_is_refused_by_validate(tmp_path: 
     # of every other (about 140 GB) was allocated at the run's first step, in a traceback
     scenario = tmp_path / "late.toml"
     scenario.write_text(triangle("late", "1.0") + "\n[sensing]\ndelay = 1e6\n")
-    proc = subprocess.run(
-        [*CLI, "validate", str(scenario)], capture_output=True, text=True, timeout=600, check=False
-    )
-    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
-    message = proc.stderr.strip()
+    message = refused(scenario)
     assert message.startswith(f"error: {scenario}: sensing.delay (line ")
     assert "1e+09 steps of dt = 0.001 s" in message and "use a shorter delay" in message
     # a delay that fits runs, in Python as on the command line
@@ -149,11 +154,7 @@ def test_work_beyond_reason_is_refused_by_validate_with_its_key(case: str, tmp_p
         text += "\n" + table
     scenario = tmp_path / "huge.toml"
     scenario.write_text(text)
-    proc = subprocess.run(
-        [*CLI, "validate", str(scenario)], capture_output=True, text=True, timeout=600, check=False
-    )
-    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
-    message = proc.stderr.strip()
+    message = refused(scenario)
     assert message.startswith(f"error: {scenario}: {key} (line "), message
     assert figure in message and len(message) < 400, message
 
@@ -162,11 +163,7 @@ def test_periods_that_would_never_end_are_refused_by_validate(tmp_path: Path) ->
     # [asynchronous] periods = 1e-300: validate said "15,000 steps" and the run never ended
     scenario = tmp_path / "eager.toml"
     scenario.write_text(triangle("eager", "15.0") + "\n[asynchronous]\nperiods = 1e-300\n")
-    proc = subprocess.run(
-        [*CLI, "validate", str(scenario)], capture_output=True, text=True, timeout=600, check=False
-    )
-    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
-    message = proc.stderr.strip()
+    message = refused(scenario)
     assert message.startswith(f"error: {scenario}: asynchronous.periods (line "), message
     assert "4.5e+301 wake-ups in 15 s" in message
 
@@ -176,11 +173,7 @@ def test_a_speed_polygon_of_a_hundred_million_sides_is_refused(tmp_path: Path) -
     table = '[safety]\nfilter = "barrier"\ndistance = 0.25\nmax_speed = 1.0\n'
     scenario = tmp_path / "round.toml"
     scenario.write_text(triangle("round", "1.0") + "\n" + table + "speed_sides = 100000000\n")
-    proc = subprocess.run(
-        [*CLI, "validate", str(scenario)], capture_output=True, text=True, timeout=600, check=False
-    )
-    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
-    message = proc.stderr.strip()
+    message = refused(scenario)
     assert message.startswith(f"error: {scenario}: safety.speed_sides (line "), message
     assert "at most 256, got 100,000,000" in message
     assert (
