@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._jit import formula
 from ..errors import FormationError, ParameterError
 from ..formation.geometry import perp
 from ..formation.spec import Formation
@@ -46,6 +47,7 @@ __all__ = [
     "MotionParameters",
     "centroid_velocity",
     "heading_spread",
+    "marched",
     "shape_realization",
 ]
 
@@ -123,12 +125,20 @@ class Marching:
         ``gain`` is the robot model's ``velocity_gain`` (the command that holds a
         robot at a velocity: ``k_d`` for double integrators, 1 otherwise).
         """
-        v = gain * self.reference(t)
         if self.leader is None:
-            return u + v
+            return marched(u, gain, self.reference(t))
         out = np.array(u, dtype=float, copy=True)
-        out[..., self.leader - 1, :] = v
+        out[..., self.leader - 1, :] = gain * self.reference(t)
         return out
+
+
+@formula
+def marched(u, gain, v):
+    """A command with its marching term: ``u + gain v``, ``v`` the reference velocity or a
+    robot's sum of motion-parameter terms ``sum_k a_ik z_k`` (``gain``: the model's
+    ``velocity_gain``). The numpy commands above and the compiled stage
+    (:mod:`.stage`) call it."""
+    return u + gain * v
 
 
 def shape_realization(formation: Formation) -> NDArray[np.float64]:
@@ -245,7 +255,7 @@ class MotionParameters:
         """
         edges = formation.edges
         z = p[..., edges[:, 0], :] - p[..., edges[:, 1], :]
-        return u + gain * (self.incidence(formation) @ z)
+        return marched(u, gain, self.incidence(formation) @ z)
 
     def incidence(self, formation: Formation) -> NDArray[np.float64]:
         """The matrix ``(n, m)`` of the ``a_ik``."""

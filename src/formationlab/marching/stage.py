@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from numba import njit
 
+from .config import marched
 from .terms import EVERY, MOTION, STILL
 
 __all__ = ["march"]
@@ -37,18 +38,18 @@ def march(p, u, nact, k, mt, acc):
                 acc[j, 0] += mt.mu_tilde[e] * zx
                 acc[j, 1] += mt.mu_tilde[e] * zy
             for i in range(n):
-                u[i, 0, b] = u[i, 0, b] + mt.gain * acc[i, 0]
-                u[i, 1, b] = u[i, 1, b] + mt.gain * acc[i, 1]
+                u[i, 0, b] = marched(u[i, 0, b], mt.gain, acc[i, 0])
+                u[i, 1, b] = marched(u[i, 1, b], mt.gain, acc[i, 1])
         return
     row = k - mt.k0 if mt.v.shape[0] > 1 else 0
-    vx = mt.gain * mt.v[row, 0]
-    vy = mt.gain * mt.v[row, 1]
+    vx = mt.v[row, 0]
+    vy = mt.v[row, 1]
     if mt.kind == EVERY:
         for i in range(n):
             for b in range(nact):
-                u[i, 0, b] = u[i, 0, b] + vx
-                u[i, 1, b] = u[i, 1, b] + vy
+                u[i, 0, b] = marched(u[i, 0, b], mt.gain, vx)
+                u[i, 1, b] = marched(u[i, 1, b], mt.gain, vy)
     else:  # the leader moves with v_ref alone
         for b in range(nact):
-            u[mt.leader, 0, b] = vx
-            u[mt.leader, 1, b] = vy
+            u[mt.leader, 0, b] = mt.gain * vx
+            u[mt.leader, 1, b] = mt.gain * vy
