@@ -31,10 +31,12 @@ from .errors import ParameterError, ScenarioError, UserInputError
 
 __all__ = [
     "COORDINATE_LIMIT",
+    "STEP_LIMIT",
     "build_dataclass",
     "check_fields",
     "choices",
     "coordinates",
+    "field_words",
     "fraction",
     "line_of",
     "nearest",
@@ -44,6 +46,7 @@ __all__ = [
     "parameter_model",
     "positive",
     "seed",
+    "steps_within",
     "suggest",
     "validation_error",
     "whole",
@@ -323,6 +326,27 @@ _EXPECTED = {
     "model_attributes_type": "expected a table",
     "dataclass_type": "expected a table",
 }
+
+
+def field_words(cls: type[BaseModel], err: Any) -> str:
+    """What a pydantic error ``err`` of a field of the model ``cls`` says, in the words of
+    :func:`number` and :func:`whole` ("must be a whole number >= 2"): for the inline tables
+    of scenario files, whose ranges are the models' field constraints. (The keys of the
+    tables themselves keep pydantic's words, :func:`validation_error`.)"""
+    ctx = err.get("ctx") or {}
+    name = str(err["loc"][0]) if err["loc"] else ""
+    field = cls.model_fields.get(name)
+    kind = "a whole number" if field is not None and field.annotation in (int, "int") else ""
+    for bound, word in (("ge", ">="), ("gt", ">"), ("le", "<="), ("lt", "<")):
+        if bound in ctx:
+            return f"must be {kind + ' ' if kind else ''}{word} {ctx[bound]:g}"
+    if err["type"] == "literal_error":
+        return "takes " + str(ctx.get("expected", "")).replace("'", '"')
+    if err["type"] in ("int_type", "int_from_float"):
+        return "must be a whole number"
+    if err["type"] in ("float_type", "finite_number"):
+        return "must be a finite number"
+    return str(err["msg"]).lower()
 
 
 def _path(loc: Sequence[Any], prefix: str, tags: Sequence[str] = ()) -> tuple[str, str]:

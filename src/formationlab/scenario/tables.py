@@ -16,7 +16,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from ..formation.templates import LATTICES
-from ..validation import choices, suggest
+from ..validation import choices, field_words, suggest
 
 __all__ = [
     "EDGE_NAMES",
@@ -64,24 +64,6 @@ def _points(v: Any, what: str) -> list[list[float]]:
     return out
 
 
-def _constraint(cls: type[BaseModel], err: Any) -> str:
-    """Words for a pydantic error of a field of ``cls`` (its constraint stated once, there)."""
-    ctx = err.get("ctx") or {}
-    name = str(err["loc"][0]) if err["loc"] else ""
-    field = cls.model_fields.get(name)
-    kind = "a whole number" if field is not None and field.annotation in (int, "int") else ""
-    for bound, word in (("ge", ">="), ("gt", ">"), ("le", "<="), ("lt", "<")):
-        if bound in ctx:
-            return f"must be {kind + ' ' if kind else ''}{word} {ctx[bound]:g}"
-    if err["type"] == "literal_error":
-        return "takes " + str(ctx.get("expected", "")).replace("'", '"')
-    if err["type"] in ("int_type", "int_from_float"):
-        return "must be a whole number"
-    if err["type"] in ("float_type", "finite_number"):
-        return "must be a finite number"
-    return str(err["msg"]).lower()
-
-
 def _sub_table(
     cls: type[BaseModel], v: dict[str, Any], what: str, known: dict[str, str],
     required: tuple[str, ...],
@@ -94,7 +76,7 @@ def _sub_table(
     except ValidationError as exc:
         err = exc.errors()[0]
         key = ".".join([what, *(str(p) for p in err["loc"])])
-        raise ValueError(f"{key} {_constraint(cls, err)}, got {err.get('input')!r}") from None
+        raise ValueError(f"{key} {field_words(cls, err)}, got {err.get('input')!r}") from None
 
 
 def _table(v: dict[str, Any], what: str, known: dict[str, str], required: tuple[str, ...]) -> None:
