@@ -79,7 +79,7 @@ def one_paper(cmd: list[str]) -> tuple[float, float]:
 def phases() -> None:
     """The reproduction timed phase by phase in this process."""
     t = time.perf_counter()
-    from formationlab.simulation.paper import PaperSetup, reproduce
+    from formationlab.studies.paper import PaperSetup, reproduce
 
     print(f"  import formationlab          {time.perf_counter() - t:6.2f} s")
     setup = PaperSetup()

@@ -43,7 +43,7 @@ import numpy as np
 import formationlab as fl
 from formationlab.dynamics import System
 from formationlab.integrators.compiled import compiled_terms, run_compiled
-from formationlab.simulation.paper import PAPER_Q0, paper_formation, paper_law
+from formationlab.studies.paper import PAPER_Q0, paper_formation, paper_law
 
 DT = 1e-3
 LAWS = ("distance", "angle-restricted")

@@ -17,7 +17,7 @@ import pytest
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 import formationlab as fl
-from formationlab.agents import law_policy, parallel_env
+from formationlab.envs import law_policy, parallel_env
 from formationlab.errors import ParameterError
 from formationlab.io.scenario import load_scenario
 from formationlab.scenario import parse_scenario
@@ -288,9 +288,9 @@ def test_bad_arguments_are_parameter_errors():
 
 def test_a_missing_pettingzoo_names_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "pettingzoo", None)
-    monkeypatch.delitem(sys.modules, "formationlab.agents.env")
+    monkeypatch.delitem(sys.modules, "formationlab.envs.pettingzoo")
     with pytest.raises(ImportError, match=r"pip install formationlab\[agents\]"):
-        importlib.import_module("formationlab.agents.env")
+        importlib.import_module("formationlab.envs.pettingzoo")
 
 
 def test_the_example_reaches_the_desired_formation(capsys):
@@ -301,3 +301,14 @@ def test_the_example_reaches_the_desired_formation(capsys):
     assert out.startswith("outcome: desired at t = ")
     errors = [float(e) for e in re.findall(r"= ([+-]\d\.\d+) m", out)]
     assert len(errors) == 3 and max(map(abs, errors)) <= fl.outcomes.analysis.Tolerances().distance
+
+
+def test_the_environments_former_address_still_answers_and_warns():
+    import formationlab.agents as agents
+    import formationlab.envs as envs
+
+    for name in ("parallel_env", "FormationEnv", "law_policy"):
+        with pytest.warns(DeprecationWarning, match=rf"formationlab\.envs\.{name}"):
+            assert getattr(agents, name) is getattr(envs, name)
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        agents.nothing  # noqa: B018

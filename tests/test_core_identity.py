@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import formationlab as fl
-from formationlab.simulation.paper import PaperSetup, paper_formation, paper_law
+from formationlab.studies.paper import PaperSetup, paper_formation, paper_law
 
 BEFORE = {
     (1, 0.0): [

@@ -217,7 +217,7 @@ def test_many_robots_in_an_animation_mark_stopped_and_constrained_ones() -> None
 
 
 def test_write_trajectory_of_a_paper_run_round_trips(tmp_path: Path) -> None:
-    from formationlab.simulation.paper import PaperSetup
+    from formationlab.studies.paper import PaperSetup
 
     res = PaperSetup(duration=1.0).run(2, perturbation=1e-6)
     write_trajectory(res, tmp_path / "t.nc")

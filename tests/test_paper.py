@@ -7,7 +7,7 @@ import pytest
 
 import formationlab as fl
 from formationlab.io.files import to_jsonable
-from formationlab.simulation.paper import (
+from formationlab.studies.paper import (
     PAPER_Q0,
     PaperSetup,
     exchanged_pairs,
@@ -135,7 +135,7 @@ def _crossing_reference(p: np.ndarray, r: np.ndarray, max_points: int = 1500) ->
 
 @pytest.mark.parametrize("seed", range(30))
 def test_path_crossing_with_the_box_filter_equals_all_pairs(seed):
-    from formationlab.simulation.paper import _polylines_cross
+    from formationlab.studies.paper import _polylines_cross
 
     rng = np.random.default_rng(seed)
     T = int(rng.integers(2, 300))
@@ -150,7 +150,7 @@ def test_path_crossing_of_the_paper_runs_equals_all_pairs(reproduction):
     crossed = 0
     for res in (reproduction.simulation_1, reproduction.simulation_2):
         for i, j in ((0, 1), (0, 2), (1, 2)):
-            from formationlab.simulation.paper import _polylines_cross
+            from formationlab.studies.paper import _polylines_cross
 
             got = _polylines_cross(res.q[:, i], res.q[:, j])
             assert got == _crossing_reference(res.q[:, i], res.q[:, j])
@@ -160,7 +160,7 @@ def test_path_crossing_of_the_paper_runs_equals_all_pairs(reproduction):
 
 def test_the_diameter_scan_in_batches_equals_single_runs():
     """The study kernel, one batch per formation, against a 10 s single run per row."""
-    from formationlab.simulation.paper import diameter_scan
+    from formationlab.studies.paper import diameter_scan
 
     setup = PaperSetup(diameters=(0.05, 0.2, 0.6))
     batched, single = diameter_scan(setup, batch=True), diameter_scan(setup, batch=False)
@@ -172,7 +172,7 @@ def test_the_diameter_scan_in_batches_equals_single_runs():
 
 def test_the_symmetry_scan_in_one_batch_equals_single_runs():
     """The seven runs of the default scan as one compiled batch, against a single run each."""
-    from formationlab.simulation.paper import symmetry_scan
+    from formationlab.studies.paper import symmetry_scan
 
     setup = PaperSetup()
     batched, single = symmetry_scan(setup, batch=True), symmetry_scan(setup, batch=False)

@@ -83,7 +83,7 @@ def test_euler_trajectory_of_paper_simulation_1_equals_simulate_with_papers_para
 
 @pytest.mark.parametrize("simulation", [1, 2])
 def test_example_trajectories_agree_with_the_paper_command(simulation: int) -> None:
-    from formationlab.simulation.paper import PaperSetup
+    from formationlab.studies.paper import PaperSetup
 
     sc = load_scenario(EXAMPLES / f"paper-simulation-{simulation}.toml")
     setup = PaperSetup(duration=2.0, dt=1e-3, integrator="euler", diameter=0.2)

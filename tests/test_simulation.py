@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import formationlab as fl
-from formationlab.simulation.paper import PAPER_Q0, paper_formation, paper_law
+from formationlab.studies.paper import PAPER_Q0, paper_formation, paper_law
 
 
 def test_V_non_increasing_along_simulation_1():

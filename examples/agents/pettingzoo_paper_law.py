@@ -1,7 +1,7 @@
 """The paper's triangle (section 4, simulation 1) with every robot a PettingZoo agent.
 
 Each robot's action is the paper's law computed from its own observation (its measured
-relative positions of the other robots, in its own frame): formationlab.agents.law_policy.
+relative positions of the other robots, in its own frame): formationlab.envs.law_policy.
 The episode ends when the desired formation is reached.
 
     pip install formationlab[agents]
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from formationlab.agents import law_policy, parallel_env
+from formationlab.envs import law_policy, parallel_env
 from formationlab.outcomes.analysis import distance_errors, edge_labels
 from formationlab.io.scenario import load_scenario
 

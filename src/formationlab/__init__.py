@@ -42,7 +42,7 @@ __version__ = package_version()
 def __getattr__(name: str) -> object:
     """``fl.Viewer``, the notebook widget, imported on first use (it needs the ``view`` extra)."""
     if name == "Viewer":
-        from .viewer.widget import Viewer
+        from .viewer.widget import Viewer  # anywidget, the view extra: when asked for
 
         return Viewer
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

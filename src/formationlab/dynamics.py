@@ -42,11 +42,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .controllers import Law
+from .errors import ParameterError
 from .formation.chunked import over_time, row_bytes
 from .formation.spec import DENSE_LIMIT, Formation
 from .marching import March
 from .models import RobotModel, SingleIntegrator
-from .sensing import Channel, Faults, Seed, Sensing
+from .neighbours.kdtree import close_pairs
+from .safety import clearances, grad_obstacle_potential, obstacle_potential, swept_clearances
+from .sensing import SENSING_LIMIT, Channel, Faults, Seed, Sensing
 from .status import Status
 from .validation import COORDINATE_LIMIT
 
@@ -100,8 +103,6 @@ class System:
         if self.faults is not None:
             self.faults.check(self.formation.n)
         if self.sensed:
-            from .sensing import SENSING_LIMIT
-
             if self.formation.n > SENSING_LIMIT:
                 assert self.sensing is not None
                 Channel(self.sensing, self.formation, self.law, self.model, [], 1.0)  # says why
@@ -233,8 +234,6 @@ class System:
         the marching term at ``t`` (the command the robots were given then, as in
         :meth:`command`).
         """
-        from .errors import ParameterError
-
         if not self.filtered:
             raise ParameterError("this system has no safety filter (safety.filter is 'none')")
         assert self.safety is not None
@@ -248,8 +247,6 @@ class System:
 
     def _repelled(self, p: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
         """``u - k grad Gamma_o``: Khatib's repulsion from the obstacles added to ``u``."""
-        from .safety import grad_obstacle_potential
-
         rep = self.law.obstacle_repulsion()
         return u - rep.gain * grad_obstacle_potential(
             p, self._radii, self.obstacles, eta=rep.repulsion.eta, influence=rep.repulsion.influence
@@ -270,8 +267,6 @@ class System:
         p = self.model.points(x)
         v = self.law.potential(self.formation, p)
         if self.obstacles:
-            from .safety import obstacle_potential
-
             rep = self.law.obstacle_repulsion()
             v = v + rep.weight * obstacle_potential(
                 p, self._radii, self.obstacles,
@@ -285,16 +280,12 @@ class System:
 
     def obstacle_clearances(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Clearance ``delta - rho_i / 2`` of every robot to every obstacle; ``(..., n, O)``."""
-        from .safety import clearances
-
         return clearances(self.positions(x), self._radii, self.obstacles)[0]
 
     def swept_obstacle_clearances(
         self, x0: NDArray[np.float64], x1: NDArray[np.float64]
     ) -> NDArray[np.float64]:
         """Least robot-obstacle clearance along the straight step ``x0 -> x1``; ``(..., n, O)``."""
-        from .safety import swept_clearances
-
         return swept_clearances(self.positions(x0), self.positions(x1), self._radii, self.obstacles)
 
     def sigma(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -329,8 +320,6 @@ class System:
         f = self.formation
         if f.n <= DENSE_LIMIT:
             return (*self._all_pairs, np.inf)
-        from .neighbours.kdtree import close_pairs
-
         qs = [np.asarray(self.positions(x), dtype=float) for x in states]
         move = max((float(np.nanmax(np.abs(b - a))) for a, b in pairwise(qs)), default=0.0)
         top = float(f.diameters.max())

@@ -5,12 +5,13 @@
 * :mod:`.asynchronous`: every robot an asyncio task with its own control period and
   jitter, exchanging measurements over a bus with delay and losses (:func:`run_async`;
   :mod:`.bus`, :mod:`.clock`);
-* :mod:`.env`: the robots of a scenario as the agents of a PettingZoo parallel
-  environment (:func:`parallel_env`; needs the ``agents`` extra,
-  ``pip install formationlab[agents]``, imported only when used);
-* :mod:`.policy`: the scenario's law as every agent's policy (:func:`law_policy`).
+
+The environments that learning uses, built from a scenario, are a layer above:
+:mod:`formationlab.envs` (``parallel_env``, ``FormationEnv``, ``law_policy``; their former
+address here still works and warns).
 """
 
+import warnings
 from typing import Any
 
 from .asynchronous import AsyncResult, arun, run_async
@@ -25,31 +26,32 @@ from .mismatch import (
     rigid_omega,
     steady_motion,
 )
-from .policy import law_policy
 
 __all__ = [
     "AsyncResult",
     "Bus",
     "DriftTable",
-    "FormationEnv",
     "Message",
     "SteadyMotion",
     "arun",
     "first_order_motion",
-    "law_policy",
     "measure_drift",
     "mismatched_controls",
     "own_distances",
-    "parallel_env",
     "rigid_omega",
     "run_async",
     "steady_motion",
 ]
 
 
-def __getattr__(name: str) -> Any:  # the environment imports PettingZoo: only when asked
-    if name in ("FormationEnv", "parallel_env"):
-        from . import env
+def __getattr__(name: str) -> Any:
+    if name in ("FormationEnv", "parallel_env", "law_policy"):
+        warnings.warn(
+            f"formationlab.agents.{name} moved to formationlab.envs.{name}: import it from there",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        from .. import envs  # the environments' former address (envs is a layer above)
 
-        return getattr(env, name)
+        return getattr(envs, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

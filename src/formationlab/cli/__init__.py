@@ -4,7 +4,9 @@ Each sub-module of this package registers its commands on :data:`app`; they
 are discovered at start-up, so a new command is a new module. Errors a user
 can cause (:class:`~formationlab.errors.UserInputError`, missing files) are
 printed as one clear message on standard error with exit status 2, never as a
-traceback.
+traceback. A command imports the modules that do its work when it runs, inside its function
+(start-up time: ``formationlab --help`` and a refused file answer before numba, matplotlib
+or xarray load); that is the one place where late imports are the rule.
 """
 
 from __future__ import annotations

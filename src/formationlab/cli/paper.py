@@ -46,7 +46,7 @@ def paper(
     from ..io import atomic_write_json, prepare_output_dir, save_figure
     from ..io.files import MANIFEST, earlier_files, remove_stale
     from ..plotting.paper import paper_figures
-    from ..simulation.paper import PaperSetup, reproduce
+    from ..studies.paper import PaperSetup, reproduce
 
     setup = PaperSetup(
         diameter=diameter,

@@ -26,6 +26,7 @@ from ..marching.terms import march_terms
 from ..models import RobotModel
 from ..models.terms import HEADING, NEAR_IDENTITY, model_terms
 from ..outcomes.analysis import Tolerances
+from ..safety import barrier_filter
 from ..safety.obstacle_terms import obstacle_terms
 from ..safety.stage import CENTRALIZED, NONE, filter_terms
 from ..sensing import BLOCK, Channel, Faults, Seed, Sensing
@@ -158,8 +159,6 @@ def _run_group(
     None. With noise or losses the chunks stop at the end of each block of steps, and the
     next block's draws of the trials still running are made here (:meth:`Channel.block`).
     """
-    from ..safety import barrier_filter
-
     B, n, k = q0.shape
     C = int(max(1, min(chunk, B)))
     G = -(-B // C)

@@ -23,6 +23,7 @@ from ..dynamics import System
 from ..formation.spec import Formation
 from ..outcomes.analysis import Tolerances
 from .classify import Equilibrium, classify_equilibrium
+from .constrained import active_set, classify_deadlock, refine_deadlock
 from .dedup import canonical_pose, same_equilibrium
 from .refine import refine
 
@@ -184,8 +185,6 @@ def _refined(
     """The classified equilibrium near ``q``, a deadlock if the filter is active there
     (a relative equilibrium for the end state of a moving run)."""
     if system is not None and system.filtered:
-        from .constrained import active_set, classify_deadlock, refine_deadlock
-
         if len(active_set(system, q)):
             dead = refine_deadlock(system, q)
             return classify_deadlock(system, dead, tolerances) if dead.success else None

@@ -46,6 +46,7 @@ from scipy.optimize import least_squares
 
 from ..dynamics import System
 from ..outcomes.analysis import Tolerances, classify
+from ..safety import obstacle_barrier_rows
 from .classify import Equilibrium, Stability
 from .jacobian import complement, rigid_modes
 
@@ -110,8 +111,6 @@ def _rows(
     system: System, q: NDArray[np.float64], act: ActiveSet
 ) -> tuple[list[NDArray[np.float64]], NDArray[np.float64]]:
     """Per constraint: the gradient ``grad h_c`` ``(n, 2)``, and ``h_c``; ``(len(act),)``."""
-    from ..safety import obstacle_barrier_rows
-
     assert system.safety is not None
     cfg = system.safety
     grads, hs = [], []

@@ -24,6 +24,7 @@ from pydantic import ConfigDict, Field, ValidationError, ValidationInfo, field_v
 from pydantic.dataclasses import dataclass as pydantic_dataclass
 
 from ..controllers import LAWS, Law
+from ..dynamics import System
 from ..errors import ParameterError, UserInputError
 from ..integrators import INTEGRATORS, RK4, FixedStepIntegrator, ImplicitEuler
 from ..simulation.run import simulate
@@ -307,8 +308,6 @@ def find_equilibria(
     )
     system = None
     if sc.obstacles or (sc.safety is not None and sc.safety.enabled):
-        from ..dynamics import System
-
         system = System(formation=sc.formation, law=law, **safety)
     cands = [own.q[-1][None]]
     outs = [np.array([own.outcome()])]

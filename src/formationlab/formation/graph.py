@@ -13,6 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import FormationError
 from ..resources import check_memory
+from .rigidity import is_generically_rigid
 
 __all__ = [
     "DENSE_RIGIDITY_MAX",
@@ -125,8 +126,6 @@ def is_rigid(edges: NDArray[np.integer], n: int, *, method: str = "auto") -> boo
     if method not in ("auto", "dense", "pebble"):
         raise ValueError(f'method must be "auto", "dense" or "pebble", got {method!r}')
     if method == "pebble" or (method == "auto" and n > DENSE_RIGIDITY_MAX):
-        from .rigidity import is_generically_rigid
-
         return is_generically_rigid(edges, n)
     if n == 2:
         return len(edges) == 1

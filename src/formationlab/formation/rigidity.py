@@ -37,6 +37,8 @@ from numpy.typing import NDArray
 from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components
 
+from .pebble import pebble_game
+
 __all__ = [
     "generic_rank_deficit",
     "independent_edges",
@@ -183,8 +185,6 @@ def independent_edges(edges: NDArray[np.int64], n: int) -> int:
     pebbles a search needs are usually close; the game stops once ``2n - 3``
     edges are independent.
     """
-    from .pebble import pebble_game
-
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     if n < 2 or len(edges) == 0:
         return 0

@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import FormationError
+from ..neighbours.kdtree import close_pairs
 from ..validation import coordinates
 from .geometry import parity
 from .graph import as_edges, complete_edges, edges_connected, is_rigid
@@ -749,8 +750,6 @@ class Formation:
             iu = np.triu_indices(self.n, k=1)
             pi, pj = iu
         else:  # only pairs that could touch
-            from ..neighbours.kdtree import close_pairs
-
             pi, pj = close_pairs(arr, float(self.diameters.max())).T
         diff = arr[..., pj, :] - arr[..., pi, :]
         r = np.sqrt(diff[..., 0] * diff[..., 0] + diff[..., 1] * diff[..., 1])

@@ -46,12 +46,14 @@ from ..errors import ParameterError
 from ..marching.terms import march_terms, with_references
 from ..models import SingleIntegrator
 from ..models.terms import HEADING, NEAR_IDENTITY, model_terms
+from ..safety import barrier_filter
 from ..safety.stage import CENTRALIZED
 from ..sensing import BLOCK
 from ..sensing.stage import sensing_arrays
 from ..status import Status
 from .base import RawSolution, steps_for
 from .diagnostics import switching_diagnostics
+from .explicit import Euler
 
 __all__ = [
     "PARALLEL_FROM",
@@ -291,8 +293,6 @@ class SingleRun:
                 self.ls = grow(self.ls)  # room for the close list, and the step again
                 lists = (self.layout, self.ls, par)
             elif status == PAUSED:  # the centralized QP that rounding defeated: Clarabel's
-                from ..safety import barrier_filter  # (safety's package imports the loop)
-
                 res = barrier_filter(self.safety, st.need_p[0, :1], st.need_u[0, :1],
                                      self.obstacles)  # fmt: skip
                 st.given_u[0, 0] = res.u[0]
@@ -356,8 +356,6 @@ def compiled_terms(system: System, integrator: object) -> RunLayout | KernelTerm
     under a safety filter or not, sensing and with faults or not, with a law whose
     ``kernel_terms`` describe its control.
     """
-    from .explicit import Euler  # (explicit imports this module's package)
-
     if type(integrator) is not Euler:
         return None
     try:

@@ -56,6 +56,8 @@ from typing import Any
 
 import numpy as np
 
+from ..outcomes.analysis import distance_errors
+from ..resources import package_version
 from .files import atomic_path, to_jsonable
 
 __all__ = [
@@ -105,8 +107,6 @@ def _layout(
     result: Any, attrs: dict[str, Any] | None
 ) -> tuple[dict[str, Any], dict[str, Any], dict[str, Series], dict[str, Any]]:
     """Coordinates, the variables that do not grow with time, the time series, attributes."""
-    from ..outcomes.analysis import distance_errors
-
     f = result.formation
     n = f.n
     robot = np.arange(1, n + 1)
@@ -178,8 +178,6 @@ def _layout(
 
 def _attributes(result: Any, attrs: dict[str, Any] | None) -> dict[str, Any]:
     """The global attributes (module docstring), with ``attrs`` added."""
-    from ..resources import package_version
-
     glob: dict[str, Any] = {
         "title": "formationlab trajectory",
         "formationlab_version": package_version(),

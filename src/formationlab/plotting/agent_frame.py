@@ -2,7 +2,7 @@
 
 :func:`agent_frame` draws the robots (discs of their diameters, headings of unicycles)
 and the formation's graph at one state on a figure of its own (the Agg canvas, no
-``pyplot`` state), for :meth:`formationlab.agents.env.FormationEnv.render`.
+``pyplot`` state), for :meth:`formationlab.envs.pettingzoo.FormationEnv.render`.
 """
 
 from __future__ import annotations

@@ -29,6 +29,7 @@ from .many import (
     draw_paths,
     segments,
 )
+from .safety import draw_safety, plot_filter_activity
 
 __all__ = [
     "plot_controls",
@@ -152,8 +153,6 @@ def plot_trajectories(
                 ax.annotate(str(i + 1), q[0, i], xytext=(5, 5), textcoords="offset points")
             )
     if getattr(result, "safety", None) is not None:
-        from .safety import draw_safety
-
         artists += draw_safety(ax, result)
     faults = getattr(result, "faults", None)
     for stop in () if faults is None else faults.stop:
@@ -328,8 +327,6 @@ def run_figures(result: Any, *, prefix: str = "") -> dict[str, Figure]:
                 ax.set_title(_prefixed(displayable(prefix), ax.get_title()), wrap=True)
         out[name] = fig
     if getattr(result, "safety", None) is not None:
-        from .safety import plot_filter_activity
-
         fig = Figure(figsize=(6.0, 5.0), layout="constrained")
         top, bottom = fig.subplots(2, 1, sharex=True)
         plot_filter_activity(result, ax=top, ax_distance=bottom)

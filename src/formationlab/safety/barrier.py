@@ -53,6 +53,7 @@ from scipy.sparse.csgraph import connected_components
 from ..errors import require_extra
 from .closed_form import closed_form
 from .config import SafetyFilter, register_filter
+from .decentralized import decentralized_filter
 from .obstacles import Obstacle, obstacle_barrier_rows
 from .pairs import sensed_pairs
 from .result import FilterResult, FilterStatus, summarise, unchanged
@@ -370,8 +371,6 @@ def barrier_filter(
     -------
     FilterResult
     """
-    from .decentralized import decentralized_filter  # the fallback
-
     q = np.asarray(q, dtype=float)
     u_hat = np.asarray(u_hat, dtype=float)
     batch, n = q.shape[:-2], q.shape[-2]

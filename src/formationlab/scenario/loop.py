@@ -15,6 +15,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Literal
 
 from ..errors import UserInputError
+from ..simulation.run import build_system, run_system
 
 if TYPE_CHECKING:
     from ..dynamics import System
@@ -51,8 +52,6 @@ def closed_loop(
     ScenarioError
         A part that does not fit the others, placed at its key in the file.
     """
-    from ..simulation.run import build_system
-
     sensing = scenario.sensing if sensing is SCENARIO else sensing
     faults = scenario.faults if faults is SCENARIO else faults
     try:
@@ -82,8 +81,6 @@ def run_scenario(
         For a scenario with ``[asynchronous]`` (run it with
         :func:`formationlab.agents.run_async`, as ``formationlab run`` does).
     """
-    from ..simulation.run import run_system
-
     if scenario.asynchronous is not None:
         raise scenario.error(
             "asynchronous",

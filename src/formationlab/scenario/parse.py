@@ -39,6 +39,7 @@ import tomli_w
 from numpy.typing import NDArray
 from pydantic import ValidationError
 
+from ..agents.asynchronous import check_schedule
 from ..controllers import LAWS, Law
 from ..errors import IgnoredKeyWarning, ScenarioError, UserInputError
 from ..formation.spec import Formation
@@ -46,6 +47,7 @@ from ..integrators import INTEGRATORS, FixedStepIntegrator, Integrator
 from ..marching import March
 from ..models import MODELS, RobotModel, SingleIntegrator
 from ..sensing import SENSING_LIMIT, Faults, Sensing, Stop, delay_ring
+from ..simulation.run import initial_state
 from ..validation import line_of, steps_within, validation_error
 from .build import (
     FIXED,
@@ -335,8 +337,6 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
     robot, initial, ignored_model = build_robot_model(
         rob, formation.n, source=source, text=text, fail=fail, warnings=warnings
     )
-    from ..simulation.run import initial_state
-
     try:
         x0 = initial_state(formation, robot, q0, **initial)
     except UserInputError as exc:
@@ -486,8 +486,6 @@ def _asynchronous(
                 f"the asynchronous runner does not take {what} yet: remove it, or remove "
                 "[asynchronous] (the synchronous run takes it)",
             )
-    from ..agents.asynchronous import check_schedule
-
     try:
         dt = float(integrator.dt)  # type: ignore[attr-defined]
         duration = float(model.simulation.duration)

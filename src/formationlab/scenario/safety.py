@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from ..errors import MissingExtraError, ScenarioError, UserInputError
 from ..formation.spec import Formation
+from ..safety import SafetyFilter, check_extra, clearances, obstacle_from_mapping
 from ..validation import line_of
 
 if TYPE_CHECKING:
@@ -63,8 +64,6 @@ def build_safety(
     """
     if not obstacles and safety is None:
         return (), None
-    from ..safety import SafetyFilter, check_extra, clearances, obstacle_from_mapping
-
     try:
         check_extra()
     except MissingExtraError as exc:

@@ -28,7 +28,7 @@ from ..formation.spec import Formation
 from ..integrators import INTEGRATORS, Euler, Integrator, RawSolution
 from ..integrators.compiled import compiled_terms, run_euler_compiled
 from ..integrators.diagnostics import switching_diagnostics
-from ..marching import March, centroid_velocity, heading_spread
+from ..marching import March, Marching, centroid_velocity, heading_spread
 from ..models import MODELS, RobotModel, SingleIntegrator
 from ..outcomes.analysis import (
     Outcome,
@@ -40,9 +40,11 @@ from ..outcomes.analysis import (
     error_statistics,
     final_motion,
     net_speed,
+    triangle_orientation,
 )
 from ..outcomes.rigid_motion import RigidMotion
 from ..registry import resolve
+from ..safety import SafetyFilter, SafetyRecord, check_obstacle_starts
 from ..sensing import Faults, Sensing
 from ..status import Status
 from ..validation import whole
@@ -291,8 +293,6 @@ class SimulationResult:
         up to :data:`LIST_LIMIT` surfaces; beyond, the statistics and counts remain
         (:meth:`edge_table` holds every edge; ``formationlab run`` writes it to a file).
         """
-        from ..outcomes.analysis import triangle_orientation
-
         tol = tolerances or Tolerances()
         n, m = self.formation.n, len(self.formation.edges)
         p_final = self.points[-1]
@@ -377,8 +377,6 @@ class SimulationResult:
 
     def _marching_summary(self) -> dict[str, Any]:
         """Final shape error and centroid velocity (against the reference, when there is one)."""
-        from ..marching import Marching
-
         vc = self.centroid_velocity()[-1]
         out: dict[str, Any] = {
             "shape_error_final": float(self.shape_error[-1]),
@@ -396,7 +394,7 @@ class SimulationResult:
 
         Needs matplotlib (imported here, not at package import). Returns the artists.
         """
-        from .. import plotting
+        from .. import plotting  # draws with matplotlib: imported when drawing (start-up time)
 
         return plotting.plot_result(self, kind, ax=ax, **kwargs)
 
@@ -565,8 +563,6 @@ def _result(
     points = robot.points(raw.x)
     record = None
     if system.obstacles or system.filtered:
-        from ..safety import SafetyRecord
-
         clear = system.obstacle_clearances(raw.x)
         least = clear.min(axis=(-2, -1)) if clear.size else np.full(len(raw.t), np.inf)
         record = SafetyRecord.from_states(
@@ -690,8 +686,6 @@ def build_system(
             formation=formation, law=law, model=model, marching=marching, sensing=sensing,
             faults=faults,
         )  # fmt: skip
-    from ..safety import SafetyFilter, check_obstacle_starts
-
     if isinstance(safety, str):
         safety = SafetyFilter(filter=safety)  # type: ignore[arg-type]
     elif safety is not None and not isinstance(safety, SafetyFilter):

@@ -7,7 +7,9 @@
 * :mod:`~formationlab.studies.executors`: this process, a process pool, or dask.distributed;
 * :mod:`~formationlab.studies.runner`: :func:`run_study`, resume, the summary;
 * :mod:`~formationlab.studies.summary`: outcome fractions and Wilson intervals;
-* :mod:`~formationlab.studies.batch`: the batched kernel every chunk calls.
+* :mod:`~formationlab.studies.batch`: the batched kernel every chunk calls;
+* :mod:`~formationlab.studies.paper`: the reproduction of the paper's section 4
+  (``formationlab paper``): its simulations, the symmetry scan and the diameter scan.
 """
 
 from .batch import BatchResult, run_batch

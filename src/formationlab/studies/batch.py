@@ -54,6 +54,7 @@ from ..integrators.base import steps_for
 from ..models import RobotModel, SingleIntegrator
 from ..outcomes.analysis import Tolerances
 from ..outcomes.batch import BatchResult, classify_batch, max_distance_errors
+from ..safety import check_obstacle_starts
 from ..sensing import Faults, Seed, Sensing
 from ..validation import positive, whole
 
@@ -186,8 +187,6 @@ def run_batch(
     elif backend == "numpy":
         system = System(formation=formation, law=law, model=model, sensing=sensing, faults=faults)
         if obstacles or safety is not None:
-            from ..safety import check_obstacle_starts
-
             check_obstacle_starts(q0[..., :2], formation.diameters / 2, tuple(obstacles))
             system = System(
                 formation=formation, law=law, model=model, obstacles=tuple(obstacles),
@@ -245,8 +244,6 @@ def _run_compiled(
     import numba
 
     if obstacles:
-        from ..safety import check_obstacle_starts
-
         check_obstacle_starts(model.positions(q0), formation.diameters / 2, tuple(obstacles))
     chunk = _chunk_size(q0.shape[0], numba.get_num_threads())
     with _one_chunk_at_a_time():

@@ -20,10 +20,13 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from ..controllers import Law
+from ..equilibria.search import settle as settle_batch
 from ..formation.spec import Formation
+from ..integrators import ImplicitEuler
 from ..models import RobotModel, SingleIntegrator
 from ..outcomes.analysis import Tolerances
 from ..outcomes.rigid_motion import RigidMotion
+from .batch import run_batch
 from .config import BoxInitial, GaussianInitial, SettleModel, StudyConfig
 from .groups import Group
 from .sampling import model_initial_states, trial_initial_states
@@ -110,8 +113,6 @@ def plan_chunks(
 
 def run_chunk(task: ChunkTask) -> pd.DataFrame:
     """Run one chunk; one row per trial (columns: see :mod:`formationlab.io.trials`)."""
-    from .batch import run_batch
-
     g = task.group
     f = g.formation
     trials = np.arange(task.start, task.stop, dtype=np.int64)
@@ -232,9 +233,6 @@ def settle_trials(
     settled_outcome : ndarray of str (object), shape (B,)
         Their outcome after settling; ``outcome`` for the others.
     """
-    from ..equilibria.search import settle as settle_batch
-    from ..integrators import ImplicitEuler
-
     outcome = np.asarray(outcome, dtype=object)
     settled = outcome == "not-converged"
     if not settle.enabled or law.smooth:

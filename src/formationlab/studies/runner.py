@@ -47,16 +47,20 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from ..controllers import LAWS, Law
+from ..engine.loop import run_chunks
 from ..errors import ParameterError
 from ..formation.spec import Formation
 from ..models import RobotModel, SingleIntegrator
+from ..safety import describe_obstacle
 from ..sensing import Faults, Sensing, delay_steps
 from ..validation import positive, steps_within, whole
 from ..validation import seed as check_seed
+from .batch import batch_backend, run_batch
 from .chunks import ChunkTask, plan_chunks, run_chunk
 from .config import GaussianInitial, StudyConfig, parse_study
 from .executors import run_in_process, run_on_dask
 from .groups import REPULSION_KEYS, ROBOT_KEYS, Group, study_groups
+from .sampling import model_initial_states, trial_initial_states
 from .summary import study_outcomes, summarize_groups
 
 if TYPE_CHECKING:
@@ -300,8 +304,6 @@ class StudySetup:
     @property
     def backend(self) -> tuple[str, str]:
         """The backend the trials run on and why it is not ``config.backend`` ("" if it is)."""
-        from .batch import batch_backend
-
         sensed = any(g.sensed for g in self.groups)
         return batch_backend(self.config.backend, self.obstacles, self.safety, sensed, self.model)
 
@@ -310,8 +312,6 @@ class StudySetup:
         filtered = self.safety is not None and self.safety.enabled
         if not self.obstacles and not filtered:
             return None
-        from ..safety import describe_obstacle
-
         f = self.safety
         return {
             "obstacles": [describe_obstacle(ob) for ob in self.obstacles],
@@ -467,10 +467,6 @@ def _warm_kernels(tasks: list[ChunkTask], notify: Callable[[str], None] | None) 
             first.setdefault((t.group.sensed, safe, type(t.model)), t)
     if not first:
         return 0.0
-    from ..engine.loop import run_chunks
-    from .batch import run_batch
-    from .sampling import model_initial_states, trial_initial_states
-
     if notify is not None and not _kernel_cached(run_chunks):
         notify("compiling kernels (once; later studies load them from the cache) ...")
     start = time.perf_counter()

@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..errors import ParameterError
 from ..formation.spec import Formation
 from ..models import RobotModel
+from ..safety import obstacle_contacts
 from ..validation import seed as check_seed
 from .config import BoxInitial, GaussianInitial
 
@@ -70,8 +71,6 @@ def _rejected(
     """Overlapping robots, or (with obstacles) a robot on an obstacle; ``(...)`` bool."""
     bad = overlapping(formation, q)
     if obstacles:
-        from ..safety import obstacle_contacts
-
         bad |= obstacle_contacts(q, formation.diameters / 2, obstacles).any(axis=(-2, -1))
     return bad
 

@@ -29,7 +29,7 @@ __all__ = [
 
 def __getattr__(name: str) -> Any:
     if name == "Viewer":  # needs anywidget; imported only when asked for
-        from .widget import Viewer
+        from .widget import Viewer  # anywidget, the view extra: when asked for
 
         return Viewer
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from ..dynamics import System
 from ..formation.spec import Formation
+from ..marching import Marching
 
 __all__ = [
     "EDGE_ERRORS_MAX",
@@ -135,8 +136,6 @@ def obstacle_shapes(obstacles: Any) -> list[dict[str, Any]]:
 
 def scene_info(system: System) -> dict[str, Any]:
     """The closed loop's parts the page shows: obstacles, filter, marching, model, sensing."""
-    from ..marching import Marching
-
     march = system.marching
     marching = None
     if march is not None:
@@ -164,8 +163,6 @@ def live_header(system: System, x: NDArray[np.float64], t: float) -> dict[str, A
     (:meth:`System.filter_result` at ``t``; None without a filter) and ``filter_status``;
     ``reference`` the marching reference velocity ``v_ref(t)`` (None without one).
     """
-    from ..marching import Marching
-
     formation = system.formation
     p = system.model.points(x)
     sigma = np.asarray(system.sigma(x))

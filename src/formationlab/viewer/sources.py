@@ -10,6 +10,8 @@ import os
 from pathlib import Path
 
 from ..errors import UserInputError
+from ..io.netcdf import load_trajectory
+from ..io.scenario import load_scenario
 from ..scenario.parse import Scenario
 from .replay import ReplaySession
 from .session import LiveSession
@@ -46,11 +48,7 @@ def open_session(
         return LiveSession(target, seed=seed)
     path = Path(target)
     if not (replay or path.is_dir()):
-        from ..io.scenario import load_scenario
-
         return LiveSession(load_scenario(path), seed=seed)
-    from ..io.netcdf import load_trajectory
-
     nc = path / "trajectory.nc"
     if not nc.is_file():
         raise UserInputError(

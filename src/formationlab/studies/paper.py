@@ -33,8 +33,10 @@ from ..errors import ParameterError
 from ..formation.spec import Formation
 from ..integrators import get_integrator
 from ..outcomes.analysis import Tolerances, triangle_orientation
+from ..simulation.batch import simulate_batch
+from ..simulation.run import SimulationResult, simulate
 from ..status import Status
-from .run import SimulationResult, simulate
+from .batch import run_batch
 
 __all__ = [
     "PAPER_ALPHA",
@@ -313,8 +315,6 @@ def symmetry_scan(setup: PaperSetup, *, batch: bool = True) -> list[dict[str, An
     """
     tol = setup.tolerances
     if batch:
-        from .batch import simulate_batch
-
         runs = simulate_batch(
             paper_formation(2, diameter=setup.diameter), paper_law(),
             np.stack([setup.initial(eps) for eps in setup.scan]), duration=setup.duration,
@@ -357,8 +357,6 @@ def diameter_scan(setup: PaperSetup, *, batch: bool = True) -> list[dict[str, An
                 }
             out.append(row)
             continue
-        from ..studies import run_batch
-
         for sim in (1, 2):
             mine = [(key, eps) for key, s, eps in cases if s == sim]
             b = run_batch(

@@ -72,7 +72,7 @@ try:
     from pettingzoo import ParallelEnv
 except ImportError as exc:  # pragma: no cover - the extra is installed where tests run
     raise ImportError(
-        "formationlab.agents.parallel_env needs PettingZoo and Gymnasium, the 'agents' "
+        "formationlab.envs.parallel_env needs PettingZoo and Gymnasium, the 'agents' "
         "extra: pip install formationlab[agents]"
     ) from exc
 
@@ -433,7 +433,7 @@ class FormationEnv(ParallelEnv):
         """An RGB frame ``(H, W, 3)`` of the robots with ``render_mode="rgb_array"``; else None."""
         if self.render_mode is None:
             return None
-        from ..plotting.agent_frame import agent_frame
+        from ..plotting.agent_frame import agent_frame  # matplotlib: when rendering (start-up)
 
         return agent_frame(self.formation, self._x, model=self.model, t=self.t)
 
@@ -476,7 +476,7 @@ def parallel_env(
     -------
     FormationEnv
         Observations, actions, rewards and the end of an episode: module docstring of
-        :mod:`formationlab.agents.env`.
+        :mod:`formationlab.envs.pettingzoo`.
     """
     return FormationEnv(
         scenario, sensing=sensing, faults=faults, render_mode=render_mode,

@@ -1,7 +1,7 @@
 """The scenario's law as the policy of every agent, from each agent's own observation.
 
 :func:`law_policy` returns the decentralized form of the paper's law for an environment of
-:func:`~formationlab.agents.parallel_env`: robot ``i``'s action is the law's control
+:func:`~formationlab.envs.parallel_env`: robot ``i``'s action is the law's control
 ``u_i`` computed by :func:`formationlab.sensing.local_controls` from robot ``i``'s own
 observation alone (its measured relative positions in its own frame, which it sees, and
 its own desired distances), turned into the robot's action: the command itself for
@@ -25,7 +25,7 @@ from ..models import Unicycle
 from ..sensing import local_controls
 
 if TYPE_CHECKING:
-    from .env import FormationEnv
+    from .pettingzoo import FormationEnv
 
 __all__ = ["law_policy"]
 
