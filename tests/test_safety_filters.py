@@ -204,7 +204,7 @@ def test_kd_tree_pairs_equal_dense_pairs(rng):
 
 
 def test_configuration_errors():
-    with pytest.raises(ParameterError, match="gamma must be a finite number >= 0"):
+    with pytest.raises(ParameterError, match="gamma must be >= 0 \\(the barrier gain"):
         SafetyFilter(filter="barrier", gamma=-1.0)
     with pytest.raises(ParameterError, match='one of "none", "barrier"'):
         SafetyFilter(filter="cbf")  # type: ignore[arg-type]

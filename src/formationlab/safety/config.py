@@ -109,6 +109,12 @@ class SafetyFilter:
                 f"safety.filter must be one of {known}, got {self.filter!r}", key="filter"
             )
         number(self.distance, "distance", low=0.0, strict=True, owner="safety")
+        if not (isinstance(self.gamma, int | float) and self.gamma >= 0):  # also NaN
+            raise ParameterError(
+                f"safety.gamma must be >= 0 (the barrier gain: 0 lets no pair approach at "
+                f"all, larger values let pairs approach faster; default 100), got "
+                f"{self.gamma!r}", key="gamma",
+            )  # fmt: skip
         number(self.gamma, "gamma", low=0.0, strict=False, owner="safety")
         if self.max_speed is not None:
             number(self.max_speed, "max_speed", low=0.0, strict=True, owner="safety")

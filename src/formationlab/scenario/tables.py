@@ -314,7 +314,8 @@ class MarchingModel(BaseModel):
 class SafetyModel(BaseModel):
     """``[safety]``: the safety filter between the law and the robots (``docs/safety.md``).
 
-    Contact distances and obstacles are checked by :mod:`formationlab.scenario.safety`.
+    Types here; ranges by :class:`~formationlab.safety.SafetyFilter` itself, contact
+    distances and obstacles by :mod:`formationlab.scenario.safety`.
     """
 
     model_config = _STRICT
@@ -326,29 +327,17 @@ class SafetyModel(BaseModel):
     sensing_radius: float | None = None
     obstacle_distance: float | None = None
 
-    @field_validator("distance", "sensing_radius", "obstacle_distance", "max_speed", mode="before")
+    @field_validator(
+        "distance", "sensing_radius", "obstacle_distance", "max_speed", "gamma", mode="before"
+    )
     @classmethod
-    def _positive(cls, v: Any, info: Any) -> float:
-        x = _finite(v, info.field_name)
-        if x <= 0:
-            raise ValueError(f"{info.field_name} must be > 0 (m), got {v!r}")
-        return x
-
-    @field_validator("gamma", mode="before")
-    @classmethod
-    def _gamma(cls, v: Any) -> float:
-        x = _finite(v, "gamma")
-        if x < 0:
-            raise ValueError(
-                f"gamma must be >= 0 (the barrier gain: 0 lets no pair approach at all, "
-                f"larger values let pairs approach faster; default 100), got {v!r}"
-            )
-        return x
+    def _number(cls, v: Any, info: Any) -> float:
+        return _finite(v, info.field_name)  # its range: SafetyFilter, with the key's line
 
     @field_validator("speed_sides", mode="before")
     @classmethod
     def _sides(cls, v: Any) -> int:
-        if isinstance(v, bool) or not isinstance(v, int) or v < 4:
+        if isinstance(v, bool) or not isinstance(v, int):
             raise ValueError(f"speed_sides must be a whole number >= 4, got {v!r}")
         return v
 
