@@ -99,8 +99,16 @@ def test_a_batch_steps_as_each_trial_alone(law, integ, model):
 
 #: gains with which one step of 0.05 s from START_APART moves robots 1 and 2 about 2 each
 #: towards each other: an explicit step carries them through each other
-STRONG = {"distance": {"k_c": 45.0}, "angle-restricted": {"k_c": 45.0, "k_a": 0.5}}
+STRONG = {
+    "distance": {"k_c": 45.0},
+    "angle-restricted": {"k_c": 45.0, "k_a": 0.5},
+    "bearing": {"k": 100.0},
+}
 START_APART = np.array([[0.0, 0.0], [3.0, 0.0], [1.5, 5.0]])
+#: the bearing law moves robots across their own bearing only (it keeps the scale): robot 3
+#: between and just above robots 1 and 2 turns both its bearings, which moves 1 and 2
+#: towards each other at 0.48 k with no relative motion across (g_12 stays g*_12)
+STARTS_APART = {"bearing": np.array([[0.0, 0.0], [1.4, 0.0], [0.7, 0.3]])}
 
 
 @pytest.mark.parametrize("integ", sorted(INTEGRATORS))
@@ -108,7 +116,7 @@ START_APART = np.array([[0.0, 0.0], [3.0, 0.0], [1.5, 5.0]])
 def test_a_step_into_contact_ends_with_a_contact_status_and_finite_states(law, integ):
     gains = STRONG.get(law, {"k": 2.0})
     res = fl.simulate(
-        TRIANGLE, fl.get_law(law, **gains), START_APART, duration=1.0,
+        TRIANGLE, fl.get_law(law, **gains), STARTS_APART.get(law, START_APART), duration=1.0,
         integrator=integrator(integ, dt=0.05),
     )  # fmt: skip
     assert np.all(np.isfinite(res.q))  # states are always finite

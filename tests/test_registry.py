@@ -56,7 +56,9 @@ def test_unknown_names_suggest_the_nearest_and_list_the_known():
         "unknown integrator 'rk5'; did you mean 'rk4'? Known: euler, filippov, implicit-euler, rk4"
     )
     assert isinstance(info.value, KeyError) and isinstance(info.value, ParameterError)
-    with pytest.raises(UnknownNameError, match=r"'xyz'\. Known: angle-restricted, distance"):
+    with pytest.raises(
+        UnknownNameError, match=r"'xyz'\. Known: angle-restricted, bearing, distance"
+    ):
         fl.get_law("xyz")
 
 

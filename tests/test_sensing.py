@@ -51,9 +51,16 @@ def test_local_frames_equal_the_centralized_law(name: str, formation: fl.Formati
     q = clear_starts(formation.n, 20, 1)
     u = law.control(formation, q)
     angles = np.random.default_rng(2).uniform(-np.pi, np.pi, (20, formation.n))
-    u_local = local_controls(law.compiled_terms(formation), measured(q, angles))
+    terms = law.compiled_terms(formation)
+    u_local = local_controls(terms, measured(q, angles))
     assert np.abs(u).max() > 0.1  # the comparison is not of zeros
-    np.testing.assert_allclose(rotate(u_local, angles), u, rtol=0, atol=1e-12 * np.abs(u).max())
+    tol = 1e-12 * np.abs(u).max()
+    if name == "bearing":  # bearings need a common frame: aligned, the same; turned, not
+        aligned = local_controls(terms, measured(q, np.zeros_like(angles)))
+        np.testing.assert_allclose(aligned, u, rtol=0, atol=tol)
+        assert np.abs(rotate(u_local, angles) - u).max() > 1e-3
+        return
+    np.testing.assert_allclose(rotate(u_local, angles), u, rtol=0, atol=tol)
     # and the commands really are in the robots' frames: unrotated, they differ
     assert np.abs(u_local - u).max() > 1e-3
 
@@ -71,6 +78,11 @@ def test_local_frames_in_the_closed_loop_of_every_model(name: str, model: object
     central = System(formation=TRIANGLE, law=law, model=model)  # type: ignore[arg-type]
     local = dataclasses.replace(central, sensing=Sensing(frames="local", seed=5))
     a, b = central.rhs(x), local.rhs(x)
+    if name == "bearing":  # turned frames turn the measured bearings: a real change
+        common = dataclasses.replace(central, sensing=Sensing(frames="global", seed=5))
+        np.testing.assert_allclose(common.rhs(x), a, rtol=0, atol=1e-12 * np.abs(a).max())
+        assert np.abs(b - a).max() > 1e-3
+        return
     np.testing.assert_allclose(b, a, rtol=0, atol=1e-12 * np.abs(a).max())
 
 

@@ -16,7 +16,15 @@ from . import (
     _command_start,  # noqa: F401 - Ctrl-C while the command starts: no traceback
     _numba_cache,  # noqa: F401 - checks numba's cache before any kernel is imported
 )
-from .controllers import LAWS, AngleRestrictedLaw, DistanceLaw, Law, Repulsion, get_law
+from .controllers import (
+    LAWS,
+    AngleRestrictedLaw,
+    BearingLaw,
+    DistanceLaw,
+    Law,
+    Repulsion,
+    get_law,
+)
 from .controllers.potentials import dphi_dr, khatib, phi, psi, triple_products
 from .dynamics import SingleIntegrator, System
 from .formation.graphs import build_edges
@@ -54,6 +62,7 @@ __all__ = [
     "OUTCOMES",
     "RK4",
     "AngleRestrictedLaw",
+    "BearingLaw",
     "DistanceLaw",
     "Euler",
     "Faults",

@@ -100,6 +100,8 @@ class System:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "obstacles", tuple(self.obstacles))
+        # the formation as the law is judged on it (desired bearings kept or dropped)
+        object.__setattr__(self, "formation", self.law.formation_for(self.formation))
         if self.faults is not None:
             self.faults.check(self.formation.n)
         if self.sensed:

@@ -5,6 +5,7 @@
 
 from .angle_restricted import AngleRestrictedLaw, active_restrictions, grad_psi, psi_sum
 from .base import LAWS, Law, ObstacleRepulsion, Repulsion, get_law, register
+from .bearing import BearingLaw
 from .distance import DistanceLaw, grad_phi, phi_sum
 from .signed_area import SignedAreaLaw
 from .squared_distance import SquaredDistanceLaw
@@ -12,6 +13,7 @@ from .squared_distance import SquaredDistanceLaw
 __all__ = [
     "LAWS",
     "AngleRestrictedLaw",
+    "BearingLaw",
     "DistanceLaw",
     "Law",
     "ObstacleRepulsion",

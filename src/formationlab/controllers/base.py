@@ -81,6 +81,13 @@ class Law:
     #: that the exact flow cannot bring two robots into contact.
     barrier_at_contact: ClassVar[bool] = False
 
+    def formation_for(self, formation: Formation) -> Formation:
+        """The formation as this law is judged on it: a law of distances (and orientation)
+        drops desired bearings (:attr:`Formation.bearings`), so that outcomes count its
+        distances; the bearing law keeps or derives them. Every closed loop
+        (:class:`formationlab.dynamics.System`, the batches) holds this formation."""
+        return formation.without_bearings()
+
     def control(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
         """Controls ``u``, shape ``(..., n, 2)``, at positions ``q`` of shape ``(..., n, 2)``."""
         raise NotImplementedError

@@ -6,11 +6,11 @@ sensing stage, :mod:`formationlab.sensing.stage`, measures and delivers them).
 
 The law enters as a :class:`~formationlab.controllers.terms.KernelTerms`, the named arrays
 and numbers each law builds (``Law.kernel_terms``), so one compiled loop serves every law
-and formation. Each pair contributes ``u_i += g r_ij``, ``u_j -= g r_ij`` with the edge's
-or Khatib's ``g`` (:mod:`.kinds`); each switching surface is decided once
-(:func:`.kinds.restriction.switching`) and switches its restricted terms; each area triangle
-adds its penalty's force. States are ``(n, k, C)`` with the trials innermost, so that each
-loop over trials is a plain SIMD loop.
+and formation. Each pair contributes ``u_i += f``, ``u_j -= f`` with the edge's force
+(:func:`.kinds.edges.edge_force`) or Khatib's ``g r_ij`` (:mod:`.kinds`); each switching
+surface is decided once (:func:`.kinds.restriction.switching`) and switches its restricted
+terms; each area triangle adds its penalty's force. States are ``(n, k, C)`` with the
+trials innermost, so that each loop over trials is a plain SIMD loop.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import math
 
 from numba import njit
 
-from .kinds.edges import edge_gain
+from .kinds.edges import edge_force
 from .kinds.khatib import repulsion_gain
 from .kinds.restriction import restriction_force, switched_on, switching, triangle_product
 from .kinds.signed_area import area_force, area_gain, signed_area
@@ -49,14 +49,16 @@ def law_field(q, u, sigma, nact, terms):
         a = t.pair_contact[p]
         if t.pair_is_edge[p]:
             d = t.pair_distance[p]
+            bx = t.pair_bearing[p * t.bearing_stride, 0]
+            by = t.pair_bearing[p * t.bearing_stride, 1]
             for b in range(nact):
                 dx = q[j, 0, b] - q[i, 0, b]
                 dy = q[j, 1, b] - q[i, 1, b]
-                g = edge_gain(t.kind, dx * dx + dy * dy, d, a, t.edge_gain)  # eq. (8)
-                u[i, 0, b] += g * dx
-                u[i, 1, b] += g * dy
-                u[j, 0, b] -= g * dx
-                u[j, 1, b] -= g * dy
+                fx, fy = edge_force(t.kind, dx, dy, d, a, t.edge_gain, bx, by)  # eq. (8)
+                u[i, 0, b] += fx
+                u[i, 1, b] += fy
+                u[j, 0, b] -= fx
+                u[j, 1, b] -= fy
         else:
             for b in range(nact):
                 dx = q[j, 0, b] - q[i, 0, b]
@@ -130,6 +132,7 @@ def local_field(z, seen, own, terms, u):
         u[i, 0] = 0.0
         u[i, 1] = 0.0
     for side in range(2):  # each edge from each end, with that robot's own d_ij
+        sign = 1.0 - 2.0 * side  # g*_ji = -g*_ij
         for e in range(t.edge_i.shape[0]):
             obs = t.edge_i[e] if side == 0 else t.edge_j[e]
             tgt = t.edge_j[e] if side == 0 else t.edge_i[e]
@@ -137,9 +140,13 @@ def local_field(z, seen, own, terms, u):
                 continue
             vx = z[obs, tgt, 0]
             vy = z[obs, tgt, 1]
-            g = edge_gain(t.kind, vx * vx + vy * vy, own[e, side], t.edge_contact[e], t.edge_gain)
-            u[obs, 0] += g * vx  # eq. (8)
-            u[obs, 1] += g * vy
+            bx = sign * t.edge_bearing[e * t.bearing_stride, 0]
+            by = sign * t.edge_bearing[e * t.bearing_stride, 1]
+            fx, fy = edge_force(
+                t.kind, vx, vy, own[e, side], t.edge_contact[e], t.edge_gain, bx, by
+            )  # eq. (8)
+            u[obs, 0] += fx
+            u[obs, 1] += fy
     if t.repulsion_gain != 0:  # Khatib's repulsion between non-neighbours, each from its end
         for side in range(2):
             for p in range(t.pair_i.shape[0]):

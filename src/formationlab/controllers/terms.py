@@ -14,7 +14,10 @@ arrays and numbers that the compiled loop (:mod:`formationlab.engine.loop`, thro
   contribute alike). The kernel decides each surface with the arithmetic of
   :func:`formationlab.controllers.potentials.triangle_products`, so that it switches
   exactly where the numpy law does;
-* **area triangles** ``(a, b, c, A*)`` of the signed-area penalty.
+* **area triangles** ``(a, b, c, A*)`` of the signed-area penalty;
+* **desired bearings** of the edges (and of the pairs that are edges) for the bearing-only
+  term (``kind = BEARING``): ``(m, 2)`` and ``(P, 2)`` with ``bearing_stride = 1``; one
+  unused row each, ``bearing_stride = 0``, for the other kinds.
 
 A law whose terms are not of these kinds does not override
 :meth:`Law.kernel_terms` and runs on the numpy path.
@@ -28,9 +31,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..formation.spec import Formation
-from .kinds.edges import LOG_BARRIER, SQUARED
+from .kinds.edges import BEARING, LOG_BARRIER, SQUARED
 
-__all__ = ["LOG_BARRIER", "PAIR_LIMIT", "SQUARED", "KernelTerms", "build_terms"]
+__all__ = ["BEARING", "LOG_BARRIER", "PAIR_LIMIT", "SQUARED", "KernelTerms", "build_terms"]
 
 #: Largest formation for which the batch kernel's all-pairs arrays are built
 #: (``n (n - 1) / 2`` pairs); larger ones run only through the neighbour-search kernel.
@@ -48,7 +51,7 @@ class KernelTerms(NamedTuple):
     half the bytes at the run's peak of memory.
     """
 
-    kind: int  #: LOG_BARRIER or SQUARED
+    kind: int  #: LOG_BARRIER, SQUARED or BEARING
     pair_i: NDArray[np.int64]
     pair_j: NDArray[np.int64]
     pair_is_edge: NDArray[np.bool_]
@@ -79,6 +82,9 @@ class KernelTerms(NamedTuple):
     edge_contact: NDArray[np.float64]
     radius: NDArray[np.float64]  #: rho_i / 2, so that a_ij = radius_i + radius_j
     term_surface: NDArray[np.int64]  #: the surface of each term
+    edge_bearing: NDArray[np.float64]  #: (m, 2) g*_ij of the edges, or (1, 2) unused
+    pair_bearing: NDArray[np.float64]  #: (P, 2) g*_ij of the pairs (0 off edges), or (1, 2)
+    bearing_stride: int  #: 1 with bearings, 0 without (row e of edge_bearing is e * stride)
 
     def writable(self) -> KernelTerms:
         """These terms with every array a writable C-contiguous copy.
@@ -140,6 +146,15 @@ def build_terms(
     corners = [np.ascontiguousarray(tris[:, c], dtype=index) for c in range(3)]
     del tris  # (the formation's, or built for this call: let go before the rest is made)
     area_tris, target = areas if areas is not None else (np.zeros((0, 3), np.int64), np.zeros(0))
+    if kind == BEARING:  # the formation's desired bearings, per edge and per pair
+        edge_bearing = np.array(formation.bearings, dtype=float)  # (m, 2), i -> j
+        pair_bearing = np.zeros((len(pi), 2))
+        if len(pi):  # pair (i, j), i < j, is row i n - i (i + 1) / 2 + j - i - 1 (triu order)
+            a, b = e[:, 0].astype(np.int64), e[:, 1].astype(np.int64)
+            pair_bearing[a * n - a * (a + 1) // 2 + b - a - 1] = edge_bearing
+        stride = 1
+    else:
+        edge_bearing, pair_bearing, stride = np.zeros((1, 2)), np.zeros((1, 2)), 0
     return KernelTerms(
         kind=int(kind),
         pair_i=pi,
@@ -172,4 +187,7 @@ def build_terms(
         edge_contact=0.5 * (formation.diameters[e[:, 0]] + formation.diameters[e[:, 1]]),
         radius=0.5 * np.array(formation.diameters, dtype=float),
         term_surface=np.ascontiguousarray(surface, dtype=np.int64 if pairs else surface.dtype),
+        edge_bearing=edge_bearing,
+        pair_bearing=pair_bearing,
+        bearing_stride=stride,
     )

@@ -50,7 +50,7 @@ REORDER_FROM = 4096
 class RunLayout(NamedTuple):
     """Arrays and numbers of one formation under one law for the compiled run (module doc)."""
 
-    kind: int  #: LOG_BARRIER or SQUARED
+    kind: int  #: LOG_BARRIER, SQUARED or BEARING
     edge_gain: float
     repulsion_gain: float  #: k_r of Khatib's repulsion
     eta: float  #: Khatib's eta
@@ -63,6 +63,9 @@ class RunLayout(NamedTuple):
     edge_j: NDArray[np.int32]
     edge_d: NDArray[np.float64]  #: d_ij
     edge_a: NDArray[np.float64]  #: a_ij
+    edge_bx: NDArray[np.float64]  #: (m,) g*_ij of the bearing term, or (1,) unused
+    edge_by: NDArray[np.float64]
+    edge_b_stride: int  #: 1 with bearings, 0 without
     nbr_ptr: NDArray[np.int32]  #: (n + 1,)
     nbr: NDArray[np.int32]  #: (2 m,) partner
     nbr_edge: NDArray[np.int32]  #: (2 m,) e or ~e
@@ -213,6 +216,12 @@ def run_layout(
     ei, ej = ei[e_order], ej[e_order]
     edge_d = np.ascontiguousarray(t.pop("edge_distance")[e_order], dtype=float)
     edge_a = np.ascontiguousarray(t.pop("edge_contact")[e_order], dtype=float)
+    bearing = t.pop("edge_bearing")  # each edge keeps its ends' roles, so its bearing
+    t.pop("pair_bearing")
+    b_stride = int(t.pop("bearing_stride"))
+    if b_stride:
+        bearing = bearing[e_order]
+    edge_bx, edge_by = (np.ascontiguousarray(bearing[:, c], dtype=float) for c in (0, 1))
     del e_order, e_pos
     # area triangles stored by their least robot, in rows by corner: 3 item + corner
     area = [relabel(t.pop(f"area_{c}")) for c in "abc"]
@@ -241,6 +250,9 @@ def run_layout(
         edge_j=ej,
         edge_d=edge_d,
         edge_a=edge_a,
+        edge_bx=edge_bx,
+        edge_by=edge_by,
+        edge_b_stride=b_stride,
         nbr_ptr=nbr_ptr,
         nbr=nbr,
         nbr_edge=nbr_edge,

@@ -23,6 +23,7 @@ Conventions (written down once, see ``docs/conventions.md``)
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -79,6 +80,50 @@ def _index(a: NDArray[np.integer], n: int) -> NDArray[np.integer]:
     allows, else int64. Numpy indexes with either; code that combines indices into keys
     (``i n + j``) or hands them to compiled kernels casts them to int64 first."""
     return np.ascontiguousarray(a, dtype=np.int32 if n <= _INDEX_LIMIT else np.int64)
+
+
+def _unit_bearings(bearings: ArrayLike, m: int) -> NDArray[np.float64]:
+    """Desired bearings ``(m, 2)``, one per edge, as read-only unit vectors."""
+    b = np.array(bearings, dtype=float)
+    if b.shape != (m, 2):
+        raise FormationError(
+            f"bearings must be one [x, y] per edge ({m} edges), got shape {b.shape}",
+            key="bearings",
+        )
+    norm = np.sqrt(np.sum(b * b, axis=-1))
+    bad = np.flatnonzero(~(np.isfinite(norm) & (norm > 0) & np.isfinite(b).all(axis=-1)))
+    if bad.size:
+        raise FormationError(
+            f"bearing {bad[0] + 1} (edge {bad[0] + 1}) is {b[bad[0]].tolist()}: a bearing is a "
+            "finite direction, not zero; give [x, y] with x or y non-zero",
+            key="bearings",
+        )
+    b /= norm[:, None]
+    b.setflags(write=False)
+    return b
+
+
+def _in_edge_order(
+    rows: NDArray[np.float64], given: ArrayLike, edges: NDArray[np.integer], n: int,
+    one_based: bool,
+) -> NDArray[np.float64]:  # fmt: skip
+    """``rows`` given for the edges ``given`` (in that order and direction) put in the stored
+    order of ``edges`` (``i < j``, sorted), reversed where an edge was given as ``(j, i)``."""
+    pairs = np.asarray(given, dtype=np.int64).reshape(-1, 2) - (1 if one_based else 0)
+    if len(pairs) != len(rows) or len(pairs) != len(edges):
+        raise FormationError(
+            f"bearings: {len(rows)} rows for {len(pairs)} given edges of {len(edges)}",
+            key="bearings",
+        )
+    where = {(int(i), int(j)): t for t, (i, j) in enumerate(edges)}
+    out = np.empty_like(rows)
+    for t, (i, j) in enumerate(pairs):
+        lo, hi = (int(i), int(j)) if i < j else (int(j), int(i))
+        if (lo, hi) not in where:
+            raise FormationError(f"bearing row {t + 1} names ({i + 1}, {j + 1}), not an edge",
+                                 key="bearings")  # fmt: skip
+        out[where[(lo, hi)]] = rows[t] if i < j else -rows[t]
+    return out
 
 
 def _signs(values: NDArray[np.float64]) -> NDArray[np.int8] | None:
@@ -190,6 +235,11 @@ class Formation:
     collinear_skipped : int
         Ordered triples of the template left without a restriction because their
         robots are collinear in it.
+    bearings : ndarray, shape (m, 2), optional
+        The desired bearings ``g*_ij`` of the edges (unit vectors from robot ``i`` to robot
+        ``j``, edges in the stored order ``i < j``): a formation defined by bearings (Zhao
+        and Zelazo 2016), whose outcome is judged by them (:mod:`formationlab.outcomes`).
+        Build with :meth:`with_bearings` (from the template, or given per edge).
     """
 
     diameters: NDArray[np.float64]
@@ -203,6 +253,7 @@ class Formation:
     orientation: Orientation = "free"
     alpha_values: AlphaValues = "sign"
     template: NDArray[np.float64] | None = field(default=None)
+    bearings: NDArray[np.float64] | None = field(default=None)
 
     def __post_init__(self) -> None:
         d = np.asarray(self.diameters, dtype=float)
@@ -255,6 +306,7 @@ class Formation:
             if template.shape != (n, 2) or not np.all(np.isfinite(template)):
                 raise FormationError(f"template must be a finite ({n}, 2) array", key="template")
             template.setflags(write=False)
+        bearings = None if self.bearings is None else _unit_bearings(self.bearings, len(edges))
         half = triples[:, 1] < triples[:, 2]  # the mirrors follow from eq. (3)
         index, halves = _index(edges, n), _index(triples[half], n)
         values = values[half]
@@ -271,6 +323,7 @@ class Formation:
         object.__setattr__(self, "_halves", halves)
         object.__setattr__(self, "_half_alpha", values if signs is None else signs)
         object.__setattr__(self, "template", template)
+        object.__setattr__(self, "bearings", bearings)
 
     def _restrictions(self, n: int, edges: NDArray[np.int64]) -> tuple[NDArray, NDArray]:
         """The restricted triples and their alpha from either form, validated (eq. 3)."""
@@ -487,10 +540,13 @@ class Formation:
     def with_orientation(self, orientation: Orientation) -> Formation:
         """The same formation driven to the template, its mirror image, or either."""
         if orientation == "free":
-            return Formation(diameters=self.diameters, edges=self.edges, distances=self.distances)
+            return Formation(
+                diameters=self.diameters, edges=self.edges, distances=self.distances,
+                template=self.template, bearings=self.bearings,
+            )  # fmt: skip
         if self.template is None:
             raise FormationError(f"orientation {orientation!r} needs a template", key="orientation")
-        return Formation.from_template(
+        out = Formation.from_template(
             self.template,
             edges=self.edges,
             diameters=self.diameters,
@@ -498,20 +554,60 @@ class Formation:
             alpha_values=self.alpha_values,
             one_based=False,
         )
+        return out if self.bearings is None else out._rebuilt(bearings=self.bearings)
+
+    def with_bearings(
+        self,
+        bearings: ArrayLike | None = None,
+        *,
+        edges: ArrayLike | None = None,
+        one_based: bool = True,
+    ) -> Formation:
+        """The same formation defined by desired bearings ``g*_ij`` (Zhao and Zelazo 2016).
+
+        Parameters
+        ----------
+        bearings : array_like, shape (m, 2), optional
+            One direction per edge (normalised here). Without it, the template's bearings
+            ``(t_j - t_i) / ||t_j - t_i||``, the natural way to give them.
+        edges : array_like of pairs, optional
+            The edges the rows of ``bearings`` belong to, in their order and direction
+            (robot numbers, 1-based unless ``one_based=False``); the formation's own edge
+            order (``i < j``, sorted) when omitted. A row given for ``(j, i)`` is the
+            bearing from ``j`` to ``i`` and is stored reversed.
+        """
+        m = len(self.edges)
+        if bearings is None:
+            if self.template is None:
+                raise FormationError(
+                    "desired bearings come from a template or are given per edge: add "
+                    "[formation] template = [...] or bearings = [[x, y], ...] (one per edge)",
+                    key="bearings",
+                )
+            t = self.template
+            given = t[self.edges[:, 1]] - t[self.edges[:, 0]]
+        else:
+            given = np.asarray(bearings, dtype=float)
+            if given.ndim != 2 or given.shape != (m, 2):
+                raise FormationError(
+                    f"bearings must be one [x, y] per edge ({m} edges), got shape "
+                    f"{given.shape}", key="bearings",
+                )  # fmt: skip
+            if edges is not None:
+                given = _in_edge_order(given, edges, self.edges, self.n, one_based)
+        return self._rebuilt(bearings=given)
+
+    def without_bearings(self) -> Formation:
+        """The same formation defined by its distances (and orientation) alone."""
+        return self if self.bearings is None else self._rebuilt(bearings=None)
+
+    def _rebuilt(self, **change: Any) -> Formation:
+        """This formation with some fields changed, validated again."""
+        return dataclasses.replace(self, **change)
 
     def with_diameters(self, diameters: float | ArrayLike) -> Formation:
         """The same formation with other robot diameters (validated again)."""
-        return Formation(
-            diameters=_per_item(diameters, self.n, "diameters", "robot"),
-            edges=self.edges,
-            distances=self.distances,
-            restricted_triples=self.restricted_triples,
-            restricted_alpha=self.restricted_alpha,
-            collinear_skipped=self.collinear_skipped,
-            orientation=self.orientation,
-            alpha_values=self.alpha_values,
-            template=self.template,
-        )
+        return self._rebuilt(diameters=_per_item(diameters, self.n, "diameters", "robot"))
 
     # ------------------------------------------------------------ derived data
     @property

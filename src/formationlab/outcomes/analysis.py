@@ -76,6 +76,33 @@ def distance_errors(formation: Formation, q: ArrayLike) -> NDArray[np.float64]:
     return r - formation.distances
 
 
+def bearing_errors(formation: Formation, q: ArrayLike) -> NDArray[np.float64]:
+    """``||g_ij - g*_ij||`` per edge of a formation defined by bearings; ``(..., m)`` (0 at
+    the desired bearing, 2 at the reversed one; about the angle in radians when small)."""
+    q = np.asarray(q, dtype=float)
+    b = formation.bearings
+    if b is None:
+        raise ValueError("the formation has no desired bearings (Formation.with_bearings)")
+    e = formation.edges
+    r = q[..., e[:, 1], :] - q[..., e[:, 0], :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g = r / np.sqrt(np.sum(r * r, axis=-1))[..., None]
+    return np.sqrt(np.sum((g - b) ** 2, axis=-1))
+
+
+def bearings_met(formation: Formation, q: ArrayLike, tolerances: Tolerances) -> NDArray[np.bool_]:
+    """Whether every bearing of a formation defined by bearings is within
+    ``tolerances.bearing`` of its desired one at ``q`` ``(..., n, 2)``: ``(...)``.
+
+    Such a formation is judged by its bearings alone (they fix its orientation too, so no
+    restricted triple can disagree and no outcome is ``mirror``): both classifiers
+    (:func:`classify`, :func:`formationlab.outcomes.batch.classify_batch`) take this
+    decision from here.
+    """
+    err = bearing_errors(formation, q)
+    return np.max(np.nan_to_num(err, nan=np.inf), axis=-1, initial=0.0) <= tolerances.bearing
+
+
 def error_statistics(errors: ArrayLike, tolerance: float) -> dict[str, float | int]:
     """Summary statistics of distance errors ``r_ij - d_ij``, shape ``(m,)``.
 
@@ -171,7 +198,12 @@ def classify(
     q = np.asarray(q, dtype=float)
     if contact or touching(formation, q):
         return "collision"
-    met = np.max(np.abs(distance_errors(formation, q))) <= tol.distance
+    if formation.bearings is not None:  # judged by its bearings
+        if bearings_met(formation, q, tol):
+            return "desired"
+        met = False
+    else:
+        met = np.max(np.abs(distance_errors(formation, q))) <= tol.distance
     if met:
         agree, disagree = orientation_agreement(formation, q)
         if disagree == 0:

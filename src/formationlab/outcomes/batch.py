@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from ..formation.spec import Formation
 from ..status import DIVERGED_SCALE, Status
 from ..validation import COORDINATE_LIMIT
-from .analysis import OUTCOMES, Tolerances
+from .analysis import OUTCOMES, Tolerances, bearings_met
 from .rigid_motion import DRIFTING, ROTATING, RigidMotion, rigid_motion, rigid_outcome
 
 __all__ = ["BatchResult", "classify_batch", "max_distance_errors"]
@@ -215,8 +215,11 @@ def classify_batch(
         qb = q[sl]
         r = np.linalg.norm(qb[:, ju, :] - qb[:, iu, :], axis=-1)
         collided = contact[sl] | np.any(r <= formation.contact_matrix[iu, ju], axis=-1)
-        met = max_distance_errors(formation, qb) <= tol.distance
-        if len(tri):
+        if formation.bearings is not None:  # judged by its bearings (no triple disagrees)
+            met = bearings_met(formation, qb, tol)
+        else:
+            met = max_distance_errors(formation, qb) <= tol.distance
+        if len(tri) and formation.bearings is None:
             rij = qb[:, tri[:, 1], :] - qb[:, tri[:, 0], :]
             rik = qb[:, tri[:, 2], :] - qb[:, tri[:, 0], :]
             c = rij[..., 0] * rik[..., 1] - rij[..., 1] * rik[..., 0]

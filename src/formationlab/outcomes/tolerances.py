@@ -27,6 +27,9 @@ class Tolerances:
     ----------
     distance : float
         Largest ``|r_ij - d_ij|`` over the edges for the distances to count as met.
+    bearing : float
+        Largest ``||g_ij - g*_ij||`` over the edges (about the angle in radians) for the
+        bearings of a formation defined by bearings to count as met.
     speed : float
         Largest speed for the robots to count as stopped: instantaneous,
         ``max_i |u_i|``, or net over the last ``window`` seconds (module docstring).
@@ -52,13 +55,14 @@ class Tolerances:
     """
 
     distance: float = 1e-2
+    bearing: float = 1e-2
     speed: float = 1e-3
     window: float = 1e-2
     shape: float = 2e-2
     drift_window: float = 2.0
 
     def __post_init__(self) -> None:
-        for name in ("distance", "speed", "window", "shape", "drift_window"):
+        for name in ("distance", "bearing", "speed", "window", "shape", "drift_window"):
             positive(getattr(self, name), name, owner="tolerance")
 
     def drift_steps(self, dt: float) -> int:

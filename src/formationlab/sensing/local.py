@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from ..controllers.kinds.edges import edge_gain
+from ..controllers.kinds.edges import edge_force
 from ..controllers.kinds.khatib import repulsion_gain
 from ..controllers.kinds.restriction import (
     restriction_force,
@@ -121,10 +121,14 @@ def local_controls(
             if own_distance is None
             else own_distance
         )
+        bearing = t.edge_bearing  # (m, 2), or one unused row: broadcast
         for side, (obs, tgt) in enumerate(((ei, ej), (ej, ei))):
             v = _gather(z, obs, tgt)
-            g = edge_gain(t.kind, np.sum(v * v, axis=-1), d[..., side], a, t.edge_gain)  # eq. (8)
-            add(obs, g[..., None] * v, _seen(seen, obs, tgt))
+            b = (1.0 - 2.0 * side) * bearing  # g*_ji = -g*_ij
+            fx, fy = edge_force(
+                t.kind, v[..., 0], v[..., 1], d[..., side], a, t.edge_gain, b[:, 0], b[:, 1]
+            )  # eq. (8)
+            add(obs, np.stack([fx, fy], axis=-1), _seen(seen, obs, tgt))
         other = ~t.pair_is_edge
         if t.repulsion_gain != 0 and other.any():
             pi, pj, pa = t.pair_i[other], t.pair_j[other], t.pair_contact[other]

@@ -168,6 +168,7 @@ def run_batch(
     """
     tol = tolerances or Tolerances()
     model = model or SingleIntegrator()
+    formation = law.formation_for(formation)  # as the law is judged on it (bearings)
     q0 = _check_initial(formation, q0, model.state_size())
     dt, duration = positive(dt, "dt"), positive(duration, "duration")
     n_steps = steps_for(float(duration), float(dt))

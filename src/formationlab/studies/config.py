@@ -91,6 +91,7 @@ class TolerancesModel(BaseModel):
 
     model_config = _STRICT
     distance: float = Field(default=1e-2, gt=0)
+    bearing: float = Field(default=1e-2, gt=0)
     speed: float = Field(default=1e-3, gt=0)
     window: float = Field(default=1e-2, gt=0)
     shape: float = Field(default=2e-2, gt=0)

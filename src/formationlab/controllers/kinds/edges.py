@@ -1,9 +1,12 @@
-"""An edge's force factor by the integer kind of its potential (for the compiled loops).
+"""An edge's force by the integer kind of its term (for the compiled loops and numpy).
 
-``g`` such that robot ``i`` of an edge gets ``g r_ij`` and robot ``j`` gets ``-g r_ij``.
-The kinds are :data:`LOG_BARRIER` (the paper's ``phi``, :mod:`.log_barrier`) and
-:data:`SQUARED` (Krick et al.'s, :mod:`.squared_distance`). A new edge potential adds its
-module, its number here and its branch in :func:`edge_gain`.
+:func:`edge_force` is robot ``i``'s term ``f`` of an edge seen at ``r_ij``; robot ``j`` gets
+``-f``. The kinds are :data:`LOG_BARRIER` (the paper's ``phi``, :mod:`.log_barrier`) and
+:data:`SQUARED` (Krick et al.'s, :mod:`.squared_distance`), whose force is ``g r_ij`` with
+the factor :func:`edge_gain`, and :data:`BEARING` (Zhao and Zelazo's bearing-only term,
+:mod:`.bearing`), which is not along ``r_ij`` and reads the edge's desired bearing ``(bx,
+by)``. A new kind of edge term adds its module, its number here and its branch in
+:func:`edge_force`; the loops that gather edges call only this function.
 """
 
 from __future__ import annotations
@@ -11,13 +14,15 @@ from __future__ import annotations
 import numpy as np
 
 from . import formula
+from .bearing import bearing_force
 from .log_barrier import phi_gain
 from .squared_distance import squared_gain
 
-__all__ = ["LOG_BARRIER", "SQUARED", "edge_gain"]
+__all__ = ["BEARING", "LOG_BARRIER", "SQUARED", "edge_force", "edge_gain"]
 
-#: Edge potential: the paper's phi (eq. 5) or Krick et al.'s squared distance.
-LOG_BARRIER, SQUARED = 0, 1
+#: Edge term: the paper's phi (eq. 5), Krick et al.'s squared distance, Zhao and Zelazo's
+#: bearing projection.
+LOG_BARRIER, SQUARED, BEARING = 0, 1, 2
 
 
 @formula
@@ -27,3 +32,13 @@ def edge_gain(kind, r2, d, a, gain):
     if kind == LOG_BARRIER:
         return phi_gain(np.sqrt(r2), d, a, gain)  # eq. (8)
     return gain * squared_gain(r2, d)  # Krick et al. 2009
+
+
+@formula
+def edge_force(kind, rx, ry, d, a, gain, bx, by):
+    """Robot ``i``'s term ``(fx, fy)`` of an edge seen at ``r_ij = (rx, ry)`` (``d`` desired
+    distance, ``a`` contact, ``(bx, by)`` desired bearing, read by :data:`BEARING` only)."""
+    if kind == BEARING:
+        return bearing_force(rx, ry, bx, by, gain)  # Zhao and Zelazo 2016, eq. (11)
+    g = edge_gain(kind, rx * rx + ry * ry, d, a, gain)  # eq. (8), or Krick et al.'s
+    return g * rx, g * ry

@@ -1,0 +1,171 @@
+"""The bearing-only law of Zhao and Zelazo (2016): the other family of formation control.
+
+Reference: S. Zhao and D. Zelazo, "Bearing Rigidity and Almost Global Bearing-Only Formation
+Stabilization", IEEE Transactions on Automatic Control 61(5):1255-1268, 2016 (survey: S. Zhao
+and D. Zelazo, "Bearing rigidity theory and its applications for control and estimation of
+network systems", IEEE Control Systems Magazine 39(2):66-83, April 2019).
+
+Their notation: positions ``p_i``, ``e_ij = p_j - p_i``, bearings ``g_ij = e_ij / ||e_ij||``,
+desired bearings ``g*_ij`` (:attr:`formationlab.Formation.bearings`), the projection
+``P_x = I_d - x x^T / ||x||^2``. The law (their eq. 11) is
+
+    p_i' = -k sum_{j in N_i} P_{g_ij} g*_ij,
+
+each robot steering by the part of each desired bearing that is orthogonal to the bearing it
+measures. It needs no distances and has no mirror problem: bearings fix the shape up to a
+translation and a scale (for an infinitesimally bearing-rigid formation,
+:mod:`formationlab.formation.bearing_rigidity`), and the orientation too, so the robots need
+a common sense of direction (a robot whose frame is turned feeds turned bearings:
+:mod:`formationlab.sensing`).
+
+Properties the tests check (their Lemma 2 and Theorem 5): the centroid ``p_bar`` and the
+scale ``s = sqrt(1/n sum_i ||p_i - p_bar||^2)`` are constant along the flow (``e_ij^T P_{g_ij}
+= 0``, and robot ``j`` gets the opposite of robot ``i``'s term); the Lyapunov function is
+``V = 1/2 ||p - p*||^2``, with ``p*`` the target formation of the same centroid and scale as
+``p`` (so ``V`` is a function of ``p`` alone), and ``V' = -k sum_E ||e*_ij|| g*_ij^T P_{g_ij}
+g*_ij <= 0``; from almost every start the robots reach ``p*``; the one other equilibrium,
+every bearing reversed (``p*`` turned by pi in the plane), is unstable.
+
+The law has no barrier at contact: two robots may meet, where their bearing is undefined. To
+compare collision counts with the distance laws, Khatib's repulsion between robots that are
+not neighbours may be added with ``k_r > 0`` (default 0, the law as published; with it the
+scale is no longer constant).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import FormationError
+from ..formation.bearing_rigidity import bearing_realisation
+from ..formation.geometry import scatter_rows
+from ..formation.spec import Formation
+from ..validation import check_fields
+from .base import Law, ObstacleRepulsion, Repulsion, register
+from .kinds.bearing import bearing_force, bearing_misalignment
+from .squared_distance import grad_repulsion
+from .terms import BEARING, KernelTerms, build_terms
+
+__all__ = ["BearingLaw", "bearing_controls", "bearing_lyapunov", "bearing_lyapunov_rate", "target"]
+
+
+def _bearings(formation: Formation) -> NDArray[np.float64]:
+    if formation.bearings is None:
+        raise FormationError(
+            "the bearing law needs desired bearings: Formation.with_bearings() (from the "
+            "template, or given per edge), or [formation] template = [...] in a scenario",
+            key="bearings",
+        )
+    return formation.bearings
+
+
+def bearing_controls(formation: Formation, q: NDArray[np.float64], k: float = 1.0) -> NDArray:
+    """``p_i' = -k sum_{j in N_i} P_{g_ij} g*_ij`` (Zhao and Zelazo 2016, eq. 11); (..., n, 2)."""
+    q = np.asarray(q, dtype=float)
+    b = _bearings(formation)
+    i, j = formation.edges[:, 0], formation.edges[:, 1]
+    r = q[..., j, :] - q[..., i, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fx, fy = bearing_force(r[..., 0], r[..., 1], b[:, 0], b[:, 1], k)  # eq. (11)
+    f = np.stack([fx, fy], axis=-1)
+    return scatter_rows(f, i, formation.n) - scatter_rows(f, j, formation.n)
+
+
+def target(formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``p*``: the formation of the desired bearings with the centroid and the scale of ``q``
+    (Zhao and Zelazo 2016, Theorem 5); ``(..., n, 2)``. Constant along the law's flow."""
+    q = np.asarray(q, dtype=float)
+    t = bearing_realisation(formation)  # centred, scale 1
+    c = q.mean(axis=-2, keepdims=True)
+    s = np.sqrt(np.mean(np.sum((q - c) ** 2, axis=-1), axis=-1))  # s(p), their eq. (13)
+    return c + s[..., None, None] * t
+
+
+def bearing_lyapunov(formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``V = 1/2 ||p - p*||^2`` with ``p*`` of :func:`target`; shape ``(...)``."""
+    q = np.asarray(q, dtype=float)
+    d = q - target(formation, q)
+    return 0.5 * np.sum(d * d, axis=(-2, -1))
+
+
+def bearing_lyapunov_rate(
+    formation: Formation, q: NDArray[np.float64], k: float = 1.0
+) -> NDArray[np.float64]:
+    """``V' = -k sum_E ||e*_ij|| g*_ij^T P_{g_ij} g*_ij`` along the law (proof of Theorem 5),
+    with ``e*`` of the target :func:`target`; shape ``(...)``, never positive."""
+    q = np.asarray(q, dtype=float)
+    b = _bearings(formation)
+    i, j = formation.edges[:, 0], formation.edges[:, 1]
+    p = target(formation, q)
+    length = np.linalg.norm(p[..., j, :] - p[..., i, :], axis=-1)  # ||e*_ij||
+    r = q[..., j, :] - q[..., i, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        m = bearing_misalignment(r[..., 0], r[..., 1], b[:, 0], b[:, 1])
+    return -k * np.sum(length * m, axis=-1)
+
+
+@register
+@dataclass(frozen=True, kw_only=True)
+class BearingLaw(Law):
+    """Bearing-only law ``u_i = -k sum_{j in N_i} P_{g_ij} g*_ij`` (Zhao and Zelazo 2016).
+
+    Reference: S. Zhao and D. Zelazo, "Bearing Rigidity and Almost Global Bearing-Only
+    Formation Stabilization", IEEE Transactions on Automatic Control 61(5):1255-1268, 2016.
+
+    The formation's desired bearings (:meth:`Formation.with_bearings`, from its template
+    when it has none) define the target; the outcome of a run is judged by them.
+
+    Parameters
+    ----------
+    k : float
+        Gain. Default 1.
+    k_r : float
+        Gain of Khatib's repulsion between robots that are not neighbours, and from
+        obstacles. Default 0: the law as published (the scale of the formation constant).
+    repulsion : Repulsion
+        Khatib's repulsion ``gamma_ij``.
+    """
+
+    name = "bearing"
+    k: float = 1.0
+    k_r: float = 0.0
+    repulsion: Repulsion = field(default_factory=Repulsion)
+
+    def __post_init__(self) -> None:
+        check_fields(self, positive=("k",), nonnegative=("k_r",))
+
+    def formation_for(self, formation: Formation) -> Formation:
+        """The formation judged by its bearings: its own, or its template's (refused, with
+        how to give them, when it has neither)."""
+        if formation.bearings is not None:
+            return formation
+        if formation.template is None:
+            _bearings(formation)  # says how to give them
+        return formation.with_bearings()
+
+    def control(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        formation = self.formation_for(formation)  # (itself inside a closed loop)
+        u = bearing_controls(formation, q, self.k)
+        if self.k_r > 0:
+            u = u - self.k_r * grad_repulsion(formation, q, self.repulsion)
+        return u
+
+    def potential(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``V = 1/2 ||p - p*||^2`` (module docstring): non-increasing along the law with
+        ``k_r = 0``; with the repulsion it measures the distance to the target only."""
+        return bearing_lyapunov(self.formation_for(formation), q)
+
+    def obstacle_repulsion(self) -> ObstacleRepulsion:
+        """``-k_r grad Gamma_o`` (weight 0 in ``V``: the law is not a gradient flow)."""
+        return ObstacleRepulsion(gain=self.k_r, weight=0.0, repulsion=self.repulsion)
+
+    def kernel_terms(self, formation: Formation, *, pairs: bool = True) -> KernelTerms:
+        formation = self.formation_for(formation)
+        rep = self.repulsion
+        return build_terms(
+            formation, pairs=pairs, kind=BEARING, edge_gain=self.k, repulsion_gain=self.k_r,
+            eta=rep.eta, influence=rep.influence,
+        )  # fmt: skip
