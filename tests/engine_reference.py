@@ -10,7 +10,9 @@ and compares: statuses, outcomes and steps identical, positions to a tolerance t
 processor's kernels meet (its docstring says which and why; never bit for bit: a last bit
 recorded on one processor is not a property of the code).
 
-The recording was made at commit 5de2f44 (before the engine refactoring of issue 24).
+The recording was made at commit 5de2f44 (before the engine refactoring of issue 24);
+``record new`` adds the example files made since (the bearing law's, with its commit),
+leaving the others as recorded.
 """
 
 from __future__ import annotations
@@ -113,23 +115,28 @@ def run_seeded_study(name: str, trials: int, seed: int) -> dict[str, object]:
     return out
 
 
-def record() -> None:
-    runs = {}
+def record(*, new_only: bool = False) -> None:
+    """Record every example and study; ``new_only``: only the example files and studies the
+    data file does not hold yet, keeping what it holds as it was recorded."""
+    old = json.loads(DATA.read_text()) if new_only and DATA.exists() else {}
+    runs, studies = dict(old.get("runs", {})), dict(old.get("studies", {}))
     for path in example_files():
         for backend in ("auto", "numpy"):
-            print(f"{key(path)} [{backend}]", flush=True)
-            runs[f"{key(path)}|{backend}"] = run_example(path, backend)
-    studies = {}
+            name = f"{key(path)}|{backend}"
+            if name not in runs:
+                print(f"{key(path)} [{backend}]", flush=True)
+                runs[name] = run_example(path, backend)
     for name, trials, seed in STUDIES:
-        print(f"study {name}", flush=True)
-        studies[name] = run_seeded_study(name, trials, seed)
+        if name not in studies:
+            print(f"study {name}", flush=True)
+            studies[name] = run_seeded_study(name, trials, seed)
     DATA.parent.mkdir(exist_ok=True)
     DATA.write_text(json.dumps({"runs": runs, "studies": studies}, indent=0) + "\n")
 
 
 if __name__ == "__main__":
-    if sys.argv[1:] == ["record"]:
+    if sys.argv[1:2] == ["record"]:  # `record new`: only what the data file does not hold
         sys.path.insert(0, str(ROOT / "src"))
-        record()
+        record(new_only=sys.argv[2:] == ["new"])
     else:
         print(__doc__)

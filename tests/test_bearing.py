@@ -10,6 +10,8 @@ with infinitesimal distance rigidity in the plane (Theorem 8).
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -18,10 +20,11 @@ from formationlab.controllers.bearing import (
     bearing_controls,
     bearing_lyapunov,
     bearing_lyapunov_rate,
+    leader_target,
     target,
 )
 from formationlab.controllers.kinds.bearing import bearing_force
-from formationlab.errors import FormationError
+from formationlab.errors import FormationError, ScenarioError
 from formationlab.formation.bearing_rigidity import (
     bearing_nullity,
     bearing_realisation,
@@ -32,6 +35,7 @@ from formationlab.formation.graphs import delaunay_edges, knn_edges
 from formationlab.formation.rigidity import rigidity_matrix
 from formationlab.formation.templates import lattice
 from formationlab.outcomes.analysis import bearing_errors
+from formationlab.scenario import parse_scenario, run_scenario
 from formationlab.studies import run_batch, trial_initial_states
 from formationlab.studies.config import BoxInitial
 
@@ -262,3 +266,91 @@ def test_the_sparse_rank_agrees_with_the_dense_one_beyond_the_dense_limit(monkey
     sparse = [bearing_nullity(q, e) for e in (full, thin)]
     assert dense[0] == 3 and dense[1] > 3
     assert sparse == dense
+
+
+@pytest.mark.parametrize("leaders", [(1, 4), (1, 3, 5), (2, 5, 6)])
+def test_followers_reach_the_formation_the_leaders_define(leaders):
+    """Zhao and Zelazo (IEEE TCNS 4(3), 2017), Theorem 1: leaders standing still (robots
+    stopped from the start) fix the position and the scale; the followers reach
+    ``p*_f = -L_ff^-1 L_fl p_l`` under the bearing-only law."""
+    f = HEXAGON.with_bearings()
+    lead = np.array(leaders) - 1
+    t = bearing_realisation(f)
+    q0 = 1.6 * _starts(f, 1, 11)[0]
+    q0[lead] = [0.5, -1.0] + 2.3 * t[lead]  # leaders where a copy of the target has them
+    want = leader_target(f, leaders, q0[lead])
+    # the closed form is that copy: the target's shape through the leaders, scaled, placed
+    np.testing.assert_allclose(want, [0.5, -1.0] + 2.3 * t, rtol=0, atol=1e-12)
+    faults = fl.Faults(stop=[fl.Stop(robot=r, at=0.0) for r in leaders])
+    euler = fl.get_integrator("euler", dt=1e-2)
+    res = fl.simulate(
+        f, fl.BearingLaw(), q0, duration=400.0, faults=faults, save_every=1000, integrator=euler
+    )
+    assert res.outcome() == "desired"
+    np.testing.assert_allclose(res.q[-1], want, rtol=0, atol=1e-6)
+    # (two neighbouring leaders, 1 and 2, pin the far robots weakly: slower, same target)
+
+
+def test_leaders_that_do_not_pin_the_followers_are_refused():
+    f = HEXAGON.with_bearings()
+    with pytest.raises(FormationError, match="at least two leaders"):
+        leader_target(f, [1], [[0.0, 0.0]])
+    # robots 1 and 4 are on one line through the centre with 2..6 around: collinear
+    # leaders on a bearing edge still pin the hexagon (their distance sets the scale)
+    leader_target(f, [1, 4], [[1.0, 0.0], [-1.0, 0.0]])
+
+
+# ----------------------------------------------------------------------------- scenario files
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def _scenario(formation: str, law: str = "bearing") -> str:
+    return (
+        "[robots]\npositions = [[0.3, -1.5], [2.0, 0.4], [-1.2, 1.1]]\n"
+        f'[formation]\n{formation}\n[controller]\nlaw = "{law}"\n'
+        '[simulation]\nintegrator = "euler"\ndt = 0.01\nduration = 40.0\n'
+    )
+
+
+def test_a_scenario_takes_bearings_from_its_template_or_per_edge():
+    tpl = parse_scenario(_scenario("template = [[0, 0], [1, 0], [0.5, 0.8660254037844386]]"))
+    given = parse_scenario((EXAMPLES / "bearing-triangle-given.toml").read_text())
+    np.testing.assert_allclose(given.formation.bearings, tpl.formation.bearings, atol=1e-15)
+    assert not given.warnings and not tpl.warnings
+    run = run_scenario(given)
+    assert run.outcome() == "desired"
+
+
+@pytest.mark.parametrize(
+    ("formation", "law", "key", "words"),
+    [
+        ('edges = [[1, 2], [2, 3]]\nbearings = [[1, 0], [0, 1]]', "bearing",
+         "formation.bearings", "do not fix the shape"),
+        ('edges = [[1, 2], [2, 3], [3, 1]]\nbearings = [[1, 0], [0, 1]]', "bearing",
+         "formation.bearings", "one [x, y] per edge (3 edges)"),
+        ('edges = [[1, 2], [2, 3], [3, 1]]\nbearings = [[1, 0], [0, 0], [0, 1]]', "bearing",
+         "formation.bearings", "not zero"),
+        ('edges = [[1, 2], [2, 3], [3, 1]]', "bearing", "formation.template",
+         "needs desired bearings"),
+        ('template = [[0, 0], [1, 0], [0.5, 0.9]]\nedges = { knn = 2 }\n'
+         'bearings = [[1, 0], [0, 1], [1, 1]]', "bearing", "formation.bearings",
+         "need the edges as a list of pairs"),
+    ],
+)  # fmt: skip
+def test_bearings_a_scenario_cannot_use_are_refused_by_key(formation, law, key, words):
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(_scenario(formation, law))
+    assert info.value.key == key and words in str(info.value)
+
+
+def test_bearings_that_no_law_reads_are_warned_about():
+    text = _scenario("edges = [[1, 2], [2, 3], [3, 1]]\nbearings = [[1, 0], [-1, 2], [-1, -2]]")
+    sc = parse_scenario(text.replace('law = "bearing"', 'law = "distance"'))
+    assert any("formation.bearings" in w and "reads no bearings" in w for w in sc.warnings)
+    studied = parse_scenario(
+        text.replace('law = "bearing"', 'law = "distance"')
+        + '[study]\ntrials = 10\nlaws = ["distance", "bearing"]\n'
+    )
+    assert not any("formation.bearings" in w for w in studied.warnings)
+    assert studied.formation.bearings is not None  # kept for the study's bearing law

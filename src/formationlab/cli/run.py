@@ -280,12 +280,15 @@ def _verdict(s: dict[str, Any]) -> str:
         if rigid["centre"] is not None:
             moving += f", {rigid['angular_velocity']:.3g} rad/s"
     line = f"outcome {s['outcome']}{moving}, max |r_ij - d_ij| = {s['max_distance_error']:.3g}"
+    if "max_bearing_error" in s:  # a formation judged by its bearings
+        line = f"outcome {s['outcome']}{moving}, max |g_ij - g*_ij| = {s['max_bearing_error']:.3g}"
     if s["converged_time"] is not None:
         return line + f", stopped at t = {s['converged_time']:.3g} s"
     speed = min(v for v in (s["final_speed"], s["net_speed"]) if v is not None)
     if s["outcome"] in ("desired", "mirror"):
+        within = tol["bearing" if "max_bearing_error" in s else "distance"]
         return line + (
-            f" (within the tolerance {tol['distance']:g}), still moving at the end "
+            f" (within the tolerance {within:g}), still moving at the end "
             f"({speed:.2g} m/s > {tol['speed']:g})"
         )
     return line + f", still moving at the end ({speed:.2g} m/s > {tol['speed']:g})"
@@ -406,6 +409,11 @@ def validate(
             warn(w if w.startswith(sc.source) else f"{path}: {w}")
         f = sc.formation
         rigid = "rigid" if f.is_rigid else "not rigid"
+        shape = f"orientation {f.orientation}"
+        if f.bearings is not None:  # checked to fix the shape when the scenario was read
+            rigid = "infinitesimally bearing rigid"
+            shape = "desired bearings " + ("given" if sc.raw.get("formation", {}).get(
+                "bearings") is not None else "of the template")  # fmt: skip
         safety = ""
         if sc.obstacles:
             safety += f", {len(sc.obstacles)} obstacles"
@@ -415,7 +423,7 @@ def validate(
         typer.echo(
             f"ok: {path}: {sc.name!r}, {_count(f.n, 'robot')}, {_count(len(f.edges), 'edge')} "
             f"({rigid}), "
-            f"orientation {f.orientation}, model {sc.model.name}, law {sc.law.name}, integrator "
+            f"{shape}, model {sc.model.name}, law {sc.law.name}, integrator "
             f"{json.dumps(sc.parameters['integrator'])}, duration {sc.duration:g} s{safety}"
             + (f", marching ({type(sc.marching).__name__})" if sc.marching is not None else "")
         )

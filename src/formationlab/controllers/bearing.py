@@ -37,10 +37,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from ..errors import FormationError
-from ..formation.bearing_rigidity import bearing_realisation
+from ..formation.bearing_rigidity import bearing_laplacian, bearing_realisation
 from ..formation.geometry import scatter_rows
 from ..formation.spec import Formation
 from ..validation import check_fields
@@ -49,7 +49,14 @@ from .kinds.bearing import bearing_force, bearing_misalignment
 from .squared_distance import grad_repulsion
 from .terms import BEARING, KernelTerms, build_terms
 
-__all__ = ["BearingLaw", "bearing_controls", "bearing_lyapunov", "bearing_lyapunov_rate", "target"]
+__all__ = [
+    "BearingLaw",
+    "bearing_controls",
+    "bearing_lyapunov",
+    "bearing_lyapunov_rate",
+    "leader_target",
+    "target",
+]
 
 
 def _bearings(formation: Formation) -> NDArray[np.float64]:
@@ -107,6 +114,46 @@ def bearing_lyapunov_rate(
     return -k * np.sum(length * m, axis=-1)
 
 
+def leader_target(
+    formation: Formation, leaders: ArrayLike, p_leaders: ArrayLike
+) -> NDArray[np.float64]:
+    """Where the followers belong when the ``leaders`` (robot numbers, 1-based) stand at
+    ``p_leaders`` ``(l, 2)``: the formation of the desired bearings through them, ``(n, 2)``.
+
+    Zhao and Zelazo, "Translational and scaling formation maneuver control via a
+    bearing-based approach", IEEE Transactions on Control of Network Systems 4(3):429-438,
+    2017, Theorem 1: with the bearing Laplacian ``L_B`` partitioned into leaders ``l`` and
+    followers ``f``, the target is unique if and only if ``L_ff`` is non-singular, and then
+    ``p*_f = -L_ff^{-1} L_fl p_l``. Two leaders fix the position and the scale (and, with
+    the bearings, the whole formation); the leaders keep their places. Refused when the
+    leaders do not fix the target.
+    """
+    b = _bearings(formation)
+    n = formation.n
+    lead = np.unique(np.asarray(leaders, dtype=np.int64).reshape(-1)) - 1
+    if lead.size < 2 or lead.min() < 0 or lead.max() >= n:
+        raise FormationError(
+            f"a bearing formation needs at least two leaders among robots 1..{n} to fix its "
+            f"position and scale, got {np.asarray(leaders).tolist()}", key="leaders",
+        )  # fmt: skip
+    pl = np.asarray(p_leaders, dtype=float).reshape(lead.size, 2)
+    follow = np.setdiff1d(np.arange(n), lead)
+    lap = bearing_laplacian(b, formation.edges, n).toarray()
+    cols_f = (2 * follow[:, None] + np.arange(2)).ravel()
+    cols_l = (2 * lead[:, None] + np.arange(2)).ravel()
+    l_ff, l_fl = lap[np.ix_(cols_f, cols_f)], lap[np.ix_(cols_f, cols_l)]
+    if np.linalg.matrix_rank(l_ff) < l_ff.shape[0]:
+        raise FormationError(
+            "these leaders do not fix the followers' places (L_ff is singular, Zhao and "
+            "Zelazo 2017, Theorem 1): choose leaders whose bearings pin every follower",
+            key="leaders",
+        )
+    out = np.empty((n, 2))
+    out[lead] = pl
+    out[follow] = np.linalg.solve(l_ff, -l_fl @ pl.ravel()).reshape(-1, 2)  # Theorem 1
+    return out
+
+
 @register
 @dataclass(frozen=True, kw_only=True)
 class BearingLaw(Law):
@@ -138,13 +185,15 @@ class BearingLaw(Law):
         check_fields(self, positive=("k",), nonnegative=("k_r",))
 
     def formation_for(self, formation: Formation) -> Formation:
-        """The formation judged by its bearings: its own, or its template's (refused, with
-        how to give them, when it has neither)."""
-        if formation.bearings is not None:
-            return formation
-        if formation.template is None:
-            _bearings(formation)  # says how to give them
-        return formation.with_bearings()
+        """The formation judged by its bearings: its own, or its template's; refused, with
+        how to give them, when it has neither, and when they do not fix the shape (not
+        infinitesimally bearing rigid: :func:`bearing_realisation`)."""
+        if formation.bearings is None:
+            if formation.template is None:
+                _bearings(formation)  # says how to give them
+            formation = formation.with_bearings()
+        bearing_realisation(formation)  # (computed once per formation)
+        return formation
 
     def control(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
         formation = self.formation_for(formation)  # (itself inside a closed loop)

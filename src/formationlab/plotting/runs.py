@@ -16,7 +16,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
-from ..outcomes.analysis import distance_errors
+from ..outcomes.analysis import bearing_errors, distance_errors
 from .colors import ROBOT_MAP, robot_colors
 from .fonts import displayable, font_context
 from .many import (
@@ -32,6 +32,7 @@ from .many import (
 from .safety import draw_safety, plot_filter_activity
 
 __all__ = [
+    "plot_bearing_errors",
     "plot_controls",
     "plot_distance_errors",
     "plot_lyapunov",
@@ -292,6 +293,38 @@ def plot_distance_errors(
     return artists
 
 
+def plot_bearing_errors(
+    result: Any, ax: Axes | None = None, *, title: str | None = None
+) -> list[Any]:
+    """Bearing errors ``||g_ij - g*_ij||`` per edge over time, of a formation defined by
+    bearings (Zhao and Zelazo 2016): 0 at the desired bearing, 2 at the reversed one.
+
+    One line per edge up to :data:`~formationlab.plotting.many.LINE_LIMIT` edges (a
+    legend up to ``LABEL_LIMIT``); beyond, bands of their distribution over the edges.
+    """
+    ax = _axes(ax)
+    artists = _shade_active(ax, result)
+    f, p = result.formation, getattr(result, "points", result.q)
+    m = len(f.edges)
+    if m > LINE_LIMIT:
+        artists += draw_bands(
+            ax, result.t, lambda rows: bearing_errors(f, p[rows]), width=m, of="edges",
+            color="C3",
+        )  # fmt: skip
+    else:
+        err = bearing_errors(f, p)
+        for e, lab in enumerate(result.edge_labels):
+            label = f"$|g_{{{lab.replace('-', '')}}} - g^*|$"
+            artists += ax.plot(result.t, err[:, e], label=label)
+    ax.axhline(0.0, color="0.5", lw=0.6)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("bearing error (about rad)")
+    ax.set_title(title or "bearing errors")
+    if m <= LABEL_LIMIT or m > LINE_LIMIT:
+        _legend(ax)
+    return artists
+
+
 def _prefixed(prefix: str, title: str) -> str:
     """``"name: title"``, on two lines when longer than :data:`_TITLE_CHARACTERS` (the
     figures are saved at their size, so a longer line would be cut)."""
@@ -305,9 +338,10 @@ _TITLE_CHARACTERS = 55
 
 def run_figures(result: Any, *, prefix: str = "") -> dict[str, Figure]:
     """The standard figures of a run, by name: ``trajectories``, ``controls_x``,
-    ``controls_y``, ``lyapunov``, ``distance_errors`` (and ``safety`` for a run with
-    obstacles or a safety filter). Figures are not managed by
-    pyplot (no GUI); save them with :func:`formationlab.io.save_figure`."""
+    ``controls_y``, ``lyapunov``, ``distance_errors`` (``bearing_errors`` for a formation
+    judged by its bearings; and ``safety`` for a run with obstacles or a safety filter).
+    Figures are not managed by pyplot (no GUI); save them with
+    :func:`formationlab.io.save_figure`."""
     out: dict[str, Figure] = {}
     panels: tuple[
         tuple[str, Callable[..., list[Any]], dict[str, Any], tuple[float, float]], ...
@@ -318,6 +352,8 @@ def run_figures(result: Any, *, prefix: str = "") -> dict[str, Figure]:
         ("lyapunov", plot_lyapunov, {}, (6.0, 3.6)),
         ("distance_errors", plot_distance_errors, {}, (6.0, 3.6)),
     )
+    if result.formation.bearings is not None:  # judged by its bearings: their errors
+        panels = (*panels[:-1], ("bearing_errors", plot_bearing_errors, {}, (6.0, 3.6)))
     for name, fn, kw, size in panels:
         with font_context():  # ``prefix`` is the user's scenario name: any script
             fig = Figure(figsize=size, layout="constrained")

@@ -142,7 +142,19 @@ def build_formation(
             )
     except UserInputError as exc:
         raise fail(_formation_key(exc, frm), str(exc)) from None
-    if frm.distances is None and template is None:
+    if frm.bearings is not None:  # desired bearings given per edge, in the order of `edges`
+        if built:
+            raise fail(
+                "formation.bearings",
+                "bearings given per edge need the edges as a list of pairs [i, j] (the rows "
+                "follow them); or leave bearings out to take the template's",
+            )
+        try:
+            order = frm.edges if isinstance(frm.edges, list) else None
+            formation = formation.with_bearings(frm.bearings, edges=order)
+        except UserInputError as exc:
+            raise fail("formation.bearings", str(exc)) from None
+    if frm.distances is None and template is None and frm.bearings is None:
         warnings.append("formation.distances not given: every d_ij = 1")
     if not edges_connected(formation.edges, formation.n):
         raise fail(

@@ -56,7 +56,7 @@ from .build import (
     restrictions_on_at_target,
     stem,
 )
-from .parts import build_entry
+from .parts import Fail, build_entry
 from .robots import build_marching, build_robot_model
 from .safety import build_safety
 from .tables import SECTIONS, ScenarioModel
@@ -307,6 +307,29 @@ def parse_scenario(text_or_dict: str | Mapping[str, Any], source: str = "<string
     return _build(model, raw, text, source)
 
 
+def _judged(
+    formation: Formation, law: Any, used_by: list[str], frm: Any, fail: Fail, warnings: list[str]
+) -> Formation:
+    """The formation as the scenario's law is judged on it (``Law.formation_for``: the
+    bearing law's bearings, derived from the template and checked to fix the shape), kept
+    whole for a study's other laws; given bearings that no law reads are warned about."""
+    key = "formation.bearings" if frm.bearings is not None else "formation.template"
+    try:
+        judged = law.formation_for(formation)
+        readers = [law.name] if judged.bearings is not None else []
+        for name in used_by:
+            if name in LAWS and LAWS[name]().formation_for(formation).bearings is not None:
+                readers.append(name)
+    except UserInputError as exc:
+        raise fail(key, str(exc)) from None
+    if frm.bearings is not None and not readers:
+        warnings.append(
+            f"formation.bearings: law {law.name!r} is judged by its distances and reads no "
+            'bearings; use law = "bearing" (or a study law "bearing") to use them'
+        )
+    return judged if judged.bearings is not None else formation
+
+
 def _plain(obj: Any) -> Any:
     """Tuples and numpy values to lists and Python scalars (TOML's own types)."""
     if isinstance(obj, Mapping):
@@ -365,6 +388,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
         text=text,
         fail=fail,
     )
+    formation = _judged(formation, law, used_by, frm, fail, warnings)
     if not formation.has_orientation and "k_a" in _fields(type(law)):
         warnings.append(
             f"law {law.name!r} has an angular term but the orientation is free, so it acts as "

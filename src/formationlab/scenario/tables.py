@@ -205,7 +205,7 @@ class RobotsModel(BaseModel):
 
 
 class FormationModel(BaseModel):
-    """``[formation]``: graph, desired distances, desired orientation."""
+    """``[formation]``: graph, desired distances, desired orientation, desired bearings."""
 
     model_config = _STRICT
     edges: str | dict[str, int | float] | list[list[int]] = "complete"
@@ -213,6 +213,12 @@ class FormationModel(BaseModel):
     template: list[list[float]] | Lattice | None = None
     orientation: Literal["free", "template", "mirror", "table"] | None = None
     alpha: list[list[float]] | None = None
+    bearings: list[list[float]] | None = None
+
+    @field_validator("bearings", mode="before")
+    @classmethod
+    def _bearings(cls, v: Any) -> list[list[float]]:
+        return _points(v, "bearings")  # one [x, y] per edge; their checks: Formation
 
     @field_validator("edges", mode="before")
     @classmethod

@@ -33,6 +33,7 @@ from ..models import MODELS, RobotModel, SingleIntegrator
 from ..outcomes.analysis import (
     Outcome,
     Tolerances,
+    bearing_errors,
     classify,
     converged_time,
     distance_errors,
@@ -331,6 +332,12 @@ class SimulationResult:
                 )
         if self.faults is not None:
             extra["faults"] = self.faults.describe()
+        if self.formation.bearings is not None:  # judged by its bearings: say how far
+            berr = bearing_errors(self.formation, p_final)
+            if m <= LIST_LIMIT:
+                extra["bearing_errors"] = dict(zip(self.edge_labels, berr.tolist(), strict=True))
+            extra["max_bearing_error"] = float(np.max(berr))
+            extra["bearing_error_stats"] = error_statistics(berr, tol.bearing)
         return {
             "model": {"name": self.model.name, **dataclasses.asdict(self.model)},
             "state_names": list(type(self.model).state_names),
