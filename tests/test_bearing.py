@@ -354,3 +354,39 @@ def test_bearings_that_no_law_reads_are_warned_about():
     )
     assert not any("formation.bearings" in w for w in studied.warnings)
     assert studied.formation.bearings is not None  # kept for the study's bearing law
+
+
+# ----------------------------------------------------------------------------- frame errors
+
+
+def test_a_frame_error_is_checked_and_drawn_from_the_seed():
+    with pytest.raises(fl.errors.ParameterError, match="frame_error"):
+        fl.Sensing(frame_error=-0.1)
+    with pytest.raises(fl.errors.ParameterError, match="turned at random already"):
+        fl.Sensing(frames="local", frame_error=0.1)
+    system = fl.dynamics.System(
+        formation=SQUARE, law=fl.BearingLaw(), sensing=fl.Sensing(frame_error=0.2, seed=3)
+    )
+    ch = system.channel(None, 1e-2)
+    a = ch.angles(np.zeros((1, 4, 2)), np.arange(1))
+    assert a.shape == (1, 4) and 0.01 < np.abs(a).max() < 1.0
+    again = fl.dynamics.System(
+        formation=SQUARE, law=fl.BearingLaw(), sensing=fl.Sensing(frame_error=0.2, seed=3)
+    ).channel(None, 1e-2)
+    np.testing.assert_array_equal(again.angles(np.zeros((1, 4, 2)), np.arange(1)), a)
+
+
+def test_turned_frames_make_a_bearing_formation_drift_and_leave_a_distance_one():
+    """Each robot's command in a frame turned by its own error: the commands no longer sum
+    to zero, so the bearing formation keeps moving (it drifts), while the distance law,
+    which reads lengths and radial directions, runs as before."""
+    q0 = _starts(SQUARE, 16, 3)
+    seeds = [(1, t) for t in range(16)]
+    turned = fl.Sensing(frame_error=0.05)
+    for law, same in ((fl.BearingLaw(), False), (fl.DistanceLaw(), True)):
+        plain = run_batch(SQUARE, law, q0, dt=1e-2, duration=30.0)
+        err = run_batch(SQUARE, law, q0, dt=1e-2, duration=30.0, sensing=turned, seeds=seeds)
+        gap = np.abs(err.q_final - plain.q_final).max()
+        assert (gap < 1e-9) if same else (gap > 1e-3)
+        if not same:
+            assert np.mean(err.outcome == "drifting") > 0.5

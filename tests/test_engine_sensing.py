@@ -38,6 +38,7 @@ EXAMPLES = Path(__file__).parents[1] / "examples"
 #: each sensing key alone, and a robot that stops
 CASES = {
     "frames": (Sensing(frames="local"), None),
+    "frame_error": (Sensing(frame_error=0.05), None),
     "noise": (Sensing(noise=0.02), None),
     "range": (Sensing(range=1.5), None),
     "delay": (Sensing(delay=0.05), None),
@@ -78,10 +79,12 @@ def test_the_kernel_is_the_driver_trial_by_trial(
     _same(fast, reference)
     plain = run_batch(formation, law, q0, dt=DT, duration=3.0)
     gap = np.abs(fast.q_final - plain.q_final).max()
-    # rotated frames leave the distance laws unchanged (to rounding), but not the bearing
-    # law, which compares its measured bearings with the common frame's g*; a mismatch of
-    # desired distances changes every law but the bearing law, which reads no distance
-    unchanged = case == ("mismatch" if name == "bearing" else "frames")
+    # rotated frames (at random, or the common frame with errors) leave the distance laws
+    # unchanged (to rounding), but not the bearing law, which compares its measured bearings
+    # with the common frame's g*; a mismatch of desired distances changes every law but the
+    # bearing law, which reads no distance
+    turned = case in ("frames", "frame_error")
+    unchanged = case == "mismatch" if name == "bearing" else turned
     if unchanged:
         assert gap < 1e-9
     else:  # the case is not the paper's run in disguise: the kernel applied it

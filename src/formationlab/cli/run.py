@@ -300,7 +300,7 @@ def _sensing_words(sc: Any) -> str:
     if sc.sensing is not None and not sc.sensing.ideal:
         d = sc.sensing.describe()
         parts = [f"frames {d['frames']}"] + [
-            f"{k} {d[k]:g}" for k in ("noise", "range", "delay", "drop", "mismatch")
+            f"{k} {d[k]:g}" for k in ("frame_error", "noise", "range", "delay", "drop", "mismatch")
             if d[k] not in (0, 0.0, None)
         ]  # fmt: skip
         out += f", sensing ({', '.join(parts)}, seed {d['seed']})"

@@ -357,6 +357,7 @@ class SensingModel(BaseModel):
 
     model_config = _STRICT
     frames: Literal["global", "local"] = "global"
+    frame_error: float = 0.0
     noise: float = 0.0
     range: float | None = None
     delay: float = 0.0

@@ -98,6 +98,11 @@ class Channel:
             self.fixed_angles = np.stack(
                 [np.random.Generator(np.random.PCG64(c[0])).uniform(0, 2 * np.pi, n) for c in kids]
             )
+        elif sensing.frame_error > 0:  # the common frame, turned by each robot's own error
+            self.fixed_angles = np.stack(
+                [np.random.Generator(np.random.PCG64(c[0])).normal(0.0, sensing.frame_error, n)
+                 for c in kids]
+            )  # fmt: skip
         self.own_distance: NDArray[np.float64] | None = None
         if sensing.mismatch > 0:
             d, a = self.terms.edge_distance, self.terms.edge_contact
@@ -120,10 +125,10 @@ class Channel:
 
     def angles(self, x: NDArray[np.float64], live: NDArray[np.intp]) -> NDArray[np.float64] | None:
         """Each robot's frame ``(L, n)`` at states ``x`` of trials ``live`` (None: common frame)."""
+        if self.fixed_angles is not None:  # fixed random frames, or the frame errors
+            return self.fixed_angles[live]
         if self.sensing.frames != "local":
             return None
-        if self.fixed_angles is not None:
-            return self.fixed_angles[live]
         return self.model.heading(x)
 
     def in_range(self, x: NDArray[np.float64]) -> NDArray[np.bool_] | None:

@@ -58,6 +58,12 @@ class Sensing:
         unicycles, a fixed random rotation (drawn from ``seed``) for other robots.
         Frames are rotations only: every robot keeps the common sense of rotation
         (chirality) that the angle-restricted law needs.
+    frame_error : float
+        Standard deviation (rad) of each robot's fixed error in the common frame
+        (``frames = "global"``): robot ``i`` measures and commands in the common frame
+        turned by ``a_i ~ N(0, frame_error^2)``, drawn from ``seed`` (a compass with an
+        error). The distance laws do not see it; the bearing law, which compares its
+        measured bearings with desired ones in the common frame, does (docs/bearing.md).
     noise : float
         Standard deviation (m) of independent Gaussian noise on each coordinate of each
         measured relative position (in the measuring robot's frame).
@@ -81,6 +87,7 @@ class Sensing:
     """
 
     frames: Literal["global", "local"] = "global"
+    frame_error: float = 0.0
     noise: float = 0.0
     range: float = math.inf
     delay: float = 0.0
@@ -94,6 +101,13 @@ class Sensing:
             raise ParameterError(
                 f"sensing.frames must be one of {known}, got {self.frames!r}", key="sensing.frames"
             )
+        number(self.frame_error, "sensing.frame_error", low=0.0, strict=False)
+        if self.frame_error > 0 and self.frames == "local":
+            raise ParameterError(
+                'sensing.frame_error turns the common frame (frames = "global"); local frames '
+                "are turned at random already: remove one of the two",
+                key="sensing.frame_error",
+            )
         number(self.noise, "sensing.noise", low=0.0, strict=False)
         number(self.range, "sensing.range", low=0.0, strict=True, allow_inf=True)
         number(self.delay, "sensing.delay", low=0.0, strict=False)
@@ -105,7 +119,8 @@ class Sensing:
     def ideal(self) -> bool:
         """Whether this is the paper's sensing (the defaults): the closed loop is unchanged."""
         return (
-            self.frames == "global" and self.noise == 0 and math.isinf(self.range)
+            self.frames == "global" and self.frame_error == 0 and self.noise == 0
+            and math.isinf(self.range)
             and self.delay == 0 and self.drop == 0 and self.mismatch == 0
         )  # fmt: skip
 
@@ -122,7 +137,7 @@ class Sensing:
     def describe(self) -> dict[str, object]:
         """JSON-ready (``range`` ``None`` when infinite)."""
         return {
-            "frames": self.frames, "noise": self.noise,
+            "frames": self.frames, "frame_error": self.frame_error, "noise": self.noise,
             "range": None if math.isinf(self.range) else self.range, "delay": self.delay,
             "drop": self.drop, "mismatch": self.mismatch, "seed": int(self.seed),
         }  # fmt: skip

@@ -182,7 +182,8 @@ def sensing_arrays(
     )
     noisy, lossy = s.noise > 0, s.drop > 0
     sn = SensingTerms(
-        measured=not s.ideal, local=s.frames == "local", headed=headed, cos_in=np.cos(-a),
+        measured=not s.ideal, local=s.frames == "local" or channel.fixed_angles is not None,
+        headed=headed, cos_in=np.cos(-a),
         sin_in=np.sin(-a), cos_out=np.cos(a), sin_out=np.sin(a), own_distance=own,
         noise=float(s.noise), drop=float(s.drop), ranged=not math.isinf(s.range),
         range2=float(s.range**2), stop_at=stop_at,

@@ -4,7 +4,7 @@ A group is one law with one set of parameters on one formation; the trials of a
 study are run once per group. A law runs only the sweep points of the keys it
 has (its dataclass fields, ``eta``/``influence`` of its repulsion, and the robot
 parameter ``diameter``), and takes the scenario law's parameters that it shares
-by name. The sensing keys (``noise``, ``range``, ``delay``, ``drop``, ``mismatch``:
+by name. The sensing keys (``frame_error``, ``noise``, ``range``, ``delay``, ``drop``, ``mismatch``:
 the scenario's ``[sensing]`` with that key changed) and the fault key ``stop_at``
 (the time at which the robots of the scenario's ``[faults] stop`` stop) apply to
 every law.
@@ -31,7 +31,7 @@ REPULSION_KEYS = ("eta", "influence")
 #: Sweep keys that set a property of the robots.
 ROBOT_KEYS = ("diameter",)
 #: Sweep keys of the sensing model (fields of :class:`~formationlab.sensing.Sensing`).
-SENSING_KEYS = ("noise", "range", "delay", "drop", "mismatch")
+SENSING_KEYS = ("frame_error", "noise", "range", "delay", "drop", "mismatch")
 #: Sweep keys of the faults: when the robots of ``[faults] stop`` stop.
 FAULT_KEYS = ("stop_at",)
 #: Sweep keys that apply to every law.
