@@ -390,3 +390,41 @@ def test_turned_frames_make_a_bearing_formation_drift_and_leave_a_distance_one()
         assert (gap < 1e-9) if same else (gap > 1e-3)
         if not same:
             assert np.mean(err.outcome == "drifting") > 0.5
+
+
+# ----------------------------------------------------------------------------- equilibria
+
+
+def test_equilibria_are_found_modulo_translation_and_scale():
+    """The bearing law's equilibria form orbits of translations and scalings (not rotations):
+    the desired one is stable once those three modes are removed, the reversed one a saddle,
+    and end states of every size merge into one equilibrium."""
+    from formationlab.equilibria import catalogue, rigid_modes
+
+    f = TRIANGLE.with_bearings()
+    law = fl.BearingLaw()
+    t = bearing_realisation(f)
+    ends = np.array([s * t + c for s, c in ((1.0, [0, 0]), (2.5, [1, -2]), (0.7, [3, 3]))])
+    cat = catalogue(f, law, ends, extra=[-1.3 * t])
+    kinds = sorted((eq.desired, eq.stability) for eq in cat.equilibria)
+    assert kinds == [(False, "saddle"), (True, "stable")]
+    assert cat.counts[0] == 3  # the three sizes are one equilibrium
+    modes = rigid_modes(t, "scale")
+    np.testing.assert_allclose(modes.T @ modes, np.eye(3), atol=1e-12)
+    jac_dir = law.control(f, t + 1e-6 * modes[:, 2].reshape(-1, 2)) - law.control(f, t)
+    assert np.abs(jac_dir).max() < 1e-12  # scaling is a zero mode of the bearing law
+
+
+def test_the_pettingzoo_environment_runs_the_bearing_law_and_rewards_its_bearings():
+    from formationlab.envs import law_policy, parallel_env
+
+    env = parallel_env(parse_scenario((EXAMPLES / "bearing-triangle.toml").read_text()))
+    obs, _ = env.reset(seed=0)
+    policy = law_policy(env)
+    for _ in range(4000):
+        obs, rewards, term, trunc, infos = env.step(policy(obs))
+        if any(term.values()) or any(trunc.values()):
+            break
+    assert all(info["outcome"] == "desired" for info in infos.values())
+    # the reward is minus each robot's bearing errors, each within the tolerance 1e-2 twice
+    assert all(-2e-2 <= r < 0 for r in rewards.values())

@@ -80,6 +80,11 @@ class Law:
     #: Whether every edge's potential is infinite at contact (the paper's phi, eq. 5), so
     #: that the exact flow cannot bring two robots into contact.
     barrier_at_contact: ClassVar[bool] = False
+    #: Besides translations, the motion of all robots that leaves the field unchanged:
+    #: ``"rotation"`` (``u(R q) = R u(q)``: laws of distances and orientation) or
+    #: ``"scale"`` (``u(s q) = u(q)``, ``s > 0``: the bearing law). Equilibria are found,
+    #: merged and classified modulo it (:mod:`formationlab.equilibria`).
+    invariance: ClassVar[str] = "rotation"
 
     def formation_for(self, formation: Formation) -> Formation:
         """The formation as this law is judged on it: a law of distances (and orientation)

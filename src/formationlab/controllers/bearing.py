@@ -177,6 +177,7 @@ class BearingLaw(Law):
     """
 
     name = "bearing"
+    invariance = "scale"  # u(s q) = u(q): bearings fix the shape up to translation and scale
     k: float = 1.0
     k_r: float = 0.0
     repulsion: Repulsion = field(default_factory=Repulsion)

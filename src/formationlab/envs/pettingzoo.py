@@ -39,7 +39,8 @@ are not clipped to the box: the robot model's own limits act (direction-preservi
 saturation, :mod:`formationlab.models.limits`), as they do on the law.
 
 Reward of robot ``i`` after a step: ``-sum_{j in N_i} |r_ij - d_ij|`` at the law's
-points (its local formation error), minus ``contact_penalty`` for every robot when the
+points (its local formation error; ``-sum_{j in N_i} ||g_ij - g*_ij||`` for a formation
+judged by its bearings, docs/bearing.md), minus ``contact_penalty`` for every robot when the
 step is rejected by the package's contact rule (:meth:`formationlab.System.step_verdict`:
 contact at the end of the step, robots passing through each other, non-finite states).
 
@@ -79,7 +80,7 @@ except ImportError as exc:  # pragma: no cover - the extra is installed where te
 from ..errors import FormationError, ParameterError
 from ..models import DoubleIntegrator, Unicycle
 from ..models.transforms import NearIdentity, heading_vectors
-from ..outcomes.analysis import Tolerances, classify, distance_errors
+from ..outcomes.analysis import Tolerances, bearing_errors, classify, distance_errors
 from ..scenario import Scenario, closed_loop, parse_scenario
 from ..sensing import Channel, Faults, Seed, Sensing, rotate
 from ..simulation.run import initial_state
@@ -405,8 +406,13 @@ class FormationEnv(ParallelEnv):
         return out
 
     def _errors(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Each robot's local formation error ``sum_{j in N_i} |r_ij - d_ij|``; ``(n,)``."""
-        e = np.abs(distance_errors(self.formation, self.model.points(x)))
+        """Each robot's local formation error ``sum_{j in N_i} |r_ij - d_ij|`` (or of its
+        bearings, ``||g_ij - g*_ij||``, for a formation judged by them); ``(n,)``."""
+        p = self.model.points(x)
+        if self.formation.bearings is not None:
+            e = bearing_errors(self.formation, p)
+        else:
+            e = np.abs(distance_errors(self.formation, p))
         out = np.zeros(self.formation.n)
         np.add.at(out, self._edges[:, 0], e)
         np.add.at(out, self._edges[:, 1], e)

@@ -138,7 +138,7 @@ def catalogue(
 
     def attribute(q: NDArray, tol: float) -> int | None:
         for k, eq in enumerate(found):
-            if same_equilibrium(formation, eq.q, q, tol=tol):
+            if same_equilibrium(formation, eq.q, q, tol=tol, invariance=law.invariance):
                 return k
         return None
 
@@ -160,7 +160,7 @@ def catalogue(
             eq = eq_or_none
             k = attribute(eq.q, 1e-6)
             if k is None:
-                found.append(_posed(eq))
+                found.append(_posed(eq, law.invariance))
                 counts.append(0)
                 k = len(found) - 1
         counts[k] += weight
@@ -194,8 +194,10 @@ def _refined(
     return classify_equilibrium(formation, law, ref, tolerances)
 
 
-def _posed(eq: Equilibrium) -> Equilibrium:
-    """``eq`` in its canonical pose, its velocity turned with it."""
+def _posed(eq: Equilibrium, invariance: str = "rotation") -> Equilibrium:
+    """``eq`` in its canonical pose, its velocity turned with it (scaled: left as it is)."""
+    if invariance == "scale":
+        return replace(eq, q=canonical_pose(eq.q, "scale"))
     d = eq.q[1] - eq.q[0]
     c, s = d / max(float(np.hypot(*d)), 1e-300)
     v = np.array(

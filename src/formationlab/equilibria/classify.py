@@ -211,7 +211,7 @@ def classify_equilibrium(
         sliding, grad_sigma = _sliding_field(formation, law, w, on)
         jac = jacobian(sliding, q) - turn
         normals = grad_sigma(q).reshape(len(on), -1).T  # (2n, k)
-        lam = reduced_eigenvalues(jac, q, extra=normals)
+        lam = reduced_eigenvalues(jac, q, extra=normals, invariance=law.invariance)
         wk = w.copy()
         wk[on] = 0.0
         below = law.control_with(formation, q, wk)
@@ -231,7 +231,7 @@ def classify_equilibrium(
             def field(x: NDArray) -> NDArray:
                 return law.control(formation, x)
 
-        lam = reduced_eigenvalues(jacobian(field, q) - turn, q)
+        lam = reduced_eigenvalues(jacobian(field, q) - turn, q, invariance=law.invariance)
     ztol = _zero_tol(lam)
     lam = np.where(np.abs(lam.imag) <= ztol, lam.real, lam)  # round-off pairs of a real double
     unstable = int(np.sum(lam.real > ztol))

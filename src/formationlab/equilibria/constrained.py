@@ -256,7 +256,7 @@ def classify_deadlock(
     normals = np.stack([g.ravel() for g in grads], axis=1)
     modes = normals
     if _rigid_invariant(system, q, dead.active):
-        modes = np.concatenate([normals, rigid_modes(q)], axis=1)
+        modes = np.concatenate([normals, rigid_modes(q, system.law.invariance)], axis=1)
     basis = complement(modes)
     step = 1e-6 * max(1.0, float(np.max(np.abs(q))))
     cols = []

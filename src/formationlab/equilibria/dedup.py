@@ -33,10 +33,13 @@ from ..formation.spec import Formation
 __all__ = ["canonical_pose", "group_equilibria", "same_equilibrium"]
 
 
-def canonical_pose(q: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``q`` translated to centroid 0 and turned so that robot 1 -> robot 2 points along +x."""
+def canonical_pose(q: NDArray[np.float64], invariance: str = "rotation") -> NDArray[np.float64]:
+    """``q`` translated to centroid 0 and turned so that robot 1 -> robot 2 points along +x
+    (``invariance = "scale"``: scaled to ``sqrt(1/n sum ||p_i||^2) = 1`` instead, not turned)."""
     q = np.asarray(q, dtype=float)
     p = q - q.mean(axis=0)
+    if invariance == "scale":
+        return p / max(float(np.sqrt(np.mean(np.sum(p * p, axis=-1)))), 1e-300)
     v = p[1] - p[0]
     ang = np.arctan2(v[1], v[0])
     c, s = np.cos(-ang), np.sin(-ang)
@@ -62,14 +65,20 @@ def same_equilibrium(
     qb: NDArray[np.float64],
     *,
     tol: float = 1e-5,
+    invariance: str = "rotation",
 ) -> bool:
     """Whether ``qa`` and ``qb`` (both ``(n, 2)``) are one equilibrium up to the allowed maps.
 
     ``tol`` bounds the differences of pairwise distances and the RMS misfit of
-    the final Procrustes fit.
+    the final Procrustes fit. With ``invariance = "scale"`` (the bearing law) the maps are
+    translations and scalings: the two shapes, centred and scaled to 1, differ by at most
+    ``tol`` (RMS).
     """
     qa = np.asarray(qa, dtype=float)
     qb = np.asarray(qb, dtype=float)
+    if invariance == "scale":
+        d = canonical_pose(qa, "scale") - canonical_pose(qb, "scale")
+        return float(np.sqrt(np.mean(np.sum(d * d, axis=-1)))) <= tol
     n = formation.n
     ra = np.linalg.norm(qa[:, None] - qa[None], axis=-1)
     rb = np.linalg.norm(qb[:, None] - qb[None], axis=-1)
@@ -120,14 +129,15 @@ def same_equilibrium(
 
 
 def group_equilibria(
-    formation: Formation, qs: list[NDArray[np.float64]], *, tol: float = 1e-5
-) -> list[int]:
+    formation: Formation, qs: list[NDArray[np.float64]], *, tol: float = 1e-5,
+    invariance: str = "rotation",
+) -> list[int]:  # fmt: skip
     """Group label of each state in ``qs``: the index of the first state it equals."""
     labels: list[int] = []
     reps: list[int] = []
     for idx, q in enumerate(qs):
         for r in reps:
-            if same_equilibrium(formation, qs[r], q, tol=tol):
+            if same_equilibrium(formation, qs[r], q, tol=tol, invariance=invariance):
                 labels.append(r)
                 break
         else:

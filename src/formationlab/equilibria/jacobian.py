@@ -49,19 +49,25 @@ def jacobian(field: Field, q: NDArray[np.float64], *, step: float | None = None)
     return ((u[0] - u[1]) / (2.0 * step)).T  # column c is du / dq_c
 
 
-def rigid_modes(q: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Orthonormal basis of the translation and rotation directions at ``q``; ``(2n, 3)``.
+def rigid_modes(q: NDArray[np.float64], invariance: str = "rotation") -> NDArray[np.float64]:
+    """Orthonormal basis of the directions that leave the field unchanged at ``q``; ``(2n, 3)``.
 
-    Translations ``(1, 0)`` and ``(0, 1)`` for every robot; the rotation about
-    the centroid ``k x (q_i - c)``.
+    Translations ``(1, 0)`` and ``(0, 1)`` for every robot; the rotation about the centroid
+    ``k x (q_i - c)`` (``invariance = "rotation"``, the laws of distances), or the scaling
+    about it, ``q_i - c`` (``"scale"``, the bearing law: ``u(s q) = u(q)``).
     """
     q = np.asarray(q, dtype=float)
     n = q.shape[0]
     tx = np.tile([1.0, 0.0], n)
     ty = np.tile([0.0, 1.0], n)
     p = q - q.mean(axis=0)
-    rot = np.stack([-p[:, 1], p[:, 0]], axis=-1).ravel()
-    basis, _ = np.linalg.qr(np.stack([tx, ty, rot], axis=1))
+    if invariance == "scale":
+        third = p.ravel()
+    elif invariance == "rotation":
+        third = np.stack([-p[:, 1], p[:, 0]], axis=-1).ravel()
+    else:
+        raise ValueError(f'invariance is "rotation" or "scale", got {invariance!r}')
+    basis, _ = np.linalg.qr(np.stack([tx, ty, third], axis=1))
     return basis
 
 
@@ -77,6 +83,7 @@ def reduced_eigenvalues(
     q: NDArray[np.float64],
     *,
     extra: NDArray[np.float64] | None = None,
+    invariance: str = "rotation",
 ) -> NDArray[np.complex128]:
     """Eigenvalues of ``jac`` with the rigid-motion modes (and ``extra`` directions) removed.
 
@@ -95,7 +102,7 @@ def reduced_eigenvalues(
     ndarray of complex, shape (2n - 3 - r,)
         Sorted by decreasing real part.
     """
-    modes = rigid_modes(q)
+    modes = rigid_modes(q, invariance)
     if extra is not None:
         modes = np.concatenate([modes, np.asarray(extra, dtype=float)], axis=1)
     basis = complement(modes)

@@ -97,15 +97,21 @@ def _scale(q: NDArray[np.float64]) -> float:
     return max(float(np.sqrt(np.mean(np.sum((q - q.mean(axis=0)) ** 2, axis=-1)))), 1e-3)
 
 
-def _gauge(q: NDArray, c0: NDArray, p0: NDArray, scale: float) -> NDArray:
-    """Centroid of ``q`` minus ``c0`` (2) and mean angular displacement from ``p0`` (1).
+def _gauge(
+    q: NDArray, c0: NDArray, p0: NDArray, scale: float, invariance: str = "rotation"
+) -> NDArray:
+    """Centroid of ``q`` minus ``c0`` (2) and the mean angular displacement from ``p0``
+    (``invariance = "rotation"``) or the mean radial one (``"scale"``) (1).
 
     ``q`` has shape ``(..., n, 2)``; returns ``(..., 3)``.
     """
     c = q.mean(axis=-2)
     p = q - c[..., None, :]
-    rot = np.sum(p0[:, 0] * p[..., 1] - p0[:, 1] * p[..., 0], axis=-1) / (q.shape[-2] * scale)
-    return np.concatenate([c - c0, rot[..., None]], axis=-1)
+    if invariance == "scale":  # p0 . (p - p0): the size pinned to the start's
+        third = np.sum(p0 * (p - p0), axis=(-2, -1)) / (q.shape[-2] * scale)
+    else:
+        third = np.sum(p0[:, 0] * p[..., 1] - p0[:, 1] * p[..., 0], axis=-1) / (q.shape[-2] * scale)
+    return np.concatenate([c - c0, third[..., None]], axis=-1)
 
 
 def _field(law: Law, formation: Formation, weights: NDArray) -> Callable[[NDArray], NDArray]:
@@ -305,7 +311,9 @@ def _solve_piece(
         u = field(q)
         if m0 is not None:
             u = u - rigid_field(q, x[..., size:])
-        return np.concatenate([u.reshape(*x.shape[:-1], size), _gauge(q, c0, p0, scale)], axis=-1)
+        return np.concatenate(
+            [u.reshape(*x.shape[:-1], size), _gauge(q, c0, p0, scale, law.invariance)], axis=-1
+        )
 
     x0 = q0.ravel() if m0 is None else np.concatenate([q0.ravel(), m0])
     x = _solve(fun, x0, method="lm")
@@ -343,7 +351,7 @@ def _solve_filippov(
         if m0 is not None:
             u = u - rigid_field(q, x[..., k:])
         sig = np.asarray(law.switching(formation, q))[..., idx] / scale**2
-        parts = [u.reshape(*x.shape[:-1], size), sig, _gauge(q, c0, p0, scale)]
+        parts = [u.reshape(*x.shape[:-1], size), sig, _gauge(q, c0, p0, scale, law.invariance)]
         return np.concatenate(parts, axis=-1)
 
     extra = np.zeros(0) if m0 is None else m0

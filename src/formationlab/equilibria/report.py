@@ -302,6 +302,7 @@ def find_equilibria(
     config = config or parse_equilibria(sc)
     sc = equilibria_scenario(sc, config)
     law, spec = sc.law, config.follow_spec
+    formation = law.formation_for(sc.formation)  # as the law is judged (bearings kept or not)
     safety = {"obstacles": sc.obstacles, "safety": sc.safety}
     own = simulate(
         sc.formation, law, sc.q0, duration=sc.duration, integrator=sc.integrator, **safety
@@ -337,7 +338,7 @@ def find_equilibria(
             "integrator": settler.name,
         }
     cat = catalogue(
-        sc.formation, law, np.concatenate(cands), outcomes=np.concatenate(outs), system=system
+        formation, law, np.concatenate(cands), outcomes=np.concatenate(outs), system=system
     )
     report = EquilibriaReport(scenario=sc, catalogue=cat, source=source)
     if spec is None:
