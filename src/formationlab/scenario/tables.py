@@ -12,7 +12,6 @@ import math
 import unicodedata
 from typing import Any, Literal
 
-import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from ..formation.templates import LATTICES
@@ -198,10 +197,7 @@ class RobotsModel(BaseModel):
     @field_validator("diameters", mode="before")
     @classmethod
     def _diameters(cls, v: Any) -> float | list[float]:
-        d = _one_or_list(v, "diameters")
-        if any(x < 0 for x in np.atleast_1d(d)):
-            raise ValueError(f"diameters must be >= 0, got {v!r}")
-        return d
+        return _one_or_list(v, "diameters")  # its range: Formation, with the key's line
 
 
 class FormationModel(BaseModel):
