@@ -428,3 +428,85 @@ def test_the_pettingzoo_environment_runs_the_bearing_law_and_rewards_its_bearing
     assert all(info["outcome"] == "desired" for info in infos.values())
     # the reward is minus each robot's bearing errors, each within the tolerance 1e-2 twice
     assert all(-2e-2 <= r < 0 for r in rewards.values())
+
+
+def test_two_marching_leaders_carry_the_bearing_formation():
+    """Several leaders given v_ref (the translational maneuver, Zhao and Zelazo 2017): in
+    steady state every robot moves at v_ref, and the followers lag behind the target by
+    bearing errors that grow in proportion to the speed (the law has no feedforward)."""
+    from formationlab.marching import Marching
+
+    f = HEXAGON.with_bearings()
+    t = bearing_realisation(f)
+    q0 = 1.6 * _starts(f, 1, 11)[0]
+    q0[[0, 3]] = [0.5, -1.0] + 2.3 * t[[0, 3]]
+    euler = fl.get_integrator("euler", dt=1e-2)
+    lag = []
+    for v in (0.02, 0.1):
+        march = Marching(velocity=[v, 0.0], leader=[1, 4])
+        assert march.leaders == (1, 4)
+        res = fl.simulate(
+            f, fl.BearingLaw(), q0, duration=300.0, marching=march, integrator=euler,
+            save_every=100,
+        )  # fmt: skip
+        speed = (res.q[-1] - res.q[-2]) / (res.t[-1] - res.t[-2])
+        np.testing.assert_allclose(speed, np.broadcast_to([v, 0.0], speed.shape), atol=1e-9)
+        lag.append(bearing_errors(res.formation, res.q[-1]).max())
+    assert 4.0 < lag[1] / lag[0] < 6.5
+    with pytest.raises(fl.errors.ParameterError, match="each robot once"):
+        Marching(velocity=[0.1, 0.0], leader=[1, 1])
+    with pytest.raises(fl.errors.ParameterError, match="leader 9 is not a robot"):
+        Marching(velocity=[0.1, 0.0], leader=[1, 9]).check(f)
+
+
+# ----------------------------------------------------------------------------- every layer
+
+
+@pytest.mark.parametrize(
+    "case", ["plain", "leaders", "obstacle-and-filter", "frame-error-noise-drop", "stop"]
+)
+@pytest.mark.parametrize("model", ["single", "single-limited", "double", "unicycle-heading"])
+def test_a_single_run_on_the_compiled_loop_follows_the_driver(model, case):
+    """The bearing law under every robot model with leaders, an obstacle and a filter,
+    sensing faults and a stopped robot: the engine's loop against the numpy driver."""
+    from test_compiled_models import assert_follows
+    from test_compiled_stages import MODELS, both
+
+    from formationlab.marching import Marching
+    from formationlab.safety import SafetyFilter
+    from formationlab.safety.obstacles import Circle
+
+    kw = {
+        "plain": {},
+        "leaders": {"marching": Marching(velocity=[0.2, -0.1], leader=[1, 2])},
+        "obstacle-and-filter": {
+            "obstacles": (Circle(center=[0.2, -1.8], radius=0.2),),
+            "safety": SafetyFilter(filter="barrier-decentralized", distance=0.25, gamma=50.0),
+        },
+        "frame-error-noise-drop": {
+            "sensing": fl.Sensing(frame_error=0.05, noise=0.01, drop=0.3, seed=4)
+        },
+        "stop": {"faults": fl.Faults(stop=[fl.Stop(robot=3, at=0.5)])},
+    }[case]
+    if case == "obstacle-and-filter" and model == "double":
+        kw.pop("safety")  # (no filter holds a double integrator: refused, tested elsewhere)
+    q0 = np.array([[-1.2, -0.9], [1.4, -0.7], [0.1, 1.3]])
+    law = fl.BearingLaw(k=1.0, k_r=1.0)  # with the repulsion (and so the obstacles' one)
+    a, b = both(
+        TRIANGLE, law, q0, model=MODELS[model], duration=2.0, save_every=5,
+        integrator=fl.Euler(dt=1e-2), **kw,
+    )  # fmt: skip
+    assert_follows(a, b, scale=3.0, tol=1e-11)
+    assert a.formation.bearings is not None
+
+
+def test_a_bearing_swarm_runs_on_the_lists_layout_as_the_driver():
+    points = lattice("triangular", 150)
+    f = fl.Formation.from_template(points, edges=delaunay_edges(points), one_based=False)
+    q0 = points + np.random.default_rng(12).normal(0.0, 0.05, points.shape)
+    from test_compiled_models import assert_follows
+    from test_compiled_stages import both
+
+    assert f.n > fl.formation.spec.DENSE_LIMIT
+    a, b = both(f, fl.BearingLaw(), q0, duration=0.5, save_every=10)
+    assert_follows(a, b, scale=float(np.abs(q0).max()))

@@ -10,9 +10,12 @@ Three ways to make a formation march, each a frozen dataclass whose
   exactly ``v_ref``, and the shape converges as without marching (the relative
   motion does not see ``v_ref``).
 * :class:`Marching` with a ``leader``: only that robot knows ``v_ref`` and
-  moves with it alone; the others follow through the law. In steady state every
-  robot moves at ``v_ref``, the followers' laws pulling with ``u_i = v_ref``:
-  the shape is off by an amount of order ``|v_ref| / k_c``.
+  moves with it alone; the others follow through the law. Several leaders
+  (``leader = (1, 4)``) all move with ``v_ref``: the translational maneuver of a
+  bearing formation, whose two or more leaders fix its position and scale (Zhao and
+  Zelazo, IEEE Transactions on Control of Network Systems 4(3), 2017; docs/bearing.md).
+  In steady state every robot moves at ``v_ref``, the followers' laws pulling with
+  ``u_i = v_ref``: the shape is off by an amount of order ``|v_ref| / k_c``.
 * :class:`MotionParameters` (Garcia de Marina, Jayawardhana and Cao,
   "Distributed rotational and translational maneuvering of rigid formations
   and their applications", IEEE Transactions on Robotics 32(3), 2016): one
@@ -71,26 +74,41 @@ class Marching:
     velocity : array_like of shape (2,), or callable
         ``v_ref`` in m/s, constant, or a function of the time ``t`` (seconds)
         returning ``[vx, vy]``.
-    leader : int, optional
-        The 1-based robot that alone is given ``v_ref`` (and ignores the law);
-        None: every robot is given it, on top of its law.
+    leader : int or sequence of int, optional
+        The 1-based robot (or robots) that alone are given ``v_ref`` (and ignore the
+        law); None: every robot is given it, on top of its law.
     """
 
     velocity: ArrayLike | Velocity
-    leader: int | None = None
+    leader: int | tuple[int, ...] | None = None
 
     def __post_init__(self) -> None:
         if not callable(self.velocity):
             object.__setattr__(self, "velocity", _vector(self.velocity, "velocity"))
         else:
             _vector(self.velocity(0.0), "velocity(0)")
-        if self.leader is not None and (
-            isinstance(self.leader, bool) or not isinstance(self.leader, int | np.integer)
-            or self.leader < 1
-        ):  # fmt: skip
+        if self.leader is not None and not isinstance(self.leader, int | np.integer):
+            object.__setattr__(self, "leader", tuple(self.leader))  # several leaders
+        for r in self.leaders:
+            if isinstance(r, bool) or not isinstance(r, int | np.integer) or r < 1:
+                raise ParameterError(
+                    f"leader must be a robot number (1-based) or a list of them, got "
+                    f"{self.leader!r}", key="leader",
+                )  # fmt: skip
+        if len(set(self.leaders)) != len(self.leaders) or (
+            self.leader is not None and not self.leaders
+        ):
             raise ParameterError(
-                f"leader must be a robot number (1-based), got {self.leader!r}", key="leader"
+                f"leader lists each robot once, and at least one, got {list(self.leaders)}",
+                key="leader",
             )
+
+    @property
+    def leaders(self) -> tuple[int, ...]:
+        """The leaders' 1-based numbers (empty: every robot is given ``v_ref``)."""
+        if self.leader is None:
+            return ()
+        return (self.leader,) if isinstance(self.leader, int | np.integer) else self.leader
 
     @property
     def time_dependent(self) -> bool:
@@ -104,13 +122,14 @@ class Marching:
         return np.asarray(self.velocity)
 
     def check(self, formation: Formation) -> None:
-        """The leader is one of the formation's robots."""
-        if self.leader is not None and self.leader > formation.n:
-            raise ParameterError(
-                f"leader {self.leader} is not a robot: there are {formation.n} robots (1 to "
-                f"{formation.n})",
-                key="leader",
-            )
+        """The leaders are robots of the formation."""
+        for r in self.leaders:
+            if r > formation.n:
+                raise ParameterError(
+                    f"leader {r} is not a robot: there are {formation.n} robots (1 to "
+                    f"{formation.n})",
+                    key="leader",
+                )
 
     def command(
         self,
@@ -128,7 +147,7 @@ class Marching:
         if self.leader is None:
             return marched(u, gain, self.reference(t))
         out = np.array(u, dtype=float, copy=True)
-        out[..., self.leader - 1, :] = gain * self.reference(t)
+        out[..., np.array(self.leaders) - 1, :] = gain * self.reference(t)
         return out
 
 

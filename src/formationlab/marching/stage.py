@@ -49,7 +49,8 @@ def march(p, u, nact, k, mt, acc):
             for b in range(nact):
                 u[i, 0, b] = marched(u[i, 0, b], mt.gain, vx)
                 u[i, 1, b] = marched(u[i, 1, b], mt.gain, vy)
-    else:  # the leader moves with v_ref alone
-        for b in range(nact):
-            u[mt.leader, 0, b] = mt.gain * vx
-            u[mt.leader, 1, b] = mt.gain * vy
+    else:  # the leaders move with v_ref alone
+        for leader in mt.leaders:
+            for b in range(nact):
+                u[leader, 0, b] = mt.gain * vx
+                u[leader, 1, b] = mt.gain * vy

@@ -37,7 +37,7 @@ class MarchTerms(NamedTuple):
 
     kind: int
     gain: float  #: the robot model's velocity_gain
-    leader: int  #: the leader's number in the loop (0-based; -1: none)
+    leaders: NDArray[np.int64]  #: the leaders' numbers in the loop (0-based; none: empty)
     v: NDArray[np.float64]  #: (S, 2) v_ref of steps k0 .. k0 + S - 1 (S = 1: constant)
     k0: int  #: the step of the table's first row
     edge_i: NDArray[np.int64]  #: (m,) motion parameters' edges, first robot
@@ -56,7 +56,7 @@ def march_terms(
     none_i, none_f = np.zeros(0, np.int64), np.zeros(0)
     if march is None:
         return MarchTerms(
-            kind=STILL, gain=float(gain), leader=-1, v=np.zeros((1, 2)), k0=0,
+            kind=STILL, gain=float(gain), leaders=none_i, v=np.zeros((1, 2)), k0=0,
             edge_i=none_i, edge_j=none_i, mu=none_f, mu_tilde=none_f,
         )  # fmt: skip
     assert formation is not None
@@ -66,14 +66,14 @@ def march_terms(
         where[np.asarray(perm)] = np.arange(n)
     if isinstance(march, Marching):
         v = np.zeros((1, 2)) if march.time_dependent else np.array(march.reference(0.0))[None]
-        leader = -1 if march.leader is None else int(where[march.leader - 1])
+        leaders = where[np.array(march.leaders, dtype=np.int64) - 1].astype(np.int64)
         return MarchTerms(
-            kind=EVERY if leader < 0 else LEADER, gain=float(gain), leader=leader, v=v, k0=0,
+            kind=LEADER if leaders.size else EVERY, gain=float(gain), leaders=leaders, v=v, k0=0,
             edge_i=none_i, edge_j=none_i, mu=none_f, mu_tilde=none_f,
         )  # fmt: skip
     edges = formation.edges
     return MarchTerms(
-        kind=MOTION, gain=float(gain), leader=-1, v=np.zeros((1, 2)), k0=0,
+        kind=MOTION, gain=float(gain), leaders=none_i, v=np.zeros((1, 2)), k0=0,
         edge_i=where[edges[:, 0]].astype(np.int64), edge_j=where[edges[:, 1]].astype(np.int64),
         mu=np.array(march.mu, dtype=float), mu_tilde=np.array(march.mu_tilde, dtype=float),
     )  # fmt: skip

@@ -147,9 +147,10 @@ def build_marching(mar: Any, formation: Formation, fail: Fail) -> March | None:
             "marching.angular_velocity",
             'a rotation needs motion parameters: set kind = "motion-parameters"',
         )
-    marching = Marching(velocity=mar.velocity, leader=mar.leader)
+    leader = tuple(mar.leader) if isinstance(mar.leader, list) else mar.leader
     try:
+        marching = Marching(velocity=mar.velocity, leader=leader)
         marching.check(formation)
     except UserInputError as exc:
-        raise fail("marching.leader", str(exc)) from None
+        raise fail(f"marching.{exc.key or 'leader'}", str(exc)) from None
     return marching

@@ -296,7 +296,7 @@ class MarchingModel(BaseModel):
 
     model_config = _STRICT
     velocity: list[float]
-    leader: int | None = Field(default=None, ge=1)
+    leader: int | list[int] | None = None  # robot numbers: checked by Marching
     kind: Literal["reference", "motion-parameters"] = "reference"
     angular_velocity: float | None = None
 
