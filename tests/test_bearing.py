@@ -510,3 +510,26 @@ def test_a_bearing_swarm_runs_on_the_lists_layout_as_the_driver():
     assert f.n > fl.formation.spec.DENSE_LIMIT
     a, b = both(f, fl.BearingLaw(), q0, duration=0.5, save_every=10)
     assert_follows(a, b, scale=float(np.abs(q0).max()))
+
+
+def test_a_study_reports_the_bearing_error_of_a_bearing_law():
+    import pandas as pd
+
+    from formationlab.studies.summary import _steady
+
+    q0 = _starts(SQUARE, 32, 13)
+    bearing = run_batch(SQUARE, fl.BearingLaw(), q0, dt=1e-2, duration=60.0)
+    distance = run_batch(SQUARE, fl.DistanceLaw(), q0, dt=1e-2, duration=20.0)
+    assert np.isnan(distance.max_bearing_error).all()
+    ok = bearing.outcome == "desired"
+    assert ok.sum() > 25 and np.all(bearing.max_bearing_error[ok] <= 1e-2)
+    want = np.max(bearing_errors(bearing_formation := SQUARE.with_bearings(), bearing.q_final), -1)
+    assert bearing_formation.bearings is not None
+    np.testing.assert_allclose(bearing.max_bearing_error, want, rtol=0, atol=1e-15)
+    rows = pd.DataFrame(
+        {"outcome": bearing.outcome, "max_distance_error": bearing.max_distance_error,
+         "max_bearing_error": bearing.max_bearing_error}
+    )  # fmt: skip
+    shape, _ = _steady(rows)
+    err = bearing.max_bearing_error[bearing.outcome != "collision"]
+    assert shape is not None and shape["median"] == pytest.approx(np.median(err), abs=1e-15)

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from ..formation.spec import Formation
 from ..status import DIVERGED_SCALE, Status
 from ..validation import COORDINATE_LIMIT
-from .analysis import OUTCOMES, Tolerances, bearings_met
+from .analysis import OUTCOMES, Tolerances, bearing_errors, bearings_met
 from .rigid_motion import DRIFTING, ROTATING, RigidMotion, rigid_motion, rigid_outcome
 
 __all__ = ["BatchResult", "classify_batch", "max_distance_errors"]
@@ -64,6 +64,9 @@ class BatchResult:
         the final ones (:func:`formationlab.outcomes.rigid_motion.rigid_motion`); NaN for a
         trial that ended before ``window_step``. Its ``velocity`` and ``omega``
         are the drift of a ``drifting`` or ``rotating`` trial.
+    max_bearing_error : ndarray, shape (B,)
+        Largest ``||g_ij - g*_ij||`` over the edges at ``q_final`` for a formation judged by
+        its bearings (docs/bearing.md); NaN for the others.
     """
 
     q_final: NDArray[np.float64]
@@ -77,6 +80,7 @@ class BatchResult:
     status: NDArray[np.int8]
     x_final: NDArray[np.float64]
     motion: RigidMotion
+    max_bearing_error: NDArray[np.float64] | None = None
 
     def statuses(self) -> list[Status]:
         """The :class:`~formationlab.status.Status` of every trial."""
@@ -124,6 +128,10 @@ class BatchResult:
                 formation, q, u, tol, contact=contact, net_speed=net_speed, motion=motion
             )
             errors = max_distance_errors(formation, q)
+            berr = (
+                np.max(bearing_errors(formation, q), axis=-1, initial=0.0)
+                if formation.bearings is not None else np.full(len(q), np.nan)
+            )  # fmt: skip
         status, outcome = _diverged(formation, q, status, outcome)
         converged = status == Status.CONVERGED.code
         return cls(
@@ -131,7 +139,7 @@ class BatchResult:
             max_distance_error=errors,
             converged_time=np.where(converged, steps * float(dt), np.nan),
             min_clearance=min_clearance, steps=steps, net_speed=net_speed,
-            status=status, x_final=x, motion=motion,
+            status=status, x_final=x, motion=motion, max_bearing_error=berr,
         )  # fmt: skip
 
 

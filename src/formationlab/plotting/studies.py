@@ -296,6 +296,8 @@ def shapes_figure(
             plot_shape(q, edges, diameters[int(row["group"])], ax, color=OUTCOME_COLORS[o])
             extra = "".join(f" {p}={row[p]:g}" for p in params if np.isfinite(row[p]))
             err = f"\n|e|max={row['max_distance_error']:.2g}"
+            if np.isfinite(row.get("max_bearing_error", np.nan)):  # judged by its bearings
+                err = f"\n|g-g*|max={row['max_bearing_error']:.2g}"
             if o in ("drifting", "rotating") and "drift_vx" in row:
                 v = np.array([row["drift_vx"], row["drift_vy"]], dtype=float)
                 extent = float(np.ptp(q, axis=0).max())
@@ -327,6 +329,7 @@ _FIXED = {
     "settled",
     "settled_outcome",
     "max_distance_error",
+    "max_bearing_error",
     "converged_time",
     "net_speed",
     "min_clearance",

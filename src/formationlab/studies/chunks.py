@@ -156,6 +156,12 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
         settled=settled,
         settled_outcome=settled_outcome,
         max_distance_error=np.asarray(res.max_distance_error, dtype=float),
+        max_bearing_error=np.asarray(
+            np.full(trials.size, np.nan)
+            if res.max_bearing_error is None
+            else res.max_bearing_error,
+            dtype=float,
+        ),
         converged_time=np.asarray(res.converged_time, dtype=float),
         net_speed=np.asarray(res.net_speed, dtype=float),
         min_clearance=np.asarray(res.min_clearance, dtype=float),

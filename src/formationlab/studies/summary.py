@@ -136,11 +136,14 @@ def summarize_groups(
 def _steady(
     rows: pd.DataFrame | None,
 ) -> tuple[dict[str, float] | None, dict[str, float | None] | None]:
-    """Steady-state shape error and drift of the trials that did not collide."""
+    """Steady-state shape error and drift of the trials that did not collide: the largest
+    distance error, or bearing error for a law judged by its bearings."""
     if rows is None or "max_distance_error" not in rows:
         return None, None
     ok = rows[rows["outcome"] != "collision"]
     err = ok["max_distance_error"].to_numpy(dtype=float)
+    if "max_bearing_error" in ok and np.isfinite(ok["max_bearing_error"].to_numpy(float)).any():
+        err = ok["max_bearing_error"].to_numpy(dtype=float)
     err = err[np.isfinite(err)]
     if not err.size:
         return None, None
