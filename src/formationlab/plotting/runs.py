@@ -15,6 +15,7 @@ from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
+from numpy.typing import NDArray
 
 from ..outcomes.analysis import bearing_errors, distance_errors
 from .colors import ROBOT_MAP, robot_colors
@@ -267,30 +268,12 @@ def plot_distance_errors(
     legend up to ``LABEL_LIMIT``); beyond, bands of their distribution over the edges,
     evaluated at the plotted times only.
     """
-    ax = _axes(ax)
-    artists = _shade_active(ax, result)
-    m = len(result.formation.edges)
-    if m > LINE_LIMIT:
-        f, p = result.formation, getattr(result, "points", result.q)
-        artists += draw_bands(
-            ax,
-            result.t,
-            lambda rows: distance_errors(f, p[rows]),
-            width=m,
-            of="edges",
-            color="C3",
-        )
-    else:
-        err = result.distance_errors
-        for e, lab in enumerate(result.edge_labels):
-            artists += ax.plot(result.t, err[:, e], label=f"$r_{{{lab.replace('-', '')}}} - d$")
-    ax.axhline(0.0, color="0.5", lw=0.6)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("distance error")
-    ax.set_title(title or "inter-robot distance errors")
-    if m <= LABEL_LIMIT or m > LINE_LIMIT:
-        _legend(ax)
-    return artists
+    f, p = result.formation, getattr(result, "points", result.q)
+    return _per_edge(
+        result, _axes(ax), lambda rows: distance_errors(f, p[rows]),
+        lambda: result.distance_errors, lambda lab: f"$r_{{{lab}}} - d$",
+        "distance error", title or "inter-robot distance errors",
+    )  # fmt: skip
 
 
 def plot_bearing_errors(
@@ -302,24 +285,33 @@ def plot_bearing_errors(
     One line per edge up to :data:`~formationlab.plotting.many.LINE_LIMIT` edges (a
     legend up to ``LABEL_LIMIT``); beyond, bands of their distribution over the edges.
     """
-    ax = _axes(ax)
-    artists = _shade_active(ax, result)
     f, p = result.formation, getattr(result, "points", result.q)
-    m = len(f.edges)
+    return _per_edge(
+        result, _axes(ax), lambda rows: bearing_errors(f, p[rows]),
+        lambda: bearing_errors(f, p), lambda lab: f"$|g_{{{lab}}} - g^*|$",
+        "bearing error (about rad)", title or "bearing errors",
+    )  # fmt: skip
+
+
+def _per_edge(
+    result: Any, ax: Axes, of_rows: Callable[[Any], NDArray], every: Callable[[], NDArray],
+    label: Callable[[str], str], ylabel: str, title: str,
+) -> list[Any]:  # fmt: skip
+    """One line per edge of ``every()`` ``(T, m)`` labelled ``label("ij")``, or beyond
+    ``LINE_LIMIT`` edges bands of ``of_rows(rows)`` over the edges; a zero line, the axes'
+    words and a legend where it is readable."""
+    artists = _shade_active(ax, result)
+    m = len(result.formation.edges)
     if m > LINE_LIMIT:
-        artists += draw_bands(
-            ax, result.t, lambda rows: bearing_errors(f, p[rows]), width=m, of="edges",
-            color="C3",
-        )  # fmt: skip
+        artists += draw_bands(ax, result.t, of_rows, width=m, of="edges", color="C3")
     else:
-        err = bearing_errors(f, p)
+        err = every()
         for e, lab in enumerate(result.edge_labels):
-            label = f"$|g_{{{lab.replace('-', '')}}} - g^*|$"
-            artists += ax.plot(result.t, err[:, e], label=label)
+            artists += ax.plot(result.t, err[:, e], label=label(lab.replace("-", "")))
     ax.axhline(0.0, color="0.5", lw=0.6)
     ax.set_xlabel("time [s]")
-    ax.set_ylabel("bearing error (about rad)")
-    ax.set_title(title or "bearing errors")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
     if m <= LABEL_LIMIT or m > LINE_LIMIT:
         _legend(ax)
     return artists
