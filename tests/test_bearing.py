@@ -533,3 +533,28 @@ def test_a_study_reports_the_bearing_error_of_a_bearing_law():
     shape, _ = _steady(rows)
     err = bearing.max_bearing_error[bearing.outcome != "collision"]
     assert shape is not None and shape["median"] == pytest.approx(np.median(err), abs=1e-15)
+
+
+def test_the_viewer_plots_the_bearing_errors_live_and_in_a_replay(tmp_path):
+    from formationlab.io.netcdf import write_trajectory
+    from formationlab.viewer.sources import open_session
+
+    path = EXAMPLES / "bearing-triangle.toml"
+    live = open_session(path)
+    assert live.info()["errors_kind"] == "bearing"
+    live.step(50)
+    fr = live.frame()
+    want = bearing_errors(live.system.formation, live.system.model.points(live.state))
+    assert fr.header["errors_kind"] == "bearing"
+    np.testing.assert_allclose(fr.header["errors"], want, rtol=0, atol=1e-15)
+    run = run_scenario(parse_scenario(path.read_text()), save_every=50)
+    (tmp_path / "run").mkdir()
+    write_trajectory(run, tmp_path / "run" / "trajectory.nc", attrs={"scenario": path.read_text()})
+    replay = open_session(tmp_path / "run")
+    info = replay.info()
+    assert info["errors_kind"] == "bearing"
+    np.testing.assert_allclose(
+        info["series"]["errors"][0][-1], bearing_errors(run.formation, run.q[-1])[0], atol=1e-12
+    )
+    # a distance run plots distances
+    assert open_session(EXAMPLES / "hexagon.toml").info()["errors_kind"] == "distance"

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from ..dynamics import System
 from ..formation.spec import Formation
 from ..marching import Marching
+from ..outcomes.analysis import bearing_errors
 
 __all__ = [
     "EDGE_ERRORS_MAX",
@@ -83,10 +84,19 @@ def split_state(state: NDArray[np.float64], names: tuple[str, ...] = ()) -> tupl
 
 
 def distance_errors(formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``r_ij - d_ij`` per edge, shape ``(m,)``."""
+    """``r_ij - d_ij`` per edge, shape ``(m,)``; ``||g_ij - g*_ij||`` for a formation judged
+    by its bearings (:func:`errors_kind`)."""
+    if formation.bearings is not None:
+        return bearing_errors(formation, q)
     e = formation.edges
     r = np.linalg.norm(q[e[:, 1]] - q[e[:, 0]], axis=-1)
     return r - formation.distances
+
+
+def errors_kind(formation: Formation) -> str:
+    """What the error plot shows: ``"bearing"`` for a formation judged by its bearings (the
+    bearing law, docs/bearing.md), else ``"distance"``."""
+    return "bearing" if formation.bearings is not None else "distance"
 
 
 def error_fields(err: NDArray[np.float64]) -> dict[str, Any]:
@@ -118,6 +128,7 @@ def static_info(formation: Formation, name: str) -> dict[str, Any]:
         "distances": [float(d) for d in formation.distances],
         "surfaces": surfaces,
         "edge_errors": len(formation.edges) <= EDGE_ERRORS_MAX,
+        "errors_kind": errors_kind(formation),
     }
 
 
@@ -168,6 +179,7 @@ def live_header(system: System, x: NDArray[np.float64], t: float) -> dict[str, A
     sigma = np.asarray(system.sigma(x))
     out: dict[str, Any] = {
         **error_fields(distance_errors(formation, p)),
+        "errors_kind": errors_kind(formation),
         "active": (np.flatnonzero(sigma >= 0) + 1).tolist() if sigma.size <= SURFACES_MAX else None,
         "filtered": None,
         "filter_status": None,

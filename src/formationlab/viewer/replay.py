@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import UserInputError
+from ..outcomes.analysis import bearing_errors
 from ..scenario.parse import Scenario, parse_scenario
 from .export import SessionError, export_table, finish_export
 from .frames import (
@@ -70,6 +71,7 @@ class ReplaySession:
             else np.zeros((len(self.t), 0))
         )
         self.sigma = np.asarray(dataset["sigma"].values, float) if "sigma" in dataset else None
+        self.errors_kind = "distance"
         self.scenario: Scenario | None = None
         text = dataset.attrs.get("scenario")
         if isinstance(text, str):
@@ -77,6 +79,10 @@ class ReplaySession:
                 self.scenario = parse_scenario(text, source="<replay>")
             except UserInputError:
                 self.scenario = None  # an old or edited file: replay without surfaces
+        if self.scenario is not None and self.scenario.formation.bearings is not None:
+            if self.scenario.n == self.q.shape[1]:  # judged by its bearings: their errors
+                self.err = bearing_errors(self.scenario.formation, self.q)
+                self.errors_kind = "bearing"
         self.edges = np.asarray(dataset["edge_robots"].values, dtype=np.int64) - 1
         self.diameters = np.asarray(dataset["diameter"].values, dtype=float)
         self.distances = (
@@ -103,6 +109,7 @@ class ReplaySession:
                 "surfaces": None,
                 "edge_errors": len(self.edges) <= EDGE_ERRORS_MAX,
             }
+        static["errors_kind"] = self.errors_kind
         if self.sigma is None or self.sigma.shape[-1] > SURFACES_MAX:
             static["surfaces"] = None
         stride = max(1, int(np.ceil(len(self.t) / SERIES_MAX)))

@@ -288,7 +288,10 @@ function render({ model, el }) {
         ? `changed robot${hd.filtered.length > 1 ? "s" : ""} ${hd.filtered.join(", ")}` : "idle"));
     }
     if (hd.reference) parts.push(`v_ref = (${flvFmt(hd.reference[0])}, ${flvFmt(hd.reference[1])})`);
-    ui.status.textContent = `t = ${hd.t.toFixed(3)} s   V = ${V}   max|r-d| = ${flvFmt(hd.err_max)}` +
+    // a formation judged by its bearings (the bearing law) plots its bearing errors
+    const bearing = (hd.errors_kind || info.errors_kind) === "bearing";
+    const errWord = bearing ? "max|g-g*|" : "max|r-d|";
+    ui.status.textContent = `t = ${hd.t.toFixed(3)} s   V = ${V}   ${errWord} = ${flvFmt(hd.err_max)}` +
       (parts.length ? "   " + parts.join("   ") : "") +
       `   ${ui.root.dataset.fps} fps` + (hd.status !== "running" && hd.status !== "replay" ? `   [${hd.status}]` : "");
     ui.root.dataset.robots = String(count);
@@ -299,7 +302,9 @@ function render({ model, el }) {
     ui.root.dataset.t = String(hd.t);
     for (const [c, s, title, labels, cursor] of [
       [ui.plotV, seriesV, "Lyapunov function V", null],
-      [ui.plotE, seriesE, info.edge_errors ? "distance errors r_ij − d_ij" : "distance errors: max |r−d|, rms",
+      [ui.plotE, seriesE, bearing
+        ? (info.edge_errors ? "bearing errors |g_ij − g*_ij|" : "bearing errors: max |g−g*|, rms")
+        : (info.edge_errors ? "distance errors r_ij − d_ij" : "distance errors: max |r−d|, rms"),
         info.edge_errors ? info.edges.map((e) => `${e[0]}-${e[1]}`) : ["max", "rms"]],
     ]) {
       const [pw, ph] = sizeCanvas(c);
