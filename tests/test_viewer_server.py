@@ -137,3 +137,18 @@ def test_drag_over_the_socket_moves_robot_on_the_server(srv):
         assert frame["pinned"] == 1
         np.testing.assert_array_equal(np.frombuffer(bufs[0], "<f4")[:2], [-2.0, -1.0])
     np.testing.assert_array_equal(srv.controller.session.q[0], [-2.0, -1.0])
+
+
+def test_websocket_refuses_a_page_of_another_site(srv):
+    """A browser sends the page's Origin: the viewer's own page is let in, another site's
+    page is not, even with the token (cross-site websocket hijacking)."""
+    own = f"http://{srv.host}:{srv.port}"
+    with connect(srv.ws_url, origin=own) as ws:
+        ws.send(json.dumps({"type": "hello"}))
+        info, _ = _recv(ws)
+        assert info["type"] == "info"
+    for other in ("http://evil.example", f"http://{srv.host}:{srv.port + 1}", "null"):
+        with pytest.raises(InvalidStatus) as exc:
+            connect(srv.ws_url, origin=other)
+        assert exc.value.response.status_code == 403
+    assert _answers(srv)

@@ -3,7 +3,8 @@
 Safe by default: it binds to 127.0.0.1, every URL that reveals or changes the
 run needs the random token that :func:`make_token` draws (``/?token=...`` and
 the websocket ``/ws?token=...``; a wrong or missing token gets 403 and the
-websocket is refused), each connection is rate-limited, messages are validated
+websocket is refused, as is a websocket whose ``Origin`` is not the viewer's own page),
+each connection is rate-limited, messages are validated
 (:mod:`formationlab.viewer.messages`), and the server writes no file: exports
 are sent to the page, which downloads them. The page's static files carry no
 data and are served without the token.
@@ -17,6 +18,7 @@ import secrets
 import socket
 import threading
 from typing import Any
+from urllib.parse import urlsplit
 
 from starlette.applications import Starlette
 from starlette.requests import Request
@@ -52,6 +54,16 @@ def _headers(csp_connect: str = "") -> dict[str, str]:
         "Referrer-Policy": "no-referrer",
         "Cache-Control": "no-store",
     }
+
+
+def _origin_ok(origin: str | None, host: str | None) -> bool:
+    """Whether a websocket's ``Origin`` is the viewer's own page: a browser always sends it,
+    and a page of another site (cross-site websocket hijacking, should it learn the token)
+    has another; a client that is not a browser sends none and is judged by the token."""
+    if origin is None:
+        return True
+    parts = urlsplit(origin)
+    return parts.scheme in ("http", "https") and host is not None and parts.netloc == host
 
 
 def make_app(controller: Controller, token: str) -> Starlette:
@@ -92,6 +104,9 @@ def make_app(controller: Controller, token: str) -> Starlette:
     async def stream(ws: WebSocket) -> None:
         if not _token_ok(ws.query_params.get("token")):
             await ws.close(code=4403, reason="wrong or missing token")
+            return
+        if not _origin_ok(ws.headers.get("origin"), ws.headers.get("host")):
+            await ws.close(code=4403, reason="a page of another site may not drive this viewer")
             return
         await ws.accept()
         limiter = RateLimiter()
