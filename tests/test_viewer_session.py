@@ -172,3 +172,19 @@ def test_replay_plays_the_stored_run(run_folder):
     np.testing.assert_array_equal(parse_scenario(text).q0, ds["q"].values[30])
     s.advance(100.0)
     assert s.index == 50 and s.paused  # stops at the end
+
+
+def test_a_state_the_page_cannot_draw_pauses_the_stream_with_a_message():
+    """Positions go to the page as float32: a robot beyond its range (finite in float64,
+    infinite in float32) pauses the session and says so, and no inf is streamed."""
+    import warnings
+
+    s = sim2_session()
+    s.state[0] = [1e39, 0.0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (no overflow warning from the cast either)
+        s.step(5)
+        fr = s.frame()
+    assert s.paused and fr.header["status"] == "out-of-range"
+    assert "lower the gains" in fr.header["message"] and s.steps == 1
+    assert np.all(np.isfinite(fr.positions))

@@ -55,6 +55,8 @@ __all__ = ["Frame", "LiveSession", "SessionError", "law_parameters"]
 LIVE_INTEGRATORS = ("euler", "rk4", "implicit-euler")
 #: Least wall time between two evaluations of V when one costs more than 4 ms.
 V_EVERY_S = 0.1
+#: the largest coordinate the page can draw (it receives float32 positions)
+DRAWABLE = float(np.finfo(np.float32).max)
 #: Most replay samples of V and the errors sent for the plots.
 SERIES_MAX = 2000
 #: Steps a live run may take (it has no end: a person stops it).
@@ -200,6 +202,12 @@ class LiveSession:
         if run.step(hold):
             self.steps += 1
             self._record()
+            if not np.all(np.abs(self.state) <= DRAWABLE):  # finite, but not drawable
+                return self._stop(
+                    "out-of-range",
+                    f"a robot left the range the page can draw (|x| > {DRAWABLE:.1e} m) at t = "
+                    f"{self.t:.4g} s: reset the robots, or lower the gains",
+                )
             return True
         # the contact rule refused the step (System.step_verdict): stay at the last
         # accepted state, ready to run on from it
@@ -236,7 +244,7 @@ class LiveSession:
         }
         return Frame(
             header=header,
-            positions=pos.astype(np.float32),
+            positions=np.clip(pos, -DRAWABLE, DRAWABLE).astype(np.float32),  # (the status says)
             heading=None if heading is None else heading.astype(np.float32),
         )
 
