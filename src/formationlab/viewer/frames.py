@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from ..dynamics import System
 from ..formation.spec import Formation
 from ..marching import Marching
-from ..outcomes.analysis import bearing_errors
+from ..outcomes.analysis import bearing_errors, distance_errors
 
 __all__ = [
     "EDGE_ERRORS_MAX",
@@ -83,14 +83,12 @@ def split_state(state: NDArray[np.float64], names: tuple[str, ...] = ()) -> tupl
     return state[..., :2], None
 
 
-def distance_errors(formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``r_ij - d_ij`` per edge, shape ``(m,)``; ``||g_ij - g*_ij||`` for a formation judged
-    by its bearings (:func:`errors_kind`)."""
+def edge_errors(formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """What the error plot shows per edge, shape ``(m,)``: ``r_ij - d_ij``, or
+    ``||g_ij - g*_ij||`` for a formation judged by its bearings (:func:`errors_kind`)."""
     if formation.bearings is not None:
         return bearing_errors(formation, q)
-    e = formation.edges
-    r = np.linalg.norm(q[e[:, 1]] - q[e[:, 0]], axis=-1)
-    return r - formation.distances
+    return distance_errors(formation, q)
 
 
 def errors_kind(formation: Formation) -> str:
@@ -178,7 +176,7 @@ def live_header(system: System, x: NDArray[np.float64], t: float) -> dict[str, A
     p = system.model.points(x)
     sigma = np.asarray(system.sigma(x))
     out: dict[str, Any] = {
-        **error_fields(distance_errors(formation, p)),
+        **error_fields(edge_errors(formation, p)),
         "errors_kind": errors_kind(formation),
         "active": (np.flatnonzero(sigma >= 0) + 1).tolist() if sigma.size <= SURFACES_MAX else None,
         "filtered": None,
