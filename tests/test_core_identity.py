@@ -2,7 +2,10 @@
 
 The final positions below were recorded, to full precision, with the per-run Euler loop that
 the batched stepping driver replaced (``PaperSetup()``: rho = 0.2, dt = 1e-3, 10 s). The driver
-must reproduce them bit for bit: the same arithmetic, step by step.
+must reproduce them to rounding: :data:`ROUNDING` is far above what another processor's
+kernels, or an equivalent rewriting of a formula (eq. 7 over one denominator moved them by
+8e-16), change in these 10,000 steps, and far below what a changed term would (the gain
+k_c changed by one part in 10^9 moves the perturbed run's by 1.2e-9).
 """
 
 import numpy as np
@@ -26,13 +29,17 @@ BEFORE = {
     ],
 }  # fmt: skip
 
+#: what rounding may change in the final positions (see the module docstring)
+ROUNDING = 1e-12
+
 
 @pytest.mark.parametrize(("simulation", "perturbation"), list(BEFORE))
-def test_paper_runs_are_unchanged_to_the_last_bit(simulation, perturbation):
+def test_paper_runs_are_unchanged_to_rounding(simulation, perturbation):
     setup = PaperSetup()
     args = (paper_formation(simulation), paper_law(), setup.initial(perturbation))
     result = fl.simulate(*args, duration=setup.duration, backend="numpy")
-    np.testing.assert_array_equal(result.q[-1].ravel(), np.array(BEFORE[simulation, perturbation]))
+    before = np.array(BEFORE[simulation, perturbation])
+    np.testing.assert_allclose(result.q[-1].ravel(), before, rtol=0, atol=ROUNDING)
     assert result.status == "success"
     compiled = fl.simulate(*args, duration=setup.duration, backend="numba")
     assert compiled.stats["backend"] == "numba" and compiled.status == "success"

@@ -19,7 +19,7 @@ import math
 
 from numba import njit
 
-from .kinds.edges import edge_force
+from .kinds.edges import edge_force, edge_force_at
 from .kinds.khatib import repulsion_gain
 from .kinds.restriction import restriction_force, switched_on, switching, triangle_product
 from .kinds.signed_area import area_force, area_gain, signed_area
@@ -28,11 +28,14 @@ __all__ = ["law_field", "local_field"]
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def law_field(q, u, sigma, nact, terms):
+def law_field(q, u, sigma, nact, terms, rr, known):
     """``u = f(q)`` for the first ``nact`` trials of a chunk.
 
-    Plain arithmetic, no branch that calls: every loop over trials is vectorised
-    (the engine decides contact, in loops of its own).
+    ``rr[p, b]`` is pair ``p``'s length ``r_ij`` in trial ``b``: given when ``known`` (the
+    contact rule of the step that led to ``q`` computed it, :func:`formationlab.engine.
+    contact.contact`), else computed here first, so that each state's square roots are taken
+    once. Plain arithmetic, no branch that calls: every loop over trials is vectorised (the
+    engine decides contact, in loops of its own).
     """
     t = terms
     n = q.shape[0]
@@ -47,6 +50,11 @@ def law_field(q, u, sigma, nact, terms):
         i = t.pair_i[p]
         j = t.pair_j[p]
         a = t.pair_contact[p]
+        if not known:
+            for b in range(nact):
+                dx = q[j, 0, b] - q[i, 0, b]
+                dy = q[j, 1, b] - q[i, 1, b]
+                rr[p, b] = math.sqrt(dx * dx + dy * dy)
         if t.pair_is_edge[p]:
             d = t.pair_distance[p]
             bx = t.pair_bearing[p * t.bearing_stride, 0]
@@ -54,8 +62,8 @@ def law_field(q, u, sigma, nact, terms):
             for b in range(nact):
                 dx = q[j, 0, b] - q[i, 0, b]
                 dy = q[j, 1, b] - q[i, 1, b]
-                fx, fy = edge_force(t.kind, dx, dy, d, a, t.edge_gain, bx, by)  # eq. (8)
-                u[i, 0, b] += fx
+                fx, fy = edge_force_at(t.kind, dx, dy, rr[p, b], d, a, t.edge_gain, bx, by)
+                u[i, 0, b] += fx  # eq. (8)
                 u[i, 1, b] += fy
                 u[j, 0, b] -= fx
                 u[j, 1, b] -= fy
@@ -63,7 +71,7 @@ def law_field(q, u, sigma, nact, terms):
             for b in range(nact):
                 dx = q[j, 0, b] - q[i, 0, b]
                 dy = q[j, 1, b] - q[i, 1, b]
-                r = math.sqrt(dx * dx + dy * dy)
+                r = rr[p, b]
                 g = repulsion_gain(r, r - a, t.repulsion_gain, t.repulsion_eta, s0)  # Khatib
                 u[i, 0, b] += g * dx
                 u[i, 1, b] += g * dy

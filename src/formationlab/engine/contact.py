@@ -62,8 +62,11 @@ def _swept(q, qp, i, j, b, a):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def contact(x, xp, disp, gap, swept, near, nact, terms):
+def contact(x, xp, disp, gap, swept, near, nact, terms, rr):
     """Clearances of the centres ``x`` for the step rule (``System.step_verdict``).
+
+    ``rr[p, b]`` becomes pair ``p``'s length in trial ``b`` at ``x``, which the law's field
+    at ``x`` reads at the next step (:func:`formationlab.controllers.stage.law_field`).
 
     ``gap``: least ``r_ij - a_ij`` at ``x``; ``swept``: least clearance along the
     straight step from ``xp`` to ``x`` of the pairs within ``SWEPT_MARGIN disp``
@@ -84,7 +87,9 @@ def contact(x, xp, disp, gap, swept, near, nact, terms):
         for b in range(nact):
             dx = x[j, 0, b] - x[i, 0, b]
             dy = x[j, 1, b] - x[i, 1, b]
-            clr = math.sqrt(dx * dx + dy * dy) - a
+            r = math.sqrt(dx * dx + dy * dy)
+            rr[p, b] = r
+            clr = r - a
             gap[b] = min(gap[b], clr)
             near[b] = 1.0 if clr <= SWEPT_MARGIN * disp[b] else near[b]
     for b in range(nact):
@@ -94,7 +99,5 @@ def contact(x, xp, disp, gap, swept, near, nact, terms):
             i = terms.pair_i[p]
             j = terms.pair_j[p]
             a = terms.pair_contact[p]
-            dx = x[j, 0, b] - x[i, 0, b]
-            dy = x[j, 1, b] - x[i, 1, b]
-            if math.sqrt(dx * dx + dy * dy) - a <= SWEPT_MARGIN * disp[b]:
+            if rr[p, b] - a <= SWEPT_MARGIN * disp[b]:
                 swept[b] = min(swept[b], _swept(x, xp, i, j, b, a))

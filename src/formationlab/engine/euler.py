@@ -30,17 +30,21 @@ def euler(x, f, xn, dt, lo, hi, nact, disp, fin):
     """
     kk = x.shape[1]
     for i in range(lo, hi):
+        # (two loops over trials: one that writes only xn and one that writes only disp and
+        # fin, so that each is vectorised; in one loop the checks that the five arrays do
+        # not overlap are too many for the compiler, and it stays scalar)
         for b in range(nact):
-            nx = x[i, 0, b] + dt * f[i, 0, b]  # explicit Euler
-            ny = x[i, 1, b] + dt * f[i, 1, b]
+            xn[i, 0, b] = x[i, 0, b] + dt * f[i, 0, b]  # explicit Euler
+            xn[i, 1, b] = x[i, 1, b] + dt * f[i, 1, b]
+        for b in range(nact):
+            nx = xn[i, 0, b]
+            ny = xn[i, 1, b]
             ex = nx - x[i, 0, b]
             ey = ny - x[i, 1, b]
             disp[b] = max(disp[b], ex * ex + ey * ey)
-            xn[i, 0, b] = nx
-            xn[i, 1, b] = ny
             fin[b] += (nx * nx + ny * ny) * 0.0  # NaN unless finite, squares too
         for d in range(2, kk):
             for b in range(nact):
-                z = x[i, d, b] + dt * f[i, d, b]
-                xn[i, d, b] = z
-                fin[b] += z * 0.0
+                xn[i, d, b] = x[i, d, b] + dt * f[i, d, b]
+            for b in range(nact):
+                fin[b] += xn[i, d, b] * 0.0

@@ -177,6 +177,10 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
     if lists is not None:  # (taken apart once: each taking apart counts its arrays' uses)
         lay, ls, par = lists
     radius = robot_radii(law, lists)
+    rr = np.empty((1, 1))  # each pair's length at the current state (the law's pairs)
+    if law is not None:
+        rr = np.empty((law.pair_i.shape[0], C))
+    known = False  # rr holds the current state's lengths (the contact rule's, last step)
     dt = run.dt
     nact = st.meta[c, 0]
     step = st.meta[c, 1]
@@ -203,7 +207,7 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
             if sn is not None and sn.measured:  # each robot's command from its measurements
                 sensed_field(src, x, hc, hs, u, ul, nact, ids, k, law, sn, ss)
             else:
-                law_field(src, u, scratch, nact, law)
+                law_field(src, u, scratch, nact, law, rr, known)
         if mt.kind != STILL:  # the formation marches
             march(src, u, nact, k, mt, acc)
         if obs is not None:  # obstacles' repulsion and the filter, trial by trial
@@ -232,8 +236,8 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
                 for i in range(n):
                     out.qw[ids[b], i, 0] = x[i, 0, b]
                     out.qw[ids[b], i, 1] = x[i, 1, b]
-        for b in range(nact):
-            code[b] = -1
+        # (code[b] is -1 for every live trial here: compaction keeps it so)
+        ended = 0  # trials that end at this step
         checked = run.check_every > 0 and (k % run.check_every == 0 or k == run.n_steps)
         if checked:  # the stop rule
             for b in range(nact):
@@ -260,10 +264,12 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
                     ss.seen_c[ids[b]] = seen
                 if still:
                     code[b] = CONVERGED
+                    ended += 1
         if k == run.n_steps:
             for b in range(nact):
                 if code[b] < 0:
                     code[b] = END
+            ended = nact
         else:  # explicit Euler, judged by the contact rule (System.step_verdict)
             for b in range(nact):
                 fin[b] = 0.0
@@ -275,15 +281,23 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
             for b in range(nact):
                 disp[b] = math.sqrt(disp[b])
             if law is not None:
-                contact(xn, x, disp, gap, swept, near, nact, law)
+                contact(xn, x, disp, gap, swept, near, nact, law, rr)
+                known = not hand  # (the law acts on the centres, whose lengths these are)
             if lists is not None and fin[0] == 0.0:  # (not finite: judged before the list)
                 room, gap[0], swept[0] = list_contact(xn, x, disp[0], ls, lay, par)
                 if not room:  # the step is taken again, with room for the list
                     _pause(st, c, nact, step, kc, GROW)
                     return
-            for b in range(nact):
+            bad = 0  # trials whose step is not finite or ends in or passes through contact
+            if obs is None and ended == 0:  # (the common case, as one vectorised loop)
+                for b in range(nact):
+                    ok = (gap[b] > 0.0) & (swept[b] > 0.0) & (fin[b] == 0.0)
+                    bad += 0 if ok else 1
+                    mc[b] = min(mc[b], gap[b]) if ok else mc[b]
+            for b in range(nact if obs is not None or ended > 0 or bad > 0 else 0):
                 if code[b] >= 0:
                     continue
+                ended += 1
                 if fin[b] != 0.0:
                     code[b] = NON_FINITE
                     continue
@@ -299,7 +313,9 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
                 elif not swept[b] > 0.0:
                     code[b] = TOO_LARGE
                 else:
-                    mc[b] = min(mc[b], gap[b])
+                    ended -= 1
+                    if bad == 0:  # (else the vectorised loop above took it)
+                        mc[b] = min(mc[b], gap[b])
             if turns:  # the headings of the next states
                 turn(xn, x, hc, hs, hcl, hsl, wide, nact)
         if checked:  # (after the verdict: a chunk paused before here takes the step again)
@@ -309,7 +325,7 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
                         qc[i, d, b] = x[i, d, b]
             kc = k
         # trials that end here end at x (a rejected step is not taken), with the rates f
-        for b in range(nact):
+        for b in range(nact if sv is not None or ended > 0 else 0):
             if sv is not None and (code[b] >= 0 or k % sv.every == 0):
                 save(sv, x, f, b, ids[b], k)
             if code[b] >= 0:
@@ -325,7 +341,7 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
                 out.ns[g] = ns[b]
         x, xn = xn, x  # the live trials' next states are current now
         st.meta[c, 3] = 1 - st.meta[c, 3]
-        for b in range(nact - 1, -1, -1):  # compact the live range
+        for b in range(nact - 1 if ended > 0 else -1, -1, -1):  # compact the live range
             if code[b] < 0:
                 continue
             last = nact - 1
@@ -340,6 +356,9 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
                         hs[i, b] = hs[i, last]
                         hcl[i, b] = hcl[i, last]
                         hsl[i, b] = hsl[i, last]
+                if law is not None:
+                    for e in range(rr.shape[0]):
+                        rr[e, b] = rr[e, last]
                 ids[b] = ids[last]
                 mc[b] = mc[last]
                 ns[b] = ns[last]

@@ -75,7 +75,7 @@ Backend = Literal["numba", "numpy"]
 #: Most trials per chunk of the numba backend (the unit of parallel work): long
 #: loops over trials amortise each loop's set-up; fewer when a batch is small, so
 #: that every thread gets about four chunks.
-CHUNK = 1024
+CHUNK = 256
 MIN_CHUNK = 64
 #: The numba kernel already uses every core, and numba's fallback threading layer
 #: ("workqueue", when neither TBB nor OpenMP is found) must not be entered from two

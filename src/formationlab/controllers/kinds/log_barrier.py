@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import formula
 
-__all__ = ["dphi_dr", "phi", "phi_gain", "phi_prime", "phi_value"]
+__all__ = ["dphi_dr", "phi", "phi_gain", "phi_prime", "phi_value", "slope_over"]
 
 
 @formula
@@ -23,13 +23,24 @@ def phi_value(r, d, a):
 @formula
 def phi_prime(r, d, a):
     """``d phi / d r = 1/(d - a) - 1/(r - a)`` (eq. 7)."""
-    return 1.0 / (d - a) - 1.0 / (r - a)  # eq. (7)
+    return slope_over(r, d, a, 1.0)  # eq. (7)
+
+
+@formula
+def slope_over(r, d, a, s):
+    """``phi'(r) / s``, eq. (7) over one denominator: ``(r - d) / ((d - a) (r - a) s)``.
+
+    The same number as ``1/(d - a) - 1/(r - a)`` without its cancellation near ``r = d``,
+    and with one division per call where ``d`` and ``a`` are fixed (a compiled loop over
+    trials computes ``1/(d - a)`` once); ``(r - a) s`` overflows only where ``r^2`` would.
+    """
+    return (1.0 / (d - a)) * (r - d) / ((r - a) * s)  # eq. (7)
 
 
 @formula
 def phi_gain(r, d, a, k_c):
     """``k_c phi'(r) / r``: robot ``i`` of an edge gets this times ``r_ij = q_j - q_i`` (eq. 8)."""
-    return k_c * phi_prime(r, d, a) / r  # eq. (8): -k_c grad_i phi_ij = k_c phi' r_ij / r
+    return k_c * slope_over(r, d, a, r)  # eq. (8): -k_c grad_i phi_ij = k_c phi' r_ij / r
 
 
 def phi(r: ArrayLike, d: ArrayLike, a: ArrayLike) -> NDArray[np.float64]:
