@@ -459,6 +459,74 @@ def test_two_marching_leaders_carry_the_bearing_formation():
         Marching(velocity=[0.1, 0.0], leader=[1, 9]).check(f)
 
 
+def test_leaders_moving_apart_scale_the_bearing_formation():
+    """The scaling maneuver (Zhao and Zelazo 2017): leaders 1 and 4, each with its own
+    velocity, move apart along their bearing; the formation the leaders define
+    (``leader_target``) grows, and the followers track it. Leaders standing still: the
+    target exactly. Moving: a steady lag relative to the scale (the bearing-only law has
+    no feedforward: its correction is bounded while the followers' needed speed grows with
+    their distance to the centre), nearly in proportion to the speed."""
+    from formationlab.marching import Marching
+
+    f = HEXAGON.with_bearings()
+    t = bearing_realisation(f)
+    q0 = 1.6 * _starts(f, 1, 11)[0]
+    q0[[0, 3]] = [0.5, -1.0] + 2.3 * t[[0, 3]]
+    out = (t[0] - t[3]) / np.linalg.norm(t[0] - t[3])  # along the bearing from 4 to 1
+    euler = fl.get_integrator("euler", dt=1e-2)
+    lag = {}
+    for v in (0.0, 0.01, 0.05):
+        march = Marching(velocity=[v * out, -v * out], leader=(1, 4))
+        assert march.per_leader
+        res = fl.simulate(
+            f, fl.BearingLaw(), q0, duration=300.0, marching=march, integrator=euler,
+            save_every=100,
+        )  # fmt: skip
+        for robot, velocity in ((0, v * out), (3, -v * out)):  # each leader its own
+            moved = (res.q[-1, robot] - res.q[0, robot]) / res.t[-1]
+            np.testing.assert_allclose(moved, velocity, rtol=0, atol=1e-12)
+        rel = []
+        for q in res.q[-20:]:
+            scale = np.linalg.norm(q[0] - q[3])
+            rel.append(np.abs(q - leader_target(f, [1, 4], q[[0, 3]])).max() / scale)
+        lag[v] = rel[-1]
+        np.testing.assert_allclose(rel, rel[-1], rtol=1e-4, atol=1e-9)  # a steady lag
+    assert lag[0.0] < 1e-9
+    assert 3.5 < lag[0.05] / lag[0.01] < 5.5  # (4.1 measured)
+    # what run's summary.json says of the maneuver: the followers' distance to the target
+    marching = res.summary()["marching"]
+    assert "centroid_velocity_error_final" not in marching  # (no one reference velocity)
+    q = res.q[-1]
+    gap = np.linalg.norm(q - leader_target(f, [1, 4], q[[0, 3]]), axis=-1).max()
+    assert marching["leader_target_error_final"] == pytest.approx(gap, rel=1e-12)
+    assert marching["leader_target_scale_final"] == pytest.approx(
+        np.linalg.norm(q[0] - q[3]) / 2, rel=1e-9
+    )
+    assert lag[0.01] < 0.02
+
+
+def test_a_velocity_per_leader_is_checked_by_name():
+    from formationlab.marching import Marching
+
+    with pytest.raises(fl.errors.ParameterError, match="one per leader \\(2 rows\\)"):
+        Marching(velocity=[[0.1, 0.0], [0.0, 0.1], [0.2, 0.2]], leader=(1, 2))
+    with pytest.raises(fl.errors.ParameterError, match="finite \\[vx, vy\\]"):
+        Marching(velocity=[[0.1, 0.0], [0.0, 0.1]])  # every robot: one velocity
+    base = (EXAMPLES / "bearing-square.toml").read_text()
+    cases = {
+        "leader = [1, 3]\nvelocity = [[0.1, 0.0]]": "marching.velocity",
+        'kind = "motion-parameters"\nvelocity = [[0.1, 0.0], [0.0, 0.1]]': "marching.velocity",
+        "leader = [1, 3]\nvelocity = [[0.1, 0.0], [0.0]]": "marching.velocity",
+    }
+    for table, key in cases.items():
+        with pytest.raises(ScenarioError, match=key.replace(".", "\\.")):
+            parse_scenario(base + "\n[marching]\n" + table + "\n")
+    text = base + "\n[marching]\nleader = [1, 3]\nvelocity = [[-0.1, 0], [0.1, 0]]\n"
+    march = parse_scenario(text).marching
+    assert march.leaders == (1, 3) and march.per_leader
+    np.testing.assert_array_equal(march.reference(0.0), [[-0.1, 0.0], [0.1, 0.0]])
+
+
 # ----------------------------------------------------------------------------- every layer
 
 

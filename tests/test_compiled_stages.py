@@ -43,6 +43,12 @@ def _marches(f):
         "every": Marching(velocity=[0.3, -0.2]),
         "timed": Marching(velocity=lambda t: [0.4 * np.cos(2 * t), 0.4 * np.sin(2 * t)]),
         "leader": Marching(velocity=[0.3, 0.1], leader=2),
+        # each leader its own velocity (a scaling maneuver), constant and in time
+        "leaders-each": Marching(velocity=[[0.3, 0.1], [-0.2, 0.15]], leader=(3, 1)),
+        "leaders-each-timed": Marching(
+            velocity=lambda t: [[0.3 * np.cos(t), 0.1], [-0.2, 0.15 * np.sin(3 * t)]],
+            leader=(1, 2),
+        ),
         "motion": MotionParameters.design(f, [0.2, 0.1], angular_velocity=0.4),
     }
 
@@ -67,7 +73,9 @@ def both(formation, law, q0, **kw):
     return a, b
 
 
-@pytest.mark.parametrize("how", ["every", "timed", "leader", "motion"])
+@pytest.mark.parametrize(
+    "how", ["every", "timed", "leader", "leaders-each", "leaders-each-timed", "motion"]
+)
 @pytest.mark.parametrize("model", sorted(MODELS))
 def test_every_march_and_model_follows_the_driver(model, how):
     march = _marches(TRIANGLE)[how]
@@ -78,19 +86,22 @@ def test_every_march_and_model_follows_the_driver(model, how):
     assert np.abs(a.q[-1] - still.q[-1]).max() > 0.05  # the march moved the robots
 
 
-@pytest.mark.parametrize("how", ["every", "leader", "motion"])
+@pytest.mark.parametrize("how", ["every", "leader", "leaders-each", "motion"])
 def test_marching_at_swarm_size_with_the_robots_renumbered(how, monkeypatch):
     monkeypatch.setattr(compiled, "REORDER_FROM", 8)  # the loop's numbers are not the robots'
     f, q0 = ladder(DENSE_LIMIT + 16, seed=2)
     march = _marches(f)[how]
-    if how == "leader":
-        march = Marching(velocity=[0.3, 0.1], leader=f.n - 5)
+    lead = {"leader": {f.n - 5: [0.3, 0.1]}, "leaders-each": {f.n - 5: [0.3, 0.1], 7: [-0.2, 0]}}
+    if how in lead:
+        velocity = list(lead[how].values())
+        march = Marching(velocity=velocity if len(velocity) > 1 else velocity[0],
+                         leader=tuple(lead[how]))  # fmt: skip
     law = fl.get_law("angle-restricted", k_a=0.3, theta=0.58)
     a, b = both(f, law, q0, marching=march, duration=0.2, save_every=25)
     assert_follows(a, b, scale=float(np.abs(q0).max()) + 1.0)
-    if how == "leader":  # the leader alone moves at v_ref
-        v = np.diff(a.q[:, f.n - 6], axis=0) / np.diff(a.t)[:, None]
-        np.testing.assert_allclose(v, np.broadcast_to([0.3, 0.1], v.shape), atol=1e-9)
+    for robot, velocity in lead.get(how, {}).items():  # each leader alone moves at its v_ref
+        v = np.diff(a.q[:, robot - 1], axis=0) / np.diff(a.t)[:, None]
+        np.testing.assert_allclose(v, np.broadcast_to(velocity, v.shape), atol=1e-9)
 
 
 @pytest.mark.parametrize("case", sorted(SENSED))

@@ -209,3 +209,29 @@ def test_page_shows_headings_obstacles_filter_activity_and_reference(browser):
         assert "v_ref = (0.2" in status
         page.close()
         assert not errors, errors
+
+
+def test_page_draws_an_arrow_from_each_leader_with_its_own_velocity(browser):
+    """The scaling maneuver (a velocity per leader): an arrow from each leader, and the
+    leaders' velocities in the status line."""
+    from pathlib import Path
+
+    from formationlab.viewer import LiveSession
+
+    path = Path(__file__).parents[1] / "examples" / "bearing-hexagon-scaling.toml"
+    session = LiveSession(load_scenario(path), seed=1)
+    session.set_paused(True)
+    session.step(5)
+    assert session.info()["marching"] == {"kind": "reference", "leader": (1, 4)}
+    with serving(session) as srv:
+        page = browser.new_page(viewport={"width": 1100, "height": 720})
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(srv.url)
+        page.wait_for_selector(f"{ROOT_SEL}[data-state=ready]", timeout=15_000)
+        wait_for(lambda: attr(page, "robots") == "6", what="the first frame drawn")
+        assert attr(page, "reference") == "0.02,0,-0.02,0"
+        status = page.text_content(f"{ROOT_SEL} [data-role=status]")
+        assert "leaders' v_ref = (0.02, 0) (-0.02, 0)" in status, status
+        page.close()
+        assert not errors, errors

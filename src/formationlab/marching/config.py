@@ -15,7 +15,12 @@ Three ways to make a formation march, each a frozen dataclass whose
   bearing formation, whose two or more leaders fix its position and scale (Zhao and
   Zelazo, IEEE Transactions on Control of Network Systems 4(3), 2017; docs/bearing.md).
   In steady state every robot moves at ``v_ref``, the followers' laws pulling with
-  ``u_i = v_ref``: the shape is off by an amount of order ``|v_ref| / k_c``.
+  ``u_i = v_ref``: the shape is off by an amount of order ``|v_ref| / k_c``. Several
+  leaders may also be given a velocity each (``velocity`` of shape ``(l, 2)``, one row
+  per leader in the order of ``leader``): leaders that move apart or together change the
+  scale of a bearing formation, the scaling maneuver of the same paper, and the
+  followers track the formation the leaders define
+  (:func:`formationlab.controllers.bearing.leader_target`).
 * :class:`MotionParameters` (Garcia de Marina, Jayawardhana and Cao,
   "Distributed rotational and translational maneuvering of rigid formations
   and their applications", IEEE Transactions on Robotics 32(3), 2016): one
@@ -57,10 +62,17 @@ __all__ = [
 Velocity = Callable[[float], ArrayLike]
 
 
-def _vector(value: Any, what: str) -> NDArray[np.float64]:
-    v = np.asarray(value, dtype=float)
-    if v.shape != (2,) or not np.all(np.isfinite(v)):
-        raise ParameterError(f"{what} must be a finite [vx, vy] in m/s, got {value!r}", key=what)
+def _vector(value: Any, what: str, rows: int = 0) -> NDArray[np.float64]:
+    """``value`` as a finite ``[vx, vy]``, or (``rows`` > 1) as ``rows`` of them."""
+    try:
+        v = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        v = np.full(0, np.nan)
+    if v.shape not in ((2,), (rows, 2) if rows > 1 else (2,)) or not np.all(np.isfinite(v)):
+        each = f", or one per leader ({rows} rows)" if rows > 1 else ""
+        raise ParameterError(
+            f"{what} must be a finite [vx, vy] in m/s{each}, got {value!r}", key="velocity"
+        )
     v.setflags(write=False)
     return v
 
@@ -71,9 +83,10 @@ class Marching:
 
     Parameters
     ----------
-    velocity : array_like of shape (2,), or callable
+    velocity : array_like of shape (2,) or (l, 2), or callable
         ``v_ref`` in m/s, constant, or a function of the time ``t`` (seconds)
-        returning ``[vx, vy]``.
+        returning ``[vx, vy]``; with ``l >= 2`` leaders, one row per leader may be
+        given instead (in the order of ``leader``): each leader moves with its own.
     leader : int or sequence of int, optional
         The 1-based robot (or robots) that alone are given ``v_ref`` (and ignore the
         law); None: every robot is given it, on top of its law.
@@ -83,10 +96,6 @@ class Marching:
     leader: int | tuple[int, ...] | None = None
 
     def __post_init__(self) -> None:
-        if not callable(self.velocity):
-            object.__setattr__(self, "velocity", _vector(self.velocity, "velocity"))
-        else:
-            _vector(self.velocity(0.0), "velocity(0)")
         if self.leader is not None and not isinstance(self.leader, int | np.integer):
             object.__setattr__(self, "leader", tuple(self.leader))  # several leaders
         for r in self.leaders:
@@ -102,6 +111,11 @@ class Marching:
                 f"leader lists each robot once, and at least one, got {list(self.leaders)}",
                 key="leader",
             )
+        rows = len(self.leaders)
+        if not callable(self.velocity):
+            object.__setattr__(self, "velocity", _vector(self.velocity, "velocity", rows))
+        else:
+            _vector(self.velocity(0.0), "velocity(0)", rows)
 
     @property
     def leaders(self) -> tuple[int, ...]:
@@ -115,8 +129,13 @@ class Marching:
         """Whether ``v_ref`` is a function of time."""
         return callable(self.velocity)
 
+    @property
+    def per_leader(self) -> bool:
+        """Whether each leader is given a velocity of its own (``velocity`` ``(l, 2)``)."""
+        return np.shape(self.reference(0.0)) != (2,)
+
     def reference(self, t: float) -> NDArray[np.float64]:
-        """``v_ref(t)``, shape ``(2,)``."""
+        """``v_ref(t)``, shape ``(2,)``, or ``(l, 2)``: each leader's."""
         if callable(self.velocity):
             return np.asarray(self.velocity(float(t)), dtype=float)
         return np.asarray(self.velocity)
@@ -139,7 +158,8 @@ class Marching:
         t: float,
         gain: float = 1.0,
     ) -> NDArray[np.float64]:
-        """The controls ``(..., n, 2)`` with ``gain v_ref(t)`` added (or the leader's replaced).
+        """The controls ``(..., n, 2)`` with ``gain v_ref(t)`` added (or the leaders' replaced,
+        each by its own row when :attr:`per_leader`).
 
         ``gain`` is the robot model's ``velocity_gain`` (the command that holds a
         robot at a velocity: ``k_d`` for double integrators, 1 otherwise).

@@ -3,9 +3,10 @@
 The compiled twin of :meth:`formationlab.marching.Marching.command` and
 :meth:`~formationlab.marching.MotionParameters.command`: after the law's field and before
 the obstacles and the filter (``System.command``), the command ``u`` ``(n, 2, C)`` at the
-law's points ``p`` of step ``k`` gets ``gain v_ref(k dt)`` (every robot), has the leader's
-replaced by it, or gets ``gain sum_k a_ik z_k`` (motion parameters, Garcia de Marina,
-Jayawardhana and Cao, IEEE Transactions on Robotics 32(3), 2016).
+law's points ``p`` of step ``k`` gets ``gain v_ref(k dt)`` (every robot), has the leaders'
+replaced by it (or each by its own row), or gets ``gain sum_k a_ik z_k`` (motion
+parameters, Garcia de Marina, Jayawardhana and Cao, IEEE Transactions on Robotics 32(3),
+2016).
 """
 
 from __future__ import annotations
@@ -42,15 +43,19 @@ def march(p, u, nact, k, mt, acc):
                 u[i, 1, b] = marched(u[i, 1, b], mt.gain, acc[i, 1])
         return
     row = k - mt.k0 if mt.v.shape[0] > 1 else 0
-    vx = mt.v[row, 0]
-    vy = mt.v[row, 1]
     if mt.kind == EVERY:
+        vx = mt.v[row, 0, 0]
+        vy = mt.v[row, 0, 1]
         for i in range(n):
             for b in range(nact):
                 u[i, 0, b] = marched(u[i, 0, b], mt.gain, vx)
                 u[i, 1, b] = marched(u[i, 1, b], mt.gain, vy)
-    else:  # the leaders move with v_ref alone
-        for leader in mt.leaders:
+    else:  # the leaders move with v_ref alone (one, or each its own)
+        for m in range(mt.leaders.shape[0]):
+            leader = mt.leaders[m]
+            each = m if mt.v.shape[1] > 1 else 0
+            vx = mt.v[row, each, 0]
+            vy = mt.v[row, each, 1]
             for b in range(nact):
                 u[leader, 0, b] = mt.gain * vx
                 u[leader, 1, b] = mt.gain * vy

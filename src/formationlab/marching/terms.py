@@ -38,7 +38,9 @@ class MarchTerms(NamedTuple):
     kind: int
     gain: float  #: the robot model's velocity_gain
     leaders: NDArray[np.int64]  #: the leaders' numbers in the loop (0-based; none: empty)
-    v: NDArray[np.float64]  #: (S, 2) v_ref of steps k0 .. k0 + S - 1 (S = 1: constant)
+    #: (S, m, 2) v_ref of steps k0 .. k0 + S - 1 (S = 1: constant); m = 1, or one row per
+    #: leader (in the order of ``leaders``)
+    v: NDArray[np.float64]
     k0: int  #: the step of the table's first row
     edge_i: NDArray[np.int64]  #: (m,) motion parameters' edges, first robot
     edge_j: NDArray[np.int64]  #: (m,) second robot
@@ -56,7 +58,7 @@ def march_terms(
     none_i, none_f = np.zeros(0, np.int64), np.zeros(0)
     if march is None:
         return MarchTerms(
-            kind=STILL, gain=float(gain), leaders=none_i, v=np.zeros((1, 2)), k0=0,
+            kind=STILL, gain=float(gain), leaders=none_i, v=np.zeros((1, 1, 2)), k0=0,
             edge_i=none_i, edge_j=none_i, mu=none_f, mu_tilde=none_f,
         )  # fmt: skip
     assert formation is not None
@@ -65,7 +67,9 @@ def march_terms(
     if perm is not None and len(perm):
         where[np.asarray(perm)] = np.arange(n)
     if isinstance(march, Marching):
-        v = np.zeros((1, 2)) if march.time_dependent else np.array(march.reference(0.0))[None]
+        v = np.array(march.reference(0.0), dtype=float).reshape(1, -1, 2)
+        if march.time_dependent:  # (tabulated block by block: with_references)
+            v = np.zeros_like(v)
         leaders = where[np.array(march.leaders, dtype=np.int64) - 1].astype(np.int64)
         return MarchTerms(
             kind=LEADER if leaders.size else EVERY, gain=float(gain), leaders=leaders, v=v, k0=0,
@@ -73,7 +77,7 @@ def march_terms(
         )  # fmt: skip
     edges = formation.edges
     return MarchTerms(
-        kind=MOTION, gain=float(gain), leaders=none_i, v=np.zeros((1, 2)), k0=0,
+        kind=MOTION, gain=float(gain), leaders=none_i, v=np.zeros((1, 1, 2)), k0=0,
         edge_i=where[edges[:, 0]].astype(np.int64), edge_j=where[edges[:, 1]].astype(np.int64),
         mu=np.array(march.mu, dtype=float), mu_tilde=np.array(march.mu_tilde, dtype=float),
     )  # fmt: skip
@@ -87,4 +91,4 @@ def with_references(
     if not (isinstance(march, Marching) and march.time_dependent):
         return terms
     v = np.array([march.reference(k * dt) for k in range(k0, k1 + 1)], dtype=float)
-    return terms._replace(v=v.reshape(-1, 2), k0=int(k0))
+    return terms._replace(v=v.reshape(k1 - k0 + 1, -1, 2), k0=int(k0))

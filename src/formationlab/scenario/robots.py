@@ -131,6 +131,12 @@ def build_marching(mar: Any, formation: Formation, fail: Fail) -> March | None:
     if mar is None:
         return None
     if mar.kind == "motion-parameters":
+        if isinstance(mar.velocity[0], list):
+            raise fail(
+                "marching.velocity",
+                "motion parameters move the whole formation with one velocity [vx, vy]; one "
+                'per leader goes with kind = "reference" and leader = [...]',
+            )
         if mar.leader is not None:
             raise fail(
                 "marching.leader",

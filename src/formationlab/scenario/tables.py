@@ -295,16 +295,23 @@ class MarchingModel(BaseModel):
     """``[marching]``: a reference velocity, a leader, or motion parameters."""
 
     model_config = _STRICT
-    velocity: list[float]
+    velocity: list[float] | list[list[float]]  # one pair, or one per leader
     leader: int | list[int] | None = None  # robot numbers: checked by Marching
     kind: Literal["reference", "motion-parameters"] = "reference"
     angular_velocity: float | None = None
 
     @field_validator("velocity", mode="before")
     @classmethod
-    def _velocity(cls, v: Any) -> list[float]:
+    def _velocity(cls, v: Any) -> list[float] | list[list[float]]:
+        if isinstance(v, list) and v and all(isinstance(row, list) for row in v):
+            if not all(len(row) == 2 for row in v):  # one row per leader: Marching counts
+                raise ValueError(f"each leader's velocity must be a pair [vx, vy], got {v!r}")
+            return [[_finite(x, "velocity") for x in row] for row in v]
         if not isinstance(v, list) or len(v) != 2:
-            raise ValueError(f"velocity must be a pair [vx, vy] in m/s, got {v!r}")
+            raise ValueError(
+                f"velocity must be a pair [vx, vy] in m/s (or, with several leaders, one "
+                f"pair per leader), got {v!r}"
+            )
         return [_finite(x, "velocity") for x in v]
 
     @field_validator("angular_velocity", mode="before")

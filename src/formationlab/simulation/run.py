@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..controllers import LAWS, Law
+from ..controllers.bearing import leader_target
 from ..dynamics import System
 from ..errors import FormationError, ParameterError
 from ..formation.chunked import over_time
@@ -389,11 +390,22 @@ class SimulationResult:
             "shape_error_final": float(self.shape_error[-1]),
             "centroid_velocity_final": vc.tolist(),
         }
-        if isinstance(self.marching, Marching):
-            ref = self.marching.reference(float(self.t[-1]))
+        march = self.marching
+        if isinstance(march, Marching):
+            ref = march.reference(float(self.t[-1]))
             out["reference_velocity_final"] = ref.tolist()
-            out["centroid_velocity_error_final"] = float(np.linalg.norm(vc - ref))
-            out["leader"] = self.marching.leader
+            if not march.per_leader:  # (leaders with a velocity each: no one centroid velocity)
+                out["centroid_velocity_error_final"] = float(np.linalg.norm(vc - ref))
+            out["leader"] = march.leader
+            f = self.formation
+            if len(march.leaders) >= 2 and f.bearings is not None:  # where the leaders say
+                p = self.points[-1]
+                lead = np.array(march.leaders) - 1
+                target = leader_target(f, march.leaders, p[lead])
+                scale = float(np.max(np.linalg.norm(target - target.mean(axis=0), axis=-1)))
+                gap = float(np.max(np.linalg.norm(p - target, axis=-1)))
+                out["leader_target_error_final"] = gap
+                out["leader_target_scale_final"] = scale
         return out
 
     def plot(self, kind: str = "trajectories", ax: Any = None, **kwargs: Any) -> Any:

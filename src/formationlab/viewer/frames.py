@@ -170,7 +170,8 @@ def live_header(system: System, x: NDArray[np.float64], t: float) -> dict[str, A
     restriction is on (``System.sigma >= 0``; None beyond :data:`SURFACES_MAX`);
     ``filtered`` the 1-based robots whose command the safety filter changed
     (:meth:`System.filter_result` at ``t``; None without a filter) and ``filter_status``;
-    ``reference`` the marching reference velocity ``v_ref(t)`` (None without one).
+    ``reference`` the marching reference velocity ``v_ref(t)`` (None without one; a list
+    of rows, one per leader, when each leader has its own).
     """
     formation = system.formation
     p = system.model.points(x)
@@ -188,5 +189,5 @@ def live_header(system: System, x: NDArray[np.float64], t: float) -> dict[str, A
         out["filtered"] = (np.flatnonzero(res.active) + 1).tolist()
         out["filter_status"] = res.worst.name.lower()
     if isinstance(system.marching, Marching):
-        out["reference"] = [float(v) for v in system.marching.reference(t)]
+        out["reference"] = np.asarray(system.marching.reference(t), dtype=float).tolist()
     return out

@@ -49,16 +49,31 @@ function flvDrawObstacles(ctx, view, obstacles) {
   return obstacles.length;
 }
 
-// The marching reference v_ref as an arrow from the robots' centroid; true when drawn.
-function flvDrawReference(ctx, view, pos, v) {
+// The marching reference v_ref as an arrow from the robots' centroid, or (a velocity per
+// leader: rows [vx, vy], `leaders` their 1-based numbers) one from each leader; true when drawn.
+function flvDrawReference(ctx, view, pos, v, leaders) {
   const n = pos.length / 2;
-  const speed = Math.hypot(v[0], v[1]);
-  if (!n || !(speed > 0)) return false;
+  if (Array.isArray(v[0])) {
+    let any = false;
+    v.forEach((row, m) => {
+      const i = leaders && leaders[m] ? leaders[m] - 1 : -1;
+      if (i >= 0 && i < n) any = flvArrow(ctx, view, pos[2 * i], pos[2 * i + 1], row) || any;
+    });
+    return any;
+  }
+  if (!n) return false;
   let cx = 0, cy = 0;
   for (let i = 0; i < n; i++) {
     cx += pos[2 * i] / n;
     cy += pos[2 * i + 1] / n;
   }
+  return flvArrow(ctx, view, cx, cy, v);
+}
+
+// An arrow for the velocity v from the point (cx, cy) (2 s of motion, clamped); true when drawn.
+function flvArrow(ctx, view, cx, cy, v) {
+  const speed = Math.hypot(v[0], v[1]);
+  if (!(speed > 0)) return false;
   const [x0, y0] = view.px(cx, cy);
   const L = Math.min(80, Math.max(24, 2 * speed * view.scale)); // 2 s of motion, clamped
   const ux = v[0] / speed, uy = -v[1] / speed;
@@ -301,7 +316,11 @@ function flvDrawScene(ctx, view, info, frame, opts) {
     ctx.stroke();
     drawn.filtered = filtered.length;
   }
-  if (frame.header.reference) drawn.reference = flvDrawReference(ctx, view, pos, frame.header.reference);
+  if (frame.header.reference) {
+    const lead = info.marching && info.marching.leader;
+    const leaders = lead === null || lead === undefined ? [] : [].concat(lead);
+    drawn.reference = flvDrawReference(ctx, view, pos, frame.header.reference, leaders);
+  }
   if (frame.heading) {
     drawn.headings = n;
     ctx.strokeStyle = FLV_COLORS.heading;

@@ -287,7 +287,11 @@ function render({ model, el }) {
       parts.push(`filter ${info.safety}: ` + (hd.filtered && hd.filtered.length
         ? `changed robot${hd.filtered.length > 1 ? "s" : ""} ${hd.filtered.join(", ")}` : "idle"));
     }
-    if (hd.reference) parts.push(`v_ref = (${flvFmt(hd.reference[0])}, ${flvFmt(hd.reference[1])})`);
+    if (hd.reference) {
+      const rows = Array.isArray(hd.reference[0]) ? hd.reference : [hd.reference];
+      const txt = rows.map((v) => `(${flvFmt(v[0])}, ${flvFmt(v[1])})`).join(" ");
+      parts.push(rows.length > 1 ? `leaders' v_ref = ${txt}` : `v_ref = ${txt}`);
+    }
     // a formation judged by its bearings (the bearing law) plots its bearing errors
     const bearing = (hd.errors_kind || info.errors_kind) === "bearing";
     const errWord = bearing ? "max|g-g*|" : "max|r-d|";
