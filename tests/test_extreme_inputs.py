@@ -186,3 +186,60 @@ def test_a_speed_polygon_of_a_hundred_million_sides_is_refused(tmp_path: Path) -
         ).status
         == "success"
     )
+
+
+@pytest.mark.parametrize(
+    ("table", "words"),
+    [
+        ([[1, 2]], "an alpha row is \\[i, j, k, alpha\\]"),
+        ([5], "an alpha row is"),
+        ([[1, 2, "a", 1]], "three robots i, j, k \\(whole numbers\\)"),
+        ([[1, 2, 3.5, 1]], "three robots i, j, k \\(whole numbers\\)"),
+        ({1: 1}, "three robots"),
+        ({(1, 2, 3): "x"}, "alpha_123 must be a finite non-zero number, got 'x'"),
+    ],
+)
+def test_an_alpha_table_of_odd_rows_is_refused_by_name(table, words):
+    """Rows of the wrong length or kind ended in IndexError or ValueError."""
+    with pytest.raises(fl.errors.FormationError, match=words) as info:
+        fl.Formation.from_alpha_table(table, n=3)
+    assert info.value.key == "alpha"
+    f = fl.Formation.from_alpha_table([[1, 2, 3, 1.0], [3.0, 1, 2, 1]], n=3)  # floats: whole
+    assert f.alpha[0, 1, 2] == 1 and f.alpha[2, 0, 1] == 1
+
+
+@pytest.mark.parametrize(
+    ("robots", "key"),
+    [
+        # points 1e150 m ahead of robots 6 m apart: the offset, not the headings
+        ('model = "unicycle"\noffset = 1e150\n', "robots.offset"),
+        # robots 1 and 2 face each other 0.6 m apart, points 0.35 m ahead: the headings
+        ('model = "unicycle"\noffset = 0.35\nheadings = [0.0, 3.14159, 0.0]\n', "robots.headings"),
+    ],
+)
+def test_hand_points_that_overlap_name_their_cause(robots, key, tmp_path: Path) -> None:
+    text = triangle("hands", "1.0").replace("[robots]\n", "[robots]\n" + robots)
+    text = text.replace("[-3.0, -3.0], [3.0, -3.0]", "[-0.3, -3.0], [0.3, -3.0]")
+    scenario = tmp_path / "hands.toml"
+    scenario.write_text(text)
+    message = refused(scenario)
+    assert message.startswith(f"error: {scenario}: {key} (line "), message
+
+
+def test_a_lattice_spacing_too_small_for_double_precision_is_refused(tmp_path: Path) -> None:
+    """spacing = 1e-300 was refused as 'robots 1, 2 and 3 are collinear' (their triple
+    products underflow): now by what is wrong, the spacing."""
+    from formationlab.formation.templates import SPACING_FLOOR, lattice
+
+    text = triangle("tiny", "1.0").replace(
+        'orientation = "table"\nalpha = [[1, 2, 3, 1.0], [3, 1, 2, 1.0], [2, 1, 3, -1.0]]\n',
+        'template = { lattice = "triangular", count = 3, spacing = 1e-300 }\n',
+    )
+    scenario = tmp_path / "tiny.toml"
+    scenario.write_text(text.replace("distances = 1.0\n", ""))
+    message = refused(scenario)
+    assert message.startswith(f"error: {scenario}: formation.template (line "), message
+    assert "spacing of 1e-300 m is below 1e-50 m" in message, message
+    q = lattice("square", 4, spacing=SPACING_FLOOR)  # the floor itself is a formation
+    f = fl.Formation.from_template(q, diameters=0.0)
+    assert f.distances.min() == pytest.approx(SPACING_FLOOR)

@@ -91,3 +91,20 @@ def test_the_front_end_bundle_has_only_a_default_render(widget):
     esm = widget._esm
     assert "export default { render }" in esm
     assert "export { socketModel }" in esm and "export { render" not in esm
+
+
+def test_odd_arguments_get_the_packages_error_with_their_name():
+    """An unknown keyword (silently accepted by the widget base class) and a seed numpy
+    would refuse with its own words: the package's ParameterError, naming the argument."""
+    with pytest.raises(fl.errors.ParameterError, match="no argument 'foo'") as info:
+        fl.Viewer(SIM2, foo=1)
+    assert info.value.key == "foo" and "law_params" in str(info.value)
+    with pytest.raises(fl.errors.ParameterError, match="seed must be a whole number") as info:
+        fl.Viewer(SIM2, seed=-1)
+    assert info.value.key == "seed"
+    with pytest.raises(fl.errors.ParameterError, match="no argument 't'"):
+        fl.Viewer(SIM2, t=3.0)  # read from the session, not set
+    # a setting reaches the session (the widget's traits alone were overwritten by it)
+    v = fl.Viewer(SIM2, seed=3, paused=True, law_params={"k_a": 5.0}, speed=2.0)
+    assert v.paused and v.session.paused and v.session.seed == 3
+    assert v.session.law.k_a == 5.0 and v.law_params["k_a"] == 5.0 and v.speed == 2.0

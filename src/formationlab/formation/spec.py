@@ -501,13 +501,25 @@ class Formation:
         1
         """
         base = cls.from_distances(n, edges=edges, distances=distances, diameters=diameters)
-        rows = table.items() if isinstance(table, Mapping) else ((r[:3], r[3]) for r in table)
+        if isinstance(table, Mapping):
+            rows = list(table.items())
+        else:
+            rows = []
+            for r in table:
+                if not (isinstance(r, Sequence | np.ndarray) and len(r) == 4):
+                    raise FormationError(
+                        f"an alpha row is [i, j, k, alpha] (three robots and a value), got {r!r}",
+                        key="alpha",
+                    )
+                rows.append((tuple(r[:3]), r[3]))
         alpha = np.zeros((n, n, n))
         given = np.zeros((n, n, n), bool)
         for key, value in rows:
-            if len(key) != 3:
+            numbers = isinstance(key, Sequence | np.ndarray) and len(key) == 3
+            if not (numbers and all(_robot_number(x) for x in key)):
                 raise FormationError(
-                    f"an alpha entry names three robots i, j, k, got {key!r}", key="alpha"
+                    f"an alpha entry names three robots i, j, k (whole numbers), got {key!r}",
+                    key="alpha",
                 )
             i, j, k = (int(x) - 1 for x in key)
             label = "".join(str(x + 1) for x in (i, j, k))
@@ -515,10 +527,13 @@ class Formation:
                 raise FormationError(f"alpha_{label} names a robot outside 1..{n}", key="alpha")
             if len({i, j, k}) != 3:
                 raise FormationError(f"alpha_{label} needs three different robots", key="alpha")
-            v = float(value)
+            try:
+                v = float(value)
+            except (TypeError, ValueError):
+                v = math.nan
             if not math.isfinite(v) or v == 0:
                 raise FormationError(
-                    f"alpha_{label} must be a finite non-zero number, got {v}", key="alpha"
+                    f"alpha_{label} must be a finite non-zero number, got {value!r}", key="alpha"
                 )
             for (a, b, c), w in (((i, j, k), v), ((i, k, j), -v)):
                 if given[a, b, c] and alpha[a, b, c] != w:
@@ -907,3 +922,12 @@ for _name, _get, _doc in (
     ),
 ):
     setattr(Formation, _name, property(_get, _setter(_name), doc=_doc))
+
+
+def _robot_number(x: Any) -> bool:
+    """Whether ``x`` is a whole number (a robot's number as a person writes it)."""
+    if isinstance(x, bool | np.bool_):
+        return False
+    if isinstance(x, int | np.integer):
+        return True
+    return isinstance(x, float | np.floating) and math.isfinite(x) and x == int(x)

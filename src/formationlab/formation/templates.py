@@ -36,9 +36,13 @@ from ..errors import FormationError
 from ..resources import check_memory
 from ..validation import choices
 
-__all__ = ["LATTICES", "LatticeKind", "lattice"]
+__all__ = ["LATTICES", "SPACING_FLOOR", "LatticeKind", "lattice"]
 
 LatticeKind = Literal["triangular", "square", "hexagonal"]
+
+#: The smallest lattice spacing: the sixth power of a distance (the barrier's ``h^3``, with
+#: ``h`` a squared distance) stays a normal double down to about 1e-51.
+SPACING_FLOOR = 1e-50
 
 #: The lattice kinds :func:`lattice` knows, with the area per point in units of ``spacing**2``.
 LATTICES: dict[str, float] = {
@@ -96,6 +100,14 @@ def lattice(kind: str, count: int, spacing: float = 1.0) -> NDArray[np.float64]:
     ):
         raise FormationError(
             f"a lattice spacing must be a positive finite number, got {spacing!r}",
+            key="template",
+        )
+    if spacing < SPACING_FLOOR:
+        raise FormationError(
+            f"a lattice spacing of {spacing:.3g} m is below {SPACING_FLOOR:g} m, where the "
+            "sixth powers of distances that the laws and filters compute underflow double "
+            "precision (every robot would look collinear with every other); give the spacing "
+            "in metres",
             key="template",
         )
     count = int(count)

@@ -135,7 +135,7 @@ class Lattice(BaseModel):
 _LATTICE_KEYS = {
     "lattice": '"' + '", "'.join(LATTICES) + '"',
     "count": "number of robots, >= 2",
-    "spacing": "nearest-neighbour distance > 0, default 1",
+    "spacing": "nearest-neighbour distance in metres, >= 1e-50, default 1",
 }
 
 

@@ -666,6 +666,16 @@ def initial_state(
         try:
             formation.check_positions(points, what="initial hand points")
         except FormationError as exc:
+            # an offset wider than the formation is the cause, else the robots' headings
+            q = x0[..., :2]
+            across = float(np.max(np.ptp(q, axis=0))) if len(q) else 0.0
+            offset = float(getattr(model, "offset", 0.0))
+            if offset > across:
+                raise FormationError(
+                    f"{exc} (the law acts on points {offset:.3g} m ahead of the centres, "
+                    f"and the robots stand within {across:.3g} m: use a smaller offset)",
+                    key="offset",
+                ) from None
             raise FormationError(
                 f"{exc} (the law acts on points ahead of the centres: turn the robots or "
                 "use a smaller offset)",

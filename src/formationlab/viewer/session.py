@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import validation
 from ..controllers import LAWS, Law, get_law
 from ..dynamics import System
 from ..errors import UserInputError, ViewerWarning
@@ -88,7 +89,8 @@ class LiveSession:
     scenario : Scenario
         What to run: its whole closed loop, its integrator and its initial state.
     seed : int, optional
-        Seed of the random perturbations (``numpy.random.default_rng``).
+        Seed of the random perturbations (``numpy.random.default_rng``), a whole number in
+        ``[0, 2**63)``.
     step_budget_s : float
         Wall time one :meth:`advance` may spend stepping (at least one step is
         taken), so that the page keeps its frame rate when steps are slow.
@@ -113,7 +115,7 @@ class LiveSession:
             )
         self.scenario = scenario
         self.formation = scenario.formation
-        self.seed = seed
+        self.seed = None if seed is None else validation.seed(seed)
         self.rng = np.random.default_rng(seed)
         self.step_budget_s = step_budget_s
         self.notices: list[str] = []

@@ -24,6 +24,7 @@ import numpy as np
 import traitlets
 from numpy.typing import NDArray
 
+from ..errors import ParameterError
 from ..scenario.parse import Scenario
 from .assets import bundle, read_asset
 from .controller import Controller, Reply
@@ -44,7 +45,11 @@ class Viewer(anywidget.AnyWidget):  # type: ignore[misc]
     scenario : Scenario or path
         A scenario, a scenario file, or the output folder of ``formationlab run``.
     seed : int, optional
-        Seed of the random perturbations.
+        Seed of the random perturbations (a whole number in ``[0, 2**63)``).
+    **kwargs
+        Settings applied to the session once it is open (``paused``, ``speed``, ``law``,
+        ``law_params``, ``integrator``, ``dt``), or ipywidgets' own traits (``layout`` ...);
+        any other name, or a trait read from the session (``t``, ``n`` ...), is an error.
 
     Examples
     --------
@@ -72,6 +77,17 @@ class Viewer(anywidget.AnyWidget):  # type: ignore[misc]
     def __init__(
         self, scenario: Scenario | str | os.PathLike[str], *, seed: int | None = None, **kwargs: Any
     ) -> None:
+        own = set(self.class_trait_names(sync=True)) - set(anywidget.AnyWidget.class_trait_names())
+        unknown = sorted(set(kwargs) - set(self.class_trait_names()))
+        unknown += sorted(k for k in kwargs if k in own and k not in _SETTABLE)  # read-only
+        if unknown:
+            raise ParameterError(
+                f"Viewer() takes no argument {', '.join(map(repr, unknown))}: give the "
+                f"scenario, seed=, the settings {', '.join(_SETTABLE)}, or ipywidgets' "
+                "layout traits",
+                key=unknown[0],
+            )
+        settings = {k: kwargs.pop(k) for k in _SETTABLE if k in kwargs}
         session = open_session(scenario, seed=seed)
         self._syncing = True
         super().__init__(**kwargs)
@@ -80,6 +96,8 @@ class Viewer(anywidget.AnyWidget):  # type: ignore[misc]
         self.on_msg(self._on_front_end)
         self._sync()
         self.observe(self._on_python_change, names=list(_SETTABLE))
+        for name, value in settings.items():  # through the session, as a change from Python
+            setattr(self, name, value)
 
     @property
     def session(self) -> Any:
