@@ -117,6 +117,22 @@ def test_keys_without_a_filter_warn():
     assert any("no effect" in w and "distance" in w for w in sc.warnings)
 
 
+def test_a_safety_distance_wider_than_the_start_warns(tmp_path):
+    """Robots that start closer than D_s: the filter can only push them apart until they
+    reach it (was accepted without a word)."""
+    text = BASE.replace("[3.0, -3.0]", "[-2.6, -3.0]").replace("[0.0, 3.0]", "[-2.2, -3.0]")
+    sc = parse_scenario(text + '[safety]\nfilter = "barrier"\ndistance = 0.9\n')
+    said = [w for w in sc.warnings if w.startswith("[safety] distance = 0.9")]
+    assert len(said) == 1, sc.warnings
+    assert "robots 1 and 2 start 0.4 m apart (and 2 more pairs), closer than it" in said[0]
+    clear = parse_scenario(text + '[safety]\nfilter = "barrier"\ndistance = 0.3\n')
+    assert not any("closer than it" in w for w in clear.warnings)
+    path = tmp_path / "close.toml"
+    path.write_text(text + '[safety]\nfilter = "barrier"\ndistance = 0.9\n')
+    res = invoke("validate", path)
+    assert res.exit_code == 0 and "closer than it" in res.output, res.output
+
+
 def test_validate_checks_the_tables(tmp_path):
     good, bad = tmp_path / "good.toml", tmp_path / "bad.toml"
     good.write_text(BASE + OBSTACLES + SAFETY)

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from ..errors import MissingExtraError, ScenarioError, UserInputError
 from ..formation.spec import Formation
+from ..neighbours.kdtree import pairs_within
 from ..safety import SafetyFilter, check_extra, clearances, obstacle_from_mapping
 from ..validation import line_of
 
@@ -105,6 +106,19 @@ def build_safety(
     except UserInputError as exc:
         key = f"safety.{exc.key or 'distance'}"
         raise ScenarioError(f"{where(key, line_of(text, key))}: {exc}", key=key) from None
+    if config.enabled and len(q0) > 1:  # pairs that start inside the safety distance
+        close = pairs_within(q0, config.distance)
+        gap = np.linalg.norm(q0[close[:, 1]] - q0[close[:, 0]], axis=-1)
+        close, gap = close[gap < config.distance], gap[gap < config.distance]
+        if len(close):
+            m = int(np.argmin(gap))
+            more = f" (and {len(close) - 1} more pairs)" if len(close) > 1 else ""
+            warnings.append(
+                f"[safety] distance = {config.distance:g}: robots {close[m, 0] + 1} and "
+                f"{close[m, 1] + 1} start {gap[m]:.3g} m apart{more}, closer than it; the "
+                "filter pushes such pairs apart (their barrier h_ij < 0 must grow) and keeps "
+                "the distance only once they reach it; move them apart or lower the distance"
+            )
     if not config.enabled and given - {"filter"}:
         unused = ", ".join(sorted(given - {"filter"}))
         warnings.append(
