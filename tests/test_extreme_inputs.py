@@ -243,3 +243,17 @@ def test_a_lattice_spacing_too_small_for_double_precision_is_refused(tmp_path: P
     q = lattice("square", 4, spacing=SPACING_FLOOR)  # the floor itself is a formation
     f = fl.Formation.from_template(q, diameters=0.0)
     assert f.distances.min() == pytest.approx(SPACING_FLOOR)
+
+
+def test_a_huge_noise_ends_non_finite_with_a_message_not_a_traceback(tmp_path: Path) -> None:
+    """A non-finite step under noisy sensing: the message used to evaluate the command again
+    outside the stepping driver, which owns the measurements, and ended in a traceback."""
+    scenario = tmp_path / "noisy.toml"
+    scenario.write_text(triangle("noisy", "0.2") + "\n[sensing]\nnoise = 1e200\n")
+    proc = subprocess.run(
+        [*CLI, "run", str(scenario), "--out", str(tmp_path / "out"), "-q"],
+        capture_output=True, text=True, timeout=600, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert "NaN or infinite positions" in proc.stderr and "noise = 1e+200" in proc.stderr
+    assert (tmp_path / "out" / "trajectory.nc").is_file()  # what ran is kept

@@ -428,16 +428,24 @@ class System:
                 "beyond about 1e154"
             )
             size = float(np.max(np.abs(self.positions(x0))))
-            move = dt * float(np.max(np.abs(self.rhs(x0, t - dt))))  # NaN if not finite
+            if self.sensed and self.sensing is not None and self.sensing.sampled:
+                # the command came from measurements drawn for that step (the driver's
+                # channel): the step itself says how far it went (NaN if not finite)
+                move = float(np.max(np.abs(self.positions(x1) - self.positions(x0))))
+            else:
+                move = dt * float(np.max(np.abs(self.rhs(x0, t - dt))))  # NaN if not finite
             if size <= COORDINATE_LIMIT and move / 10 <= COORDINATE_LIMIT:
                 return f"{head}; reduce dt (now {dt:g} s), e.g. to {dt / 10:g} s"
             # the velocity at the last accepted state is not finite, or its squared
             # distances overflow: no dt helps
+            noisy = ""
+            if self.sensed and self.sensing is not None and self.sensing.noise > 0:
+                noisy = f", and the measurements' noise ([sensing] noise = {self.sensing.noise:g})"
             return (
                 f"{head}: the velocity at t = {t - dt:g} s is not finite, whatever dt (the "
                 f"largest coordinate is {size:.3g}; squared distances overflow beyond about "
                 "1e154, and so do forces with huge gains): scale the positions, distances "
-                "and gains to moderate numbers"
+                f"and gains to moderate numbers{noisy}"
             )
         iu, ju, a, _ = self._pairs(x0, x1)
         q0, q1 = self.positions(x0), self.positions(x1)
