@@ -58,6 +58,7 @@ def test_huge_gains_end_non_finite_on_the_command_line(tmp_path: Path) -> None:
     )  # fmt: skip
     assert proc.returncode == 1, proc.stderr  # not -6 (SIGABRT)
     assert "Traceback" not in proc.stderr
+    assert "Warning" not in proc.stderr + proc.stdout  # (numpy's overflow warnings leaked)
     error = [ln for ln in proc.stderr.splitlines() if ln.startswith("error:")]
     assert len(error) == 1 and "produced NaN or infinite positions" in error[0]
     summary = json.loads((out / "summary.json").read_text())
@@ -257,3 +258,20 @@ def test_a_huge_noise_ends_non_finite_with_a_message_not_a_traceback(tmp_path: P
     assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
     assert "NaN or infinite positions" in proc.stderr and "noise = 1e+200" in proc.stderr
     assert (tmp_path / "out" / "trajectory.nc").is_file()  # what ran is kept
+
+
+@pytest.mark.parametrize(
+    ("obstacle", "words"),
+    [
+        ("polygon = [[10, 10], [1e300, 10], [10, 1e300]]", "polygon coordinates reach 1e+300"),
+        ("circle = { center = [1e200, 0.0], radius = 1.0 }", "circle coordinates reach 1e+200"),
+        ("circle = { center = [5.0, 5.0], radius = 1e160 }", "circle coordinates reach 1e+160"),
+    ],
+)
+def test_an_obstacle_beyond_the_coordinate_limit_is_refused(obstacle, words, tmp_path):
+    """Accepted before, with numpy's and shapely's overflow warnings in the output."""
+    scenario = tmp_path / "far.toml"
+    scenario.write_text(triangle("far", "0.2") + "\n[[obstacles]]\n" + obstacle + "\n")
+    message = refused(scenario)
+    assert f"{scenario}: obstacles, item 1 (line " in message and words in message, message
+    assert "Warning" not in message

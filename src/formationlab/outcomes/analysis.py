@@ -211,7 +211,8 @@ def classify(
         if agree == 0:
             return "mirror"
         return "incorrect"
-    speed = np.max(np.linalg.norm(np.asarray(u, dtype=float), axis=-1))
+    with np.errstate(over="ignore"):  # a huge velocity is inf: moving, not stopped
+        speed = np.max(np.linalg.norm(np.asarray(u, dtype=float), axis=-1))
     stopped = speed <= tol.speed or (net_speed is not None and net_speed <= tol.speed)
     if stopped:
         return "incorrect"
@@ -273,8 +274,9 @@ _SCRATCH = 4 * 8
 
 
 def _top_speed(u: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``max_i |u_i|`` of each state, ``(T, n, 2) -> (T,)``."""
-    return np.max(np.linalg.norm(u, axis=-1), axis=-1)
+    """``max_i |u_i|`` of each state, ``(T, n, 2) -> (T,)`` (inf where a square overflows)."""
+    with np.errstate(over="ignore"):
+        return np.max(np.linalg.norm(u, axis=-1), axis=-1)
 
 
 def converged_time(

@@ -35,6 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..controllers.kinds.khatib import dkhatib_ds, khatib
 from ..errors import ObstacleError, require_extra
+from ..validation import COORDINATE_LIMIT
 
 __all__ = [
     "Circle",
@@ -61,6 +62,16 @@ def _finite_point(value: ArrayLike, what: str) -> NDArray[np.float64]:
     return arr
 
 
+def _within_limit(numbers: NDArray[np.float64], what: str) -> None:
+    """Refuse an obstacle whose coordinates (or radius) exceed ``COORDINATE_LIMIT``."""
+    largest = float(np.max(np.abs(numbers)))
+    if largest > COORDINATE_LIMIT:
+        raise ObstacleError(
+            f"{what} coordinates reach {largest:.3g}, beyond {COORDINATE_LIMIT:g}: squared "
+            "distances to it overflow double precision; give the obstacle in metres"
+        )
+
+
 @dataclass(frozen=True, kw_only=True, eq=False)
 class Circle:
     """A disc obstacle.
@@ -81,6 +92,7 @@ class Circle:
         r = self.radius
         if not (isinstance(r, int | float) and np.isfinite(r) and r > 0):
             raise ObstacleError(f"circle radius must be a finite number > 0, got {r!r}")
+        _within_limit(np.append(c, r), "circle")
         c.setflags(write=False)
         object.__setattr__(self, "center", c)
         object.__setattr__(self, "radius", float(r))
@@ -121,6 +133,7 @@ class Polygon:
             raise ObstacleError(f"a polygon needs at least 3 vertices [x, y], got shape {v.shape}")
         if not np.all(np.isfinite(v)):
             raise ObstacleError(f"polygon vertices must be finite, got {v.tolist()}")
+        _within_limit(v, "polygon")
         if np.allclose(v[0], v[-1]):
             v = v[:-1]  # a closing repeat of the first vertex is tolerated
         shapely: Any = require_extra("safety", ("shapely",), "polygon obstacles")

@@ -294,7 +294,12 @@ class SimulationResult:
         ``final_headings``) up to :data:`LIST_LIMIT` robots, ``active_restrictions_final``
         up to :data:`LIST_LIMIT` surfaces; beyond, the statistics and counts remain
         (:meth:`edge_table` holds every edge; ``formationlab run`` writes it to a file).
+        A run that blew up has inf or NaN figures, without numpy's warnings.
         """
+        with np.errstate(over="ignore", invalid="ignore"):
+            return self._summary(tolerances)
+
+    def _summary(self, tolerances: Tolerances | None) -> dict[str, Any]:
         tol = tolerances or Tolerances()
         n, m = self.formation.n, len(self.formation.edges)
         p_final = self.points[-1]
