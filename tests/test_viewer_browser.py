@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import numpy as np
 import pytest
 from _viewer import launch_chromium, serving, sim2_session, wait_for
@@ -193,13 +195,7 @@ def test_page_shows_headings_obstacles_filter_activity_and_reference(browser):
     session = LiveSession(load_scenario(path), seed=1)
     session.set_paused(True)
     session.step(20)
-    with serving(session) as srv:
-        page = browser.new_page(viewport={"width": 1100, "height": 720})
-        errors: list[str] = []
-        page.on("pageerror", lambda e: errors.append(str(e)))
-        page.goto(srv.url)
-        page.wait_for_selector(f"{ROOT_SEL}[data-state=ready]", timeout=15_000)
-        wait_for(lambda: attr(page, "robots") == "3", what="the first frame drawn")
+    with drawn_page(browser, session, robots=3) as page:
         assert attr(page, "obstacles") == "1"
         assert attr(page, "headings") == "3"
         assert attr(page, "filtered") == "1,2,3"
@@ -207,8 +203,6 @@ def test_page_shows_headings_obstacles_filter_activity_and_reference(browser):
         status = page.text_content(f"{ROOT_SEL} [data-role=status]")
         assert "filter barrier-decentralized: changed robots 1, 2, 3" in status
         assert "v_ref = (0.2" in status
-        page.close()
-        assert not errors, errors
 
 
 def test_page_draws_an_arrow_from_each_leader_with_its_own_velocity(browser):
@@ -223,15 +217,23 @@ def test_page_draws_an_arrow_from_each_leader_with_its_own_velocity(browser):
     session.set_paused(True)
     session.step(5)
     assert session.info()["marching"] == {"kind": "reference", "leader": (1, 4)}
+    with drawn_page(browser, session, robots=6) as page:
+        assert attr(page, "reference") == "0.02,0,-0.02,0"
+        status = page.text_content(f"{ROOT_SEL} [data-role=status]")
+        assert "leaders' v_ref = (0.02, 0) (-0.02, 0)" in status, status
+
+
+@contextmanager
+def drawn_page(browser, session, *, robots: int):
+    """The page of ``session`` once its first frame of ``robots`` robots is drawn; no error
+    of the page's script is allowed."""
     with serving(session) as srv:
         page = browser.new_page(viewport={"width": 1100, "height": 720})
         errors: list[str] = []
         page.on("pageerror", lambda e: errors.append(str(e)))
         page.goto(srv.url)
         page.wait_for_selector(f"{ROOT_SEL}[data-state=ready]", timeout=15_000)
-        wait_for(lambda: attr(page, "robots") == "6", what="the first frame drawn")
-        assert attr(page, "reference") == "0.02,0,-0.02,0"
-        status = page.text_content(f"{ROOT_SEL} [data-role=status]")
-        assert "leaders' v_ref = (0.02, 0) (-0.02, 0)" in status, status
+        wait_for(lambda: attr(page, "robots") == str(robots), what="the first frame drawn")
+        yield page
         page.close()
         assert not errors, errors
