@@ -17,9 +17,9 @@ or at ``duration``. The final states are classified exactly as
 vectorised twin).
 
 Two backends compute the same thing: ``"numba"`` (compiled, parallel over
-chunks of trials, for the laws ``distance``, ``angle-restricted``,
-``squared-distance`` and ``signed-area``: those whose ``Law.kernel_terms``
-gives their data; and the robot models ``single-integrator``, ``unicycle``
+chunks of trials, for every law whose ``Law.kernel_terms`` gives its data (the
+package's five: ``distance``, ``angle-restricted``, ``squared-distance``,
+``signed-area`` and ``bearing``); and the robot models ``single-integrator``, ``unicycle``
 and ``double-integrator``) and ``"numpy"`` (the stepping driver,
 :func:`formationlab.integrators.drive`, with explicit Euler and a stop rule:
 the readable specification, for any law). ``"numba"`` runs the engine's one compiled
@@ -59,16 +59,12 @@ from ..sensing import Faults, Seed, Sensing
 from ..validation import positive, whole
 
 __all__ = [
-    "KERNEL_LAWS",
     "BatchResult",
     "batch_backend",
     "classify_batch",
     "max_distance_errors",
     "run_batch",
 ]
-
-#: Laws the numba backend implements (the numpy backend takes any law).
-KERNEL_LAWS = ("distance", "angle-restricted", "squared-distance", "signed-area")
 
 Backend = Literal["numba", "numpy"]
 
