@@ -180,7 +180,9 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
     rr = np.empty((1, 1))  # each pair's length at the current state (the law's pairs)
     if law is not None:
         rr = np.empty((law.pair_i.shape[0], C))
-    known = False  # rr holds the current state's lengths (the contact rule's, last step)
+    # rr holds the current state's lengths (the contact rule's, last step); a bool, not the
+    # literal False, which would compile the law's field a second time
+    known = np.bool_(False)
     dt = run.dt
     nact = st.meta[c, 0]
     step = st.meta[c, 1]
