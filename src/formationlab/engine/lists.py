@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit, prange
 from numpy.typing import NDArray
 
-from ..controllers.kinds.edges import edge_force
+from ..controllers.kinds.edges import edge_force_at
 from ..controllers.kinds.khatib import repulsion_gain
 from ..controllers.kinds.restriction import (
     restriction_force,
@@ -125,11 +125,11 @@ def _edges(lo, hi, q, qp, sweep, kind, gain, edge_i, edge_j, edge_a, edge_d, bea
     for e in range(hi - lo):
         dx = fx[e]
         dy = fy[e]
-        r2 = dx * dx + dy * dy
-        f0, f1 = edge_force(kind, dx, dy, ed[e], ea[e], gain, bx[e * step], by[e * step])
+        r = math.sqrt(dx * dx + dy * dy)  # (once: the force's and the clearance's)
+        f0, f1 = edge_force_at(kind, dx, dy, r, ed[e], ea[e], gain, bx[e * step], by[e * step])
         fx[e] = f0  # eq. (8), Krick et al.'s, or Zhao and Zelazo's (its kind)
         fy[e] = f1
-        clr[e] = math.sqrt(r2) - ea[e]
+        clr[e] = r - ea[e]
     g_min = np.inf
     w_min = np.inf
     for e in range(hi - lo):
