@@ -57,7 +57,8 @@ def test_unknown_names_suggest_the_nearest_and_list_the_known():
     )
     assert isinstance(info.value, KeyError) and isinstance(info.value, ParameterError)
     with pytest.raises(
-        UnknownNameError, match=r"'xyz'\. Known: angle-restricted, bearing, distance"
+        UnknownNameError,
+        match=r"'xyz'\. Known: angle-restricted, bearing, chirality-restricted, distance",
     ):
         fl.get_law("xyz")
 

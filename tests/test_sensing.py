@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 
 import formationlab as fl
 from formationlab.cli import _load_commands, app
-from formationlab.controllers import LAWS
+from formationlab.controllers import laws_in
 from formationlab.dynamics import System
 from formationlab.errors import ParameterError, ScenarioError
 from formationlab.models import DoubleIntegrator, Unicycle
@@ -33,7 +33,7 @@ from formationlab.sensing import (
 )
 from formationlab.studies.batch import run_batch
 
-KERNEL_LAWS = list(LAWS)
+KERNEL_LAWS = laws_in(2)
 TRIANGLE = fl.Formation.from_template([[0, 0], [1, 0], [0.5, 0.8]], diameters=0.2)
 SQUARE = parse_scenario(
     Path(__file__).parents[1].joinpath("examples/square-with-diagonals.toml").read_text()

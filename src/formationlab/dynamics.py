@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 from .controllers import Law
 from .errors import ParameterError
 from .formation.chunked import over_time, row_bytes
+from .formation.geometry import row_norms
 from .formation.spec import DENSE_LIMIT, Formation
 from .marching import March
 from .models import RobotModel, SingleIntegrator
@@ -102,6 +103,8 @@ class System:
         object.__setattr__(self, "obstacles", tuple(self.obstacles))
         # the formation as the law is judged on it (desired bearings kept or dropped)
         object.__setattr__(self, "formation", self.law.formation_for(self.formation))
+        if self.formation.dim != 2:
+            self._check_space()
         if self.faults is not None:
             self.faults.check(self.formation.n)
         if self.sensed:
@@ -117,6 +120,23 @@ class System:
             self.safety.check_diameters(self.formation.diameters)
         if self.obstacles:
             self.law.obstacle_repulsion()  # a law without one refuses obstacles now
+
+    def _check_space(self) -> None:
+        """Refuse, by name, what the closed loop cannot do yet for a formation in space."""
+        dim = self.formation.dim
+        self.model.check_space(dim)
+        parts = {
+            "sensing": self.sensed or (self.faults is not None and self.faults.any),
+            "marching": self.marching is not None,
+            "obstacles": bool(self.obstacles),
+            "safety": self.filtered,
+        }
+        refused = [name for name, used in parts.items() if used]
+        if refused:
+            raise ParameterError(
+                f"a formation in space ({dim}-D) runs without {', '.join(refused)} so far "
+                "(they are planar); remove them from the run"
+            )
 
     @property
     def time_dependent(self) -> bool:
@@ -340,7 +360,7 @@ class System:
     def _clearances(self, x: NDArray, iu: NDArray, ju: NDArray, a: NDArray) -> NDArray:
         q = self.positions(x)
         d = q[..., ju, :] - q[..., iu, :]
-        return np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) - a
+        return row_norms(d) - a
 
     def clearance(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Least ``r_ij - a_ij`` over all pairs, and robot-obstacle clearance; shape ``(...)``.
@@ -365,7 +385,7 @@ class System:
         dd = np.sum(dr * dr, axis=-1)
         s = np.clip(-np.sum(r0 * dr, axis=-1) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
         m = r0 + s[..., None] * dr
-        return np.sqrt(m[..., 0] * m[..., 0] + m[..., 1] * m[..., 1]) - a
+        return row_norms(m) - a
 
     def swept_clearance(
         self, x0: NDArray[np.float64], x1: NDArray[np.float64]

@@ -4,8 +4,9 @@
 """
 
 from .angle_restricted import AngleRestrictedLaw, active_restrictions, grad_psi, psi_sum
-from .base import LAWS, Law, ObstacleRepulsion, Repulsion, get_law, register
+from .base import LAWS, Law, ObstacleRepulsion, Repulsion, get_law, laws_in, register
 from .bearing import BearingLaw
+from .chirality_restricted import ChiralityRestrictedLaw
 from .distance import DistanceLaw, grad_phi, phi_sum
 from .signed_area import SignedAreaLaw
 from .squared_distance import SquaredDistanceLaw
@@ -14,6 +15,7 @@ __all__ = [
     "LAWS",
     "AngleRestrictedLaw",
     "BearingLaw",
+    "ChiralityRestrictedLaw",
     "DistanceLaw",
     "Law",
     "ObstacleRepulsion",
@@ -24,6 +26,7 @@ __all__ = [
     "get_law",
     "grad_phi",
     "grad_psi",
+    "laws_in",
     "phi_sum",
     "psi_sum",
     "register",

@@ -24,6 +24,7 @@ from .terms import LOG_BARRIER, KernelTerms, build_terms
 
 __all__ = [
     "AngleRestrictedLaw",
+    "RestrictedLaw",
     "active_restrictions",
     "grad_psi",
     "psi_sum",
@@ -147,28 +148,25 @@ def psi_sum(formation: Formation, q: NDArray[np.float64], theta: float) -> NDArr
     return 2.0 * total  # eq. (13): the ordered pairs (j, k) and (k, j)
 
 
-@register
 @dataclass(frozen=True, kw_only=True)
-class AngleRestrictedLaw(Law):
-    """The paper's law ``u_i = -k_c grad_i phi_i - k_a grad_i psi_i`` (eq. 11).
-
-    The step function in ``psi_ijk`` (eq. 14) makes the closed loop
-    discontinuous: trajectories may slide along the surfaces
-    ``alpha_ijk c_ijk + theta = 0`` (line ``s`` of eq. 26).
+class RestrictedLaw(Law):
+    """What the paper's law and its lift to space share: the gains of eq. (11), the
+    threshold ``theta``, Khatib's repulsion, ``lambda`` of eq. (25) and the obstacles'
+    repulsion. The restriction itself (triangles in the plane, tetrahedra in space) is the
+    subclass's.
 
     Parameters
     ----------
     k_c : float
         Gain of the distance term (paper: 2).
     k_a : float
-        Gain of the angular term (paper: 3).
+        Gain of the restriction's term (paper: 3).
     theta : float
         Threshold of the restrictions, > 0 (paper: 0.5).
     repulsion : Repulsion
         Khatib's repulsion between non-neighbours.
     """
 
-    name = "angle-restricted"
     barrier_at_contact = True
     smooth = False
     k_c: float = 2.0
@@ -180,8 +178,29 @@ class AngleRestrictedLaw(Law):
         check_fields(self, positive=("k_c",), nonnegative=("k_a", "theta"))
 
     def lam(self, formation: Formation) -> float:
-        """``lambda`` of eq. (25): ``lambda kappa k_c = 2 k_a`` (kappa = pi or 3)."""
+        """``lambda`` of eq. (25): ``lambda kappa k_c = 2 k_a`` (kappa = pi or 3 in the
+        plane, 4 in space: ``Formation.kappa``)."""
         return 2.0 * self.k_a / (formation.kappa * self.k_c)  # eq. (25)
+
+    def obstacle_repulsion(self) -> ObstacleRepulsion:
+        """``-k_c grad Gamma_o``; ``u = -(k_c / 2) grad V``, so ``V`` gains ``2 Gamma_o``."""
+        return ObstacleRepulsion(gain=self.k_c, weight=2.0, repulsion=self.repulsion)
+
+
+@register
+@dataclass(frozen=True, kw_only=True)
+class AngleRestrictedLaw(RestrictedLaw):
+    """The paper's law ``u_i = -k_c grad_i phi_i - k_a grad_i psi_i`` (eq. 11).
+
+    The step function in ``psi_ijk`` (eq. 14) makes the closed loop
+    discontinuous: trajectories may slide along the surfaces
+    ``alpha_ijk c_ijk + theta = 0`` (line ``s`` of eq. 26). Parameters: those of
+    :class:`RestrictedLaw`.
+    """
+
+    name = "angle-restricted"
+    dims = (2,)
+    elsewhere = 'in space the orientation is a chirality: use law = "chirality-restricted"'
 
     def control(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
         """``u`` of eq. (11): :meth:`control_with` the steps ``Upsilon(sigma(q))``."""
@@ -210,10 +229,6 @@ class AngleRestrictedLaw(Law):
         self, formation: Formation, q: NDArray[np.float64], weights: NDArray[np.float64]
     ) -> NDArray[np.float64]:
         return self._control(formation, q, triple_steps(formation, weights))
-
-    def obstacle_repulsion(self) -> ObstacleRepulsion:
-        """``-k_c grad Gamma_o``; ``u = -(k_c / 2) grad V``, so ``V`` gains ``2 Gamma_o``."""
-        return ObstacleRepulsion(gain=self.k_c, weight=2.0, repulsion=self.repulsion)
 
     def kernel_terms(self, formation: Formation, *, pairs: bool = True) -> KernelTerms:
         rep = self.repulsion

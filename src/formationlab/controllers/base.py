@@ -32,7 +32,7 @@ from ..registry import Registry
 from ..validation import check_fields
 from .terms import KernelTerms
 
-__all__ = ["LAWS", "Law", "ObstacleRepulsion", "Repulsion", "get_law", "register"]
+__all__ = ["LAWS", "Law", "ObstacleRepulsion", "Repulsion", "get_law", "laws_in", "register"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -85,13 +85,28 @@ class Law:
     #: ``"scale"`` (``u(s q) = u(q)``, ``s > 0``: the bearing law). Equilibria are found,
     #: merged and classified modulo it (:mod:`formationlab.equilibria`).
     invariance: ClassVar[str] = "rotation"
+    #: The spaces the law works in (``Formation.dim``), and what to use in the others.
+    dims: ClassVar[tuple[int, ...]] = (2, 3)
+    elsewhere: ClassVar[str] = ""
 
     def formation_for(self, formation: Formation) -> Formation:
         """The formation as this law is judged on it: a law of distances (and orientation)
         drops desired bearings (:attr:`Formation.bearings`), so that outcomes count its
         distances; the bearing law keeps or derives them. Every closed loop
-        (:class:`formationlab.dynamics.System`, the batches) holds this formation."""
+        (:class:`formationlab.dynamics.System`, the batches) holds this formation.
+        Refuses a formation in a space the law does not work in (:attr:`dims`)."""
+        self.check_dim(formation)
         return formation.without_bearings()
+
+    def check_dim(self, formation: Formation) -> None:
+        """Refuse, by name, a formation in a space the law does not work in."""
+        if formation.dim not in self.dims:
+            space = {2: "in the plane", 3: "in space (3-D)"}
+            raise ParameterError(
+                f"the law {self.name!r} works {' and '.join(space[d] for d in self.dims)}, "
+                f"and this formation is {space[formation.dim]}"
+                + (f": {self.elsewhere}" if self.elsewhere else "")
+            )
 
     def control(self, formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
         """Controls ``u``, shape ``(..., n, 2)``, at positions ``q`` of shape ``(..., n, 2)``."""
@@ -149,6 +164,12 @@ class Law:
         :meth:`kernel_terms` would otherwise inherit terms of another law.
         """
 
+        if formation.dim != 2:
+            raise ParameterError(
+                "the compiled loop steps formations in the plane; a formation in space runs "
+                'on the numpy path (backend="numpy", which "auto" chooses)'
+            )
+
         def owner(name: str) -> type:
             return next(c for c in type(self).__mro__ if name in c.__dict__)
 
@@ -176,6 +197,11 @@ L = TypeVar("L", bound=type[Law])
 def register(cls: L) -> L:
     """Class decorator: make a law available by its ``name``."""
     return LAWS.register(cls)
+
+
+def laws_in(dim: int) -> list[str]:
+    """The names of the registered laws that work in ``dim`` dimensions (2 or 3), sorted."""
+    return sorted(name for name, cls in LAWS.items() if dim in cls.dims)
 
 
 def get_law(name: str, **params: object) -> Law:

@@ -178,6 +178,8 @@ class BearingLaw(Law):
 
     name = "bearing"
     invariance = "scale"  # u(s q) = u(q): bearings fix the shape up to translation and scale
+    dims = (2,)
+    elsewhere = "the bearing law in space is not built yet; use a law of distances"
     k: float = 1.0
     k_r: float = 0.0
     repulsion: Repulsion = field(default_factory=Repulsion)
@@ -189,6 +191,7 @@ class BearingLaw(Law):
         """The formation judged by its bearings: its own, or its template's; refused, with
         how to give them, when it has neither, and when they do not fix the shape (not
         infinitesimally bearing rigid: :func:`bearing_realisation`)."""
+        self.check_dim(formation)
         if formation.bearings is None:
             if formation.template is None:
                 _bearings(formation)  # says how to give them

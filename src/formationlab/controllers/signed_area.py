@@ -176,6 +176,8 @@ class SignedAreaLaw(Law):
     """
 
     name = "signed-area"
+    dims = (2,)
+    elsewhere = 'in space the chirality of tetrahedra takes its place: law = "chirality-restricted"'
     k: float = 1.0
     k_s: float = 1.0
     k_r: float = 2.0

@@ -17,6 +17,7 @@ __all__ = [
     "COLLINEAR_SIN",
     "alpha_from_shape",
     "both_orders",
+    "neighbour_lists",
     "neighbour_triples",
     "signed_angle",
     "switching_surfaces",
@@ -35,19 +36,28 @@ def signed_angle(u: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.f
     return np.arctan2(cross(u, v), dot)
 
 
+def neighbour_lists(
+    edges: NDArray[np.integer], n: int
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """Every half-edge ``(i, j)`` of the graph, sorted by ``i`` then ``j``, and where each
+    robot's row starts: ``dst[ptr[i]:ptr[i + 1]]`` are the neighbours of ``i``, sorted."""
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    src = np.concatenate([e[:, 0], e[:, 1]])
+    dst = np.concatenate([e[:, 1], e[:, 0]])
+    order = np.lexsort((dst, src))
+    src, dst = src[order], dst[order]
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(src, minlength=n))])
+    return src, dst, ptr
+
+
 def neighbour_triples(edges: NDArray[np.integer], n: int) -> NDArray[np.int64]:
     """Every ordered ``(i, j, k)`` with ``j != k`` both neighbours of ``i`` (the sum of eq. 13).
 
     Shape ``(t, 3)``, sorted lexicographically; ``t = sum_i deg_i (deg_i - 1)``, so
     the cost grows with the edges, not with ``n^3``.
     """
-    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
-    src = np.concatenate([e[:, 0], e[:, 1]])
-    dst = np.concatenate([e[:, 1], e[:, 0]])
-    order = np.lexsort((dst, src))
-    src, dst = src[order], dst[order]
-    deg = np.bincount(src, minlength=n)
-    ptr = np.concatenate([[0], np.cumsum(deg)])
+    src, dst, ptr = neighbour_lists(edges, n)
+    deg = np.diff(ptr)
     reps = deg[src]  # each half-edge (i, j) pairs with every neighbour k of i
     first = np.repeat(np.arange(src.size), reps)
     offset = np.arange(first.size) - np.repeat(np.cumsum(reps) - reps, reps)

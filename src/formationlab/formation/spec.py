@@ -37,6 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..errors import FormationError
 from ..neighbours.kdtree import close_pairs
 from ..validation import coordinates
+from .chirality import chirality_from_shape, chirality_surfaces
 from .geometry import parity
 from .graph import as_edges, complete_edges, edges_connected, is_rigid
 from .orientation import alpha_from_shape, both_orders, neighbour_triples, switching_surfaces
@@ -235,6 +236,15 @@ class Formation:
     collinear_skipped : int
         Ordered triples of the template left without a restriction because their
         robots are collinear in it.
+    chiral_quads : ndarray of int, shape (Q, 4), optional
+        In space (``dim = 3``): the quadruples ``(i, j, k, l)``, ``j < k < l`` neighbours of
+        ``i``, whose chirality is restricted (:mod:`.chirality`), 0-based, sorted.
+    chiral_signs : ndarray of int8, shape (Q,), optional
+        Their ``beta_ijkl`` (+1 or -1): the restriction drives towards
+        ``sign(v_ijkl) = -beta_ijkl``, the paper's convention for alpha.
+    dim : int
+        The space the robots move in: 2 (the plane, the paper's) or 3. Follows the
+        template's columns when a template is given.
     bearings : ndarray, shape (m, 2), optional
         The desired bearings ``g*_ij`` of the edges (unit vectors from robot ``i`` to robot
         ``j``, edges in the stored order ``i < j``): a formation defined by bearings (Zhao
@@ -254,6 +264,9 @@ class Formation:
     alpha_values: AlphaValues = "sign"
     template: NDArray[np.float64] | None = field(default=None)
     bearings: NDArray[np.float64] | None = field(default=None)
+    chiral_quads: NDArray[np.integer] | None = field(default=None)
+    chiral_signs: NDArray[np.int8] | None = field(default=None)
+    dim: int = 2
 
     def __post_init__(self) -> None:
         d = np.asarray(self.diameters, dtype=float)
@@ -291,7 +304,7 @@ class Formation:
                 key="alpha_values",
             )
         triples, values = self._restrictions(n, edges)
-        if len(triples) == 0 and self.orientation != "free":
+        if len(triples) == 0 and self.chiral_quads is None and self.orientation != "free":
             raise FormationError(
                 f"orientation {self.orientation!r} needs alpha values", key="orientation"
             )
@@ -300,12 +313,32 @@ class Formation:
             alpha = np.zeros((n, n, n))
             alpha[tuple(triples.T)] = values
             alpha.setflags(write=False)
+        dim = self.dim
         template = None
         if self.template is not None:
             template = np.asarray(self.template, dtype=float)
-            if template.shape != (n, 2) or not np.all(np.isfinite(template)):
-                raise FormationError(f"template must be a finite ({n}, 2) array", key="template")
+            if template.ndim == 2 and template.shape[1] in (2, 3):
+                dim = template.shape[1]
+            if template.shape != (n, dim) or not np.all(np.isfinite(template)):
+                raise FormationError(
+                    f"template must be a finite ({n}, 2) or ({n}, 3) array", key="template"
+                )
             template.setflags(write=False)
+        if isinstance(dim, bool) or dim not in (2, 3):
+            raise FormationError(f"dim must be 2 or 3, got {dim!r}", key="dim")
+        quads, quad_signs = self._chirality(n, edges, int(dim))
+        if dim == 3 and len(triples):
+            raise FormationError(
+                "alpha restricts triangles in the plane; in space the orientation is the "
+                "chirality of tetrahedra (chiral_quads, chiral_signs, or a 3-D template)",
+                key="alpha",
+            )
+        if dim == 3 and self.bearings is not None:
+            raise FormationError(
+                "desired bearings are planar here; the bearing law in 3-D is not built yet: "
+                "give the formation by distances (and chirality)",
+                key="bearings",
+            )
         bearings = None if self.bearings is None else _unit_bearings(self.bearings, len(edges))
         half = triples[:, 1] < triples[:, 2]  # the mirrors follow from eq. (3)
         index, halves = _index(edges, n), _index(triples[half], n)
@@ -324,6 +357,53 @@ class Formation:
         object.__setattr__(self, "_half_alpha", values if signs is None else signs)
         object.__setattr__(self, "template", template)
         object.__setattr__(self, "bearings", bearings)
+        object.__setattr__(self, "dim", int(dim))
+        object.__setattr__(self, "chiral_quads", quads)
+        object.__setattr__(self, "chiral_signs", quad_signs)
+
+    def _chirality(
+        self, n: int, edges: NDArray[np.int64], dim: int
+    ) -> tuple[NDArray[np.integer] | None, NDArray[np.int8] | None]:
+        """The restricted quadruples and their signs, validated (:mod:`.chirality`)."""
+        if self.chiral_quads is None and self.chiral_signs is None:
+            return None, None
+        if dim != 3:
+            raise FormationError(
+                "chirality (chiral_quads) restricts tetrahedra in space; a planar formation "
+                "restricts its orientation through alpha",
+                key="chirality",
+            )
+        quads = np.asarray(self.chiral_quads, dtype=np.int64).reshape(-1, 4)
+        signs = np.asarray(self.chiral_signs, dtype=float).reshape(-1)
+        if signs.shape != (len(quads),) or not np.all(np.isin(signs, (-1.0, 1.0))):
+            raise FormationError(
+                "chiral_signs must hold one +1 or -1 per restricted quadruple", key="chirality"
+            )
+        if np.any((quads < 0) | (quads >= n)) or np.any(
+            ~((quads[:, 1] < quads[:, 2]) & (quads[:, 2] < quads[:, 3]))
+            | np.any(quads[:, 1:] == quads[:, :1], axis=1)
+        ):
+            raise FormationError(
+                f"restricted quadruples (i, j, k, l) name four robots in 0..{n - 1} with "
+                "j < k < l and i different from them",
+                key="chirality",
+            )
+        adj = {(int(i), int(j)) for i, j in edges} | {(int(j), int(i)) for i, j in edges}
+        for row in quads:
+            i, *others = (int(v) for v in row)
+            for j in others:
+                if (i, j) not in adj:
+                    raise FormationError(
+                        f"the chirality of robots {i + 1}, {others[0] + 1}, {others[1] + 1}, "
+                        f"{others[2] + 1} is restricted at robot {i + 1}, but robot {j + 1} is "
+                        f"not its neighbour; add the edge or drop the quadruple",
+                        key="chirality",
+                    )
+        order = np.lexsort(quads.T[::-1])
+        quads, signs8 = _index(quads[order], n), signs[order].astype(np.int8)
+        quads.setflags(write=False)
+        signs8.setflags(write=False)
+        return quads, signs8
 
     def _restrictions(self, n: int, edges: NDArray[np.int64]) -> tuple[NDArray, NDArray]:
         """The restricted triples and their alpha from either form, validated (eq. 3)."""
@@ -387,6 +467,7 @@ class Formation:
         distances: float | ArrayLike = 1.0,
         diameters: float | ArrayLike = 0.2,
         one_based: bool = True,
+        dim: int = 2,
     ) -> Formation:
         """A formation with free orientation from a graph and desired distances.
 
@@ -400,6 +481,8 @@ class Formation:
             ``d_ij``: one number for every edge, or one per edge in the given order.
         diameters : float or sequence of float
             ``rho_i``: one number for every robot, or one per robot.
+        dim : {2, 3}
+            The space the robots move in (3: drones).
         """
         if not isinstance(n, int | np.integer) or n < 2:
             raise FormationError(f"a formation needs an integer n >= 2 robots, got {n!r}")
@@ -413,7 +496,8 @@ class Formation:
             order = {(min(i, j), max(i, j)): t for t, (i, j) in enumerate(given)}
             dist = _per_item(dist, len(e), "distances", "edge")
             dist = dist[[order[(i, j)] for i, j in e]]
-        return cls(diameters=diam, edges=e, distances=_per_item(dist, len(e), "distances", "edge"))
+        dist = _per_item(dist, len(e), "distances", "edge")
+        return cls(diameters=diam, edges=e, distances=dist, dim=dim)
 
     @classmethod
     def from_template(
@@ -439,9 +523,11 @@ class Formation:
             both in the paper's sign convention (module docstring).
         """
         tpl = np.asarray(template, dtype=float)
-        if tpl.ndim != 2 or tpl.shape[1] != 2 or tpl.shape[0] < 2:
+        if tpl.ndim != 2 or tpl.shape[1] not in (2, 3) or tpl.shape[0] < 2:
             raise FormationError(
-                f"template must have shape (n, 2) with n >= 2, got {tpl.shape}", key="template"
+                f"template must have shape (n, 2) or, in space, (n, 3) with n >= 2, got "
+                f"{tpl.shape}",
+                key="template",
             )
         if not np.all(np.isfinite(tpl)):
             raise FormationError("template holds NaN or infinite numbers", key="template")
@@ -457,6 +543,21 @@ class Formation:
         triples: NDArray[np.int64] | None = None
         values: NDArray[np.float64] | None = None
         skipped = 0
+        if tpl.shape[1] == 3:  # in space: the chirality of tetrahedra (.chirality)
+            if alpha_values != "sign":
+                raise FormationError(
+                    "in space the orientation is a chirality, which has signs only: use "
+                    'alpha_values = "sign"',
+                    key="alpha_values",
+                )
+            quads = signs = None
+            if orientation != "free":
+                shape = tpl if orientation == "template" else tpl * np.array([-1.0, 1.0, 1.0])
+                quads, signs, skipped = chirality_from_shape(shape, e)
+            return cls(
+                diameters=diam, edges=e, distances=dist, collinear_skipped=skipped,
+                orientation=orientation, template=tpl, chiral_quads=quads, chiral_signs=signs,
+            )  # fmt: skip
         if orientation != "free":
             shape = tpl if orientation == "template" else tpl * np.array([-1.0, 1.0])
             triples, values, skipped = alpha_from_shape(shape, e, alpha_values)
@@ -557,7 +658,7 @@ class Formation:
         if orientation == "free":
             return Formation(
                 diameters=self.diameters, edges=self.edges, distances=self.distances,
-                template=self.template, bearings=self.bearings,
+                template=self.template, bearings=self.bearings, dim=self.dim,
             )  # fmt: skip
         if self.template is None:
             raise FormationError(f"orientation {orientation!r} needs a template", key="orientation")
@@ -702,8 +803,33 @@ class Formation:
 
     @property
     def has_orientation(self) -> bool:
-        """Whether some triple is restricted (the orientation is not free)."""
-        return len(self.restricted_halves) > 0
+        """Whether some triple is restricted (the orientation is not free); in space,
+        whether some quadruple's chirality is (:attr:`has_chirality`)."""
+        return len(self.restricted_halves) > 0 or self.has_chirality
+
+    @property
+    def has_chirality(self) -> bool:
+        """Whether some quadruple's chirality is restricted (a formation in space)."""
+        return self.chiral_quads is not None and len(self.chiral_quads) > 0
+
+    @cached_property
+    def chiral_surfaces(self) -> tuple[NDArray[np.int64], NDArray[np.int8], NDArray[np.int64]]:
+        """The distinct switching surfaces of the chirality restrictions: sorted tetrahedra
+        ``(s, 4)``, their ``beta_s`` and the surface of each quadruple
+        (:func:`.chirality.chirality_surfaces`)."""
+        if not self.has_chirality:
+            return np.zeros((0, 4), np.int64), np.zeros(0, np.int8), np.zeros(0, np.int64)
+        out = chirality_surfaces(self.chiral_quads, self.chiral_signs)  # type: ignore[arg-type]
+        for arr in out:
+            arr.setflags(write=False)
+        return out
+
+    @property
+    def chiral_sign(self) -> NDArray[np.float64]:
+        """Desired ``sign(v_ijkl)`` of each restricted quadruple, ``-beta_ijkl``; ``(Q,)``."""
+        if self.chiral_signs is None:
+            return np.zeros(0)
+        return -self.chiral_signs.astype(float)
 
     @property
     def restricted_halves(self) -> NDArray[np.integer]:
@@ -823,14 +949,20 @@ class Formation:
 
     @cached_property
     def surface_labels(self) -> list[str]:
-        """1-based label of each switching surface, ``"alpha_ijk"`` of its first triple."""
+        """1-based label of each switching surface, ``"alpha_ijk"`` of its first triple; in
+        space ``"v_abcd"``, the tetrahedron whose chirality switches on it."""
+        if self.dim == 3:
+            return ["v_{}{}{}{}".format(*t) for t in (self.chiral_surfaces[0] + 1).tolist()]
         first = np.unique(self.half_surface, return_index=True)[1]  # (a half: before its mirror)
         firsts = (self.restricted_halves[first] + 1).tolist()  # ints: 10x faster to format
         return ["alpha_{}{}{}".format(*ijk) for ijk in firsts]
 
     @property
     def kappa(self) -> float:
-        """The constant of eqs. (24)-(25): pi for angles, 3 for signs."""
+        """The constant of eqs. (24)-(25): pi for angles, 3 for signs; in space 4, the
+        robots of a tetrahedron that each hold its restriction (docs/three-d.md)."""
+        if self.dim == 3:
+            return 4.0
         return math.pi if self.alpha_values == "angle" else 3.0
 
     @cached_property
@@ -844,15 +976,16 @@ class Formation:
         return is_rigid(self.edges, self.n)
 
     def check_positions(self, q: ArrayLike, *, what: str = "initial positions") -> NDArray:
-        """Validate positions ``q`` of shape ``(..., n, 2)``: finite, no overlapping robots.
+        """Validate positions ``q`` of shape ``(..., n, dim)``: finite, no overlapping robots.
 
         Returns the positions as a float array. Raises :class:`FormationError`
         naming the first overlapping pair (1-based).
         """
         arr = np.asarray(q, dtype=float)
-        if arr.ndim < 2 or arr.shape[-2:] != (self.n, 2):
+        if arr.ndim < 2 or arr.shape[-2:] != (self.n, self.dim):
             raise FormationError(
-                f"{what} must have shape (..., {self.n}, 2), got {arr.shape}", key="positions"
+                f"{what} must have shape (..., {self.n}, {self.dim}), got {arr.shape}",
+                key="positions",
             )
         if not np.all(np.isfinite(arr)):
             raise FormationError(f"{what} hold NaN or infinite numbers", key="positions")
@@ -863,7 +996,7 @@ class Formation:
         else:  # only pairs that could touch
             pi, pj = close_pairs(arr, float(self.diameters.max())).T
         diff = arr[..., pj, :] - arr[..., pi, :]
-        r = np.sqrt(diff[..., 0] * diff[..., 0] + diff[..., 1] * diff[..., 1])
+        r = np.sqrt(np.sum(diff * diff, axis=-1))
         gap = r - 0.5 * (self.diameters[pi] + self.diameters[pj])
         if np.any(gap <= 0):
             flat = np.argwhere(gap <= 0)[0]

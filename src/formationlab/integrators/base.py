@@ -28,7 +28,7 @@ from ..dynamics import System
 from ..registry import Registry
 from ..status import Status
 from ..validation import positive
-from .driver import Progress, drive
+from .driver import Progress, drive, position_dim
 
 __all__ = [
     "INTEGRATORS",
@@ -73,11 +73,12 @@ class RawSolution:
     status: Status = Status.SUCCESS
     message: str = ""
     stats: dict[str, Any] = field(default_factory=dict)
+    dim: int = 2  #: the position columns of the state: 2 in the plane, 3 in space
 
     @property
     def q(self) -> NDArray[np.float64]:
-        """Saved positions ``(T, n, 2)``."""
-        return self.x[..., :2]
+        """Saved positions ``(T, n, dim)``."""
+        return self.x[..., : self.dim]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -155,8 +156,9 @@ class FixedStepIntegrator(Integrator):
         )  # fmt: skip
         t, x, v = out.trajectory(0)
         return RawSolution(
-            t=t, x=x, v=v, status=out.statuses()[0], message=out.message[0], stats=out.stats
-        )
+            t=t, x=x, v=v, status=out.statuses()[0], message=out.message[0], stats=out.stats,
+            dim=position_dim(system),
+        )  # fmt: skip
 
 
 def steps_for(duration: float, dt: float) -> int:

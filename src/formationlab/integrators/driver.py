@@ -55,16 +55,23 @@ from numpy.typing import NDArray
 
 from ..dynamics import SensedView, System
 from ..errors import ParameterError
+from ..formation.geometry import row_norms
 from ..status import Status
 from .diagnostics import SwitchMonitor
 from .stepped import Stepped, StopRule
 
-__all__ = ["Stepped", "Stepping", "StopRule", "drive"]
+__all__ = ["Stepped", "Stepping", "StopRule", "drive", "position_dim"]
 
 P = ParamSpec("P")
 R = TypeVar("R")
 
 Progress = Callable[[float], None]
+
+
+def position_dim(system: Any) -> int:
+    """The position columns of ``system``'s states: its formation's ``dim`` (2 in the plane,
+    3 in space); 2 for the duck-typed systems of tests, which have no formation."""
+    return int(getattr(getattr(system, "formation", None), "dim", 2))
 
 
 class Scheme(Protocol):
@@ -162,13 +169,14 @@ class Stepping:
         self.message = [""] * B
         self.min_clear = system.clearance(x)
         self.net = np.full(B, np.nan)
-        self.q_window = np.full((B, *x.shape[1:-1], 2), np.nan)
+        self.dim = d = position_dim(system)  # the position columns
+        self.q_window = np.full((B, *x.shape[1:-1], d), np.nan)
         self.window_step = -1 if window is None else self.n_steps - int(window)
         self.saved: list[
             tuple[int, NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]
         ] = []
         self.live, self.x = np.arange(B), x
-        self.xc, self.kc = x[..., :2].copy(), -1  # positions at the previous check, its step
+        self.xc, self.kc = x[..., :d].copy(), -1  # positions at the previous check, its step
         self.seen_c = np.ones(B, dtype=bool)  # whether each trial's robots saw everyone then
         self.monitor = SwitchMonitor(sigma0=system.sigma(x[0]), t0=self.t0) if diagnostics else None
         self.counters: dict[str, float] = {}
@@ -219,16 +227,16 @@ class Stepping:
         self.evaluations += live.size
         self.v = v
         if k == self.window_step:
-            self.q_window[live] = x[..., :2]
+            self.q_window[live] = x[..., : self.dim]
         ending = np.zeros(live.size, dtype=bool)
         clear = None
         if stop is not None and (k % stop.check_every == 0 or k == n_steps):
-            q = x[..., :2]
+            q = x[..., : self.dim]
             still = system.speed(x, v) <= stop.speed
             if self.kc >= 0:
                 d = q - self.xc
                 net = self.net
-                net[live] = np.sqrt(np.max(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1], -1))
+                net[live] = np.max(row_norms(d), -1)
                 net[live] /= (k - self.kc) * dt
                 still |= net[live] <= stop.speed
             if channel is not None:  # robots that wait for a measurement are not at rest

@@ -48,7 +48,7 @@ from ..errors import ParameterError
 from ..status import Status
 from ..validation import check_fields, one_of
 from .base import Integrator, RawSolution, register_integrator, steps_for
-from .driver import Progress
+from .driver import Progress, position_dim
 
 __all__ = ["OFF", "ON", "SLIDE", "Filippov"]
 
@@ -388,6 +388,7 @@ class Filippov(Integrator):
             "max_excursion": excursion,
         }
         return RawSolution(
+            dim=position_dim(system),
             t=np.asarray(ts),
             x=np.asarray(qs),
             v=np.asarray(vs),

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from ..dynamics import System
 from ..validation import positive
 from .base import FixedStepIntegrator
+from .driver import position_dim
 
 __all__ = ["Substepped"]
 
@@ -58,7 +59,7 @@ class Substepped(FixedStepIntegrator):
         t: float = 0.0,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         with np.errstate(all="ignore"):
-            pos = system.rhs(x, t)[..., :2]
+            pos = system.rhs(x, t)[..., : position_dim(system)]
             speed = np.sqrt(np.max(np.sum(pos * pos, axis=-1), axis=-1))
         need = np.clip(np.ceil(np.log2(np.maximum(speed * dt / self.reach, 1.0))), 0, 8)
         need = np.minimum(need, self.max_level).astype(int)

@@ -28,6 +28,8 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..errors import ParameterError
+
 __all__ = ["RobotModel"]
 
 
@@ -43,6 +45,22 @@ class RobotModel:
     #: whether the law's control is a velocity command of :meth:`points` (the safety
     #: filter certifies it as one); False for a model whose command is a force
     command_is_velocity: ClassVar[bool] = True
+    #: the spaces (``Formation.dim``) the model moves in; its state's columns are in the
+    #: plane's terms (``state_names``) unless the model says how it extends to space
+    dims: ClassVar[tuple[int, ...]] = (2,)
+
+    def check_space(self, dim: int) -> None:
+        """Refuse, by name, a formation in a space (``Formation.dim``) the model does not
+        move in."""
+        if dim not in self.dims:
+            raise ParameterError(
+                f"the robot model {self.name!r} moves in the plane, and this formation is in "
+                f'space ({dim}-D): use model = "single-integrator"'
+            )
+
+    def names_in(self, dim: int) -> tuple[str, ...]:
+        """The names of the state's columns for a formation in ``dim`` dimensions."""
+        return self.state_names
 
     @classmethod
     def state_size(cls) -> int:

@@ -38,10 +38,10 @@ def scale_factor(size: NDArray[np.float64], limit: float | None) -> NDArray[np.f
 
 
 def limit_speed(u: NDArray[np.float64], max_speed: float | None) -> NDArray[np.float64]:
-    """``u_i min(1, v_max / |u_i|)`` per robot; ``(..., n, 2) -> (..., n, 2)``."""
+    """``u_i min(1, v_max / |u_i|)`` per robot; ``(..., n, d) -> (..., n, d)``."""
     if max_speed is None:
         return u
-    size = np.sqrt(u[..., 0] * u[..., 0] + u[..., 1] * u[..., 1])
+    size = np.sqrt(np.sum(u * u, axis=-1))
     return u * scale_factor(size, max_speed)[..., None]
 
 

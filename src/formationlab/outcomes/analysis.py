@@ -43,8 +43,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..formation.chirality import signed_volumes
 from ..formation.chunked import over_time, time_slices
-from ..formation.geometry import cross
+from ..formation.geometry import cross, row_norms
 from ..formation.spec import DENSE_LIMIT, Formation
 from ..neighbours.kdtree import close_pairs
 from .rigid_motion import DRIFTING, NOT_RIGID, ROTATING, RigidMotion, rigid_motion, rigid_outcome
@@ -151,10 +152,28 @@ def orientation_agreement(formation: Formation, q: ArrayLike) -> tuple[int, int]
     halves ``j < k`` the formation holds are counted twice.
     """
     q = np.asarray(q, dtype=float)
+    if formation.dim == 3:
+        agree, disagree = chirality_agreement(formation, q)
+        return int(agree), int(disagree)
     i, j, k = formation.restricted_halves.T
     s = np.sign(cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :]))
     s = s * -np.sign(formation.half_alpha())  # the desired sign(c_ijk) is -sign(alpha_ijk)
     return 2 * int(np.sum(s > 0)), 2 * int(np.sum(s <= 0))
+
+
+def chirality_agreement(
+    formation: Formation, q: ArrayLike
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Restricted quadruples whose ``sign(v_ijkl)`` agrees / disagrees with the desired one
+    (a formation in space, :mod:`formationlab.formation.chirality`); each ``(...)``.
+
+    A flat quadruple (``v = 0``) disagrees, as a collinear triple does in the plane.
+    """
+    if not formation.has_chirality:
+        shape = np.shape(q)[:-2]
+        return np.zeros(shape, np.int64), np.zeros(shape, np.int64)
+    s = np.sign(signed_volumes(q, formation.chiral_quads)) * formation.chiral_sign
+    return np.sum(s > 0, axis=-1), np.sum(s <= 0, axis=-1)
 
 
 def touching(formation: Formation, q: ArrayLike) -> bool:
@@ -264,7 +283,7 @@ def net_speed(t: ArrayLike, q: ArrayLike, window: float) -> NDArray[np.float64]:
     for part in time_slices(len(rows), _SCRATCH * q[0].size):  # bounded scratch memory
         k = rows[part]
         d = q[k] - q[j[k]]
-        disp = np.sqrt(np.max(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1], axis=-1))
+        disp = np.max(row_norms(d), axis=-1)
         out[k] = disp / (t[k] - t[j[k]])
     return out
 

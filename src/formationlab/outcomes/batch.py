@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from ..formation.spec import Formation
 from ..status import DIVERGED_SCALE, Status
 from ..validation import COORDINATE_LIMIT
-from .analysis import OUTCOMES, Tolerances, bearing_errors, bearings_met
+from .analysis import OUTCOMES, Tolerances, bearing_errors, bearings_met, chirality_agreement
 from .rigid_motion import DRIFTING, ROTATING, RigidMotion, rigid_motion, rigid_outcome
 
 __all__ = ["BatchResult", "classify_batch", "max_distance_errors"]
@@ -233,6 +233,8 @@ def classify_batch(
             c = rij[..., 0] * rik[..., 1] - rij[..., 1] * rik[..., 0]
             s = np.sign(c) * want
             agree, disagree = np.sum(s > 0, axis=-1), np.sum(s <= 0, axis=-1)
+        elif formation.has_chirality and formation.bearings is None:  # in space
+            agree, disagree = chirality_agreement(formation, qb)
         else:
             agree = disagree = np.zeros(len(qb), dtype=np.int64)
         stopped = np.max(np.linalg.norm(u[sl], axis=-1), axis=-1) <= tol.speed

@@ -114,6 +114,8 @@ def rigid_motion(before: ArrayLike, after: ArrayLike, window: ArrayLike) -> Rigi
     p = np.asarray(before, dtype=float)
     q = np.asarray(after, dtype=float)
     t = np.asarray(window, dtype=float)
+    if p.shape[-1] == 3:
+        return _rigid_motion_in_space(p, q, t)
     with np.errstate(invalid="ignore", divide="ignore"):
         t = np.where(t > 0, t, np.nan)
         pc, qc = p.mean(axis=-2), q.mean(axis=-2)
@@ -135,6 +137,45 @@ def rigid_motion(before: ArrayLike, after: ArrayLike, window: ArrayLike) -> Rigi
     return RigidMotion(
         velocity=velocity, omega=omega, centre=centre, speed=speed, spin=spin,
         shape_rate=shape_rate, window=t,
+    )  # fmt: skip
+
+
+def _rigid_motion_in_space(p: NDArray, q: NDArray, t: NDArray) -> RigidMotion:
+    """:func:`rigid_motion` of positions in space ``(..., n, 3)``.
+
+    The rotation ``R`` is the least-squares (Kabsch) fit of the centred shapes, from the
+    singular value decomposition of ``sum_i B_i A_i^T`` with the sign that keeps ``det R =
+    +1`` (a rotation, never a reflection); ``omega`` is its angle over ``T`` (>= 0: in
+    space the axis carries the direction), the velocity the centroid's chord over ``T``,
+    and the centre NaN (a rotation in space has an axis, not a centre).
+    """
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.where(t > 0, t, np.nan)
+        pc, qc = p.mean(axis=-2), q.mean(axis=-2)
+        a, b = p - pc[..., None, :], q - qc[..., None, :]
+        h = np.einsum("...ni,...nj->...ij", b, a)  # sum_i B_i A_i^T
+        ok = np.all(np.isfinite(h), axis=(-2, -1))
+        u, _, vt = np.linalg.svd(np.where(ok[..., None, None], h, 0.0))
+        flip = np.sign(np.linalg.det(u @ vt))
+        u[..., :, 2] *= np.where(flip == 0, 1.0, flip)[..., None]
+        rot = u @ vt  # the rotation carrying A onto B (det +1)
+        ra = np.einsum("...ij,...nj->...ni", rot, a)
+        shape_rate = np.max(np.linalg.norm(b - ra, axis=-1), axis=-1) / t
+        cos = np.clip(0.5 * (np.trace(rot, axis1=-2, axis2=-1) - 1.0), -1.0, 1.0)
+        angle = np.where(ok, np.arccos(cos), np.nan)
+        omega = angle / t
+        # the axis, from the rotation's antisymmetric part (omega_vec = omega axis)
+        w = np.stack([rot[..., 2, 1] - rot[..., 1, 2], rot[..., 0, 2] - rot[..., 2, 0],
+                      rot[..., 1, 0] - rot[..., 0, 1]], axis=-1)  # fmt: skip
+        size = np.linalg.norm(w, axis=-1)
+        axis = w / np.where(size > 0, size, 1.0)[..., None]
+        velocity = (qc - pc) / t[..., None]
+        move = velocity[..., None, :] + omega[..., None, None] * np.cross(axis[..., None, :], b)
+        speed = np.max(np.linalg.norm(move, axis=-1), axis=-1)
+        spin = np.abs(omega) * np.max(np.linalg.norm(b, axis=-1), axis=-1)
+    return RigidMotion(
+        velocity=velocity, omega=omega, centre=np.full(velocity.shape, np.nan), speed=speed,
+        spin=spin, shape_rate=shape_rate, window=t,
     )  # fmt: skip
 
 

@@ -258,22 +258,34 @@ def restrictions_on_at_target(formation: Formation, law: Any) -> str | None:
     """
     switching = getattr(law, "switching", None)
     theta = getattr(law, "theta", None)
-    if switching is None or theta is None or formation.alpha is None:
+    if switching is None or theta is None or not formation.has_orientation:
         return None
     if formation.template is None or formation.orientation not in ("template", "mirror"):
         return None
     shape = formation.template
     if formation.orientation == "mirror":
-        shape = shape * np.array([-1.0, 1.0])
+        shape = shape * np.array([-1.0, 1.0, 1.0][: formation.dim])
     sigma = np.asarray(switching(formation, shape))
     on = np.flatnonzero(sigma >= 0)
     if on.size == 0:
         return None
-    tris, beta, _ = formation.surfaces
+    bound = float(np.min(theta - sigma))  # the smallest |beta_s c_abc| at the desired shape
     worst = on[np.argmax(sigma[on])]
+    if formation.dim == 3:  # in space: tetrahedra flatter than theta (docs/three-d.md)
+        tets, beta3, _ = formation.chiral_surfaces
+        robots = ", ".join(str(int(x) + 1) for x in tets[worst])
+        size = abs(float(sigma[worst] - theta) / float(beta3[worst]))  # |v_abcd|
+        label = "v_" + "".join(str(int(x) + 1) for x in tets[worst])
+        tip = f"use theta below {bound:.3g} (the flattest restricted tetrahedron), " * (bound > 0)
+        return (
+            f"{on.size} of the {sigma.size} restrictions of law {law.name!r} are on at the "
+            f"desired shape (e.g. robots {robots}: |{label}| = {size:.3g} <= theta = "
+            f"{theta:g}, a tetrahedron flatter than theta), so the desired formation is not an "
+            f"equilibrium of the law; {tip}or a graph without these quadruples"
+        )
+    tris, beta, _ = formation.surfaces
     a, b, c = (int(x) + 1 for x in tris[worst])
     area = abs(float(sigma[worst] - theta) / float(beta[worst]))  # |c_abc|
-    bound = float(np.min(theta - sigma))  # the smallest |beta_s c_abc| at the desired shape
     tip = f"use theta below {bound:.3g} (the thinnest restricted triangle), " if bound > 0 else ""
     what = (
         "the desired formation is not an equilibrium of the law"

@@ -346,7 +346,7 @@ class SimulationResult:
             extra["bearing_error_stats"] = error_statistics(berr, tol.bearing)
         return {
             "model": {"name": self.model.name, **dataclasses.asdict(self.model)},
-            "state_names": list(type(self.model).state_names),
+            "state_names": list(self.model.names_in(self.formation.dim)),
             "outcome": outcome,
             "status": self.status,
             "message": self.message,
@@ -614,7 +614,7 @@ def _result(
         integrator=integrator,
         t=raw.t,
         q=raw.q,
-        u=raw.v[..., :2],
+        u=raw.v[..., : formation.dim],
         V=V,
         sigma=sigma,
         status=status,
@@ -650,6 +650,7 @@ def initial_state(
     differ (near-identity hand points: the law's barrier acts on them).
     """
     arr = np.asarray(q0, dtype=float)
+    model.check_space(formation.dim)
     k = model.state_size()
     if arr.ndim >= 2 and arr.shape[-1] == k and k > 2:
         if initial:
@@ -660,19 +661,19 @@ def initial_state(
         if not np.all(np.isfinite(arr)):
             raise FormationError("the initial state holds NaN or infinite numbers")
         x0 = arr.copy()
-        formation.check_positions(x0[..., :2])
+        formation.check_positions(model.positions(x0))
     else:
         q = formation.check_positions(arr)
         x0 = model.initial_state(q, **initial)
     if x0.ndim != 2:
         raise ParameterError(f"simulate takes one initial state of shape (n, k), got {x0.shape}")
     points = model.points(x0)
-    if not np.array_equal(points, x0[..., :2]):
+    if not np.array_equal(points, model.positions(x0)):
         try:
             formation.check_positions(points, what="initial hand points")
         except FormationError as exc:
             # an offset wider than the formation is the cause, else the robots' headings
-            q = x0[..., :2]
+            q = model.positions(x0)
             across = float(np.max(np.ptp(q, axis=0))) if len(q) else 0.0
             offset = float(getattr(model, "offset", 0.0))
             if offset > across:
@@ -728,8 +729,9 @@ def build_system(
             f"'barrier-decentralized', 'none'), got {safety!r}",
             key="safety",
         )
-    check_obstacle_starts(model.positions(x0), formation.diameters / 2, tuple(obstacles))
-    return System(
+    system = System(
         formation=formation, law=law, model=model, marching=marching,
         obstacles=tuple(obstacles), safety=safety, sensing=sensing, faults=faults,
     )  # fmt: skip
+    check_obstacle_starts(model.positions(x0), formation.diameters / 2, system.obstacles)
+    return system

@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import validation
-from ..controllers import LAWS, Law, get_law
+from ..controllers import LAWS, Law, get_law, laws_in
 from ..dynamics import System
 from ..errors import UserInputError, ViewerWarning
 from ..integrators import FixedStepIntegrator, Integrator, get_integrator
@@ -76,9 +76,10 @@ def law_parameters(law: Law) -> dict[str, float]:
     }
 
 
-def _law_catalogue() -> dict[str, dict[str, float]]:
-    """Every registered law with the defaults of its scalar gains."""
-    return {name: law_parameters(cls()) for name, cls in sorted(LAWS.items())}
+def _law_catalogue(dim: int) -> dict[str, dict[str, float]]:
+    """Every registered law that works in ``dim`` dimensions, with the defaults of its
+    scalar gains."""
+    return {name: law_parameters(LAWS[name]()) for name in laws_in(dim)}
 
 
 class LiveSession:
@@ -273,7 +274,7 @@ class LiveSession:
             **static_info(self.formation, self.scenario.name),
             **scene_info(self.system),
             "law": {"name": self.law.name, "params": law_parameters(self.law)},
-            "laws": _law_catalogue(),
+            "laws": _law_catalogue(self.formation.dim),
             "integrator": {"name": self.integrator.name, "dt": self.integrator.dt},
             "integrators": list(LIVE_INTEGRATORS),
             "models": [self.system.model.name],
