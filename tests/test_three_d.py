@@ -7,7 +7,9 @@ condition with kappa = 4, the robots of a tetrahedron.
 
 from __future__ import annotations
 
+import json
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -240,3 +242,156 @@ def test_every_law_and_integrator_of_space_reaches_the_distances(law, integrator
     assert np.max(np.abs(fl.distance_errors(f, r.q[-1]))) < 1e-2
     if law == "chirality-restricted":
         assert s["outcome"] == "desired"
+
+
+# ------------------------------------------------------------------ scenario files and commands
+
+EXAMPLES = Path(__file__).parents[1] / "examples" / "space"
+
+
+def invoke(*args: object):
+    from typer.testing import CliRunner
+
+    from formationlab.cli import _load_commands, app
+
+    _load_commands()
+    return CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False)
+
+
+@pytest.fixture(scope="module")
+def tetra_run(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("space") / "out"
+    res = invoke("run", EXAMPLES / "tetrahedron-mirror.toml", "--out", out, "--quiet")
+    assert res.exit_code == 0, res.output
+    return out
+
+
+def test_run_writes_a_run_in_space(tetra_run: Path) -> None:
+    import xarray as xr
+
+    s = json.loads((tetra_run / "summary.json").read_text())
+    assert s["outcome"] == "desired" and s["state_names"] == ["x", "y", "z"]
+    assert s["max_distance_error"] < 1e-3
+    with xr.open_dataset(tetra_run / "trajectory.nc") as ds:
+        assert list(ds["axis"].values) == ["x", "y", "z"]
+        assert ds["q"].shape[1:] == (4, 3)
+        q_end = ds["q"].values[-1]
+        assert list(ds["surface"].values) == ["v_1234"]
+    f = fl.Formation.from_template(TETRA)
+    assert chirality_agreement(f, q_end) == (4, 0)
+    for name in ("trajectories", "controls_x", "controls_y", "controls_z", "lyapunov"):
+        assert (tetra_run / f"{name}.png").stat().st_size > 10_000
+
+
+def test_the_distance_law_from_the_same_file_ends_at_the_mirror(tmp_path: Path) -> None:
+    text = (EXAMPLES / "tetrahedron-mirror.toml").read_text()
+    path = tmp_path / "plain.toml"
+    path.write_text(text.replace('law = "chirality-restricted"', 'law = "distance"'))
+    res = invoke("run", path, "--out", tmp_path / "out", "--quiet")
+    assert res.exit_code == 1 or res.exit_code == 0, res.output
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["outcome"] == "mirror"
+
+
+@pytest.mark.parametrize(
+    "command, what",
+    [
+        (["study"], "`formationlab study` takes formations in the plane"),
+        (["equilibria"], "`formationlab equilibria` takes formations in the plane"),
+        (["view", "--no-browser"], "the viewer takes formations in the plane"),
+        (["run", "--animate"], "the animation (--animate) takes formations in the plane"),
+    ],
+)
+def test_commands_that_are_planar_refuse_a_run_in_space_by_name(tmp_path, command, what) -> None:
+    args = [command[0], EXAMPLES / "tetrahedron-mirror.toml", *command[1:]]
+    if command[0] != "view":
+        args += ["--out", tmp_path / "out"]
+    res = invoke(*args)
+    assert res.exit_code == 2, res.output
+    text = (EXAMPLES / "tetrahedron-mirror.toml").read_text().splitlines()
+    line = next(k for k, row in enumerate(text, 1) if row.startswith("template ="))
+    assert f"formation.template (line {line})" in res.output and what in res.output
+    assert "Traceback" not in res.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_animate_refuses_a_run_in_space(tetra_run: Path) -> None:
+    res = invoke("animate", tetra_run)
+    assert res.exit_code == 2 and "is a run in space" in res.output, res.output
+
+
+@pytest.mark.parametrize(
+    "change, key, words",
+    [
+        (("[0.2, 0.1, 0.3], [-3.1", "[0.2, 0.1], [-3.1"), "robots.positions",
+         "positions, row 2, must be a pair [x, y], as row 1, got [-3.1, -0.2, 0.1]"),
+        (("[[0.2, 0.1, 0.3], [-3.1, -0.2, 0.1], [-1.4, 2.7, -0.2], [-1.6, 0.8, 2.6]]",
+          "[[0.2, 0.1], [-3.1, -0.2], [-1.4, 2.7], [-1.6, 0.8]]"), "robots.positions",
+         "the positions are [x, y] pairs (the plane) and the template is [x, y, z] triples"),
+        (('edges = "complete"', 'edges = "delaunay"'), "formation.edges",
+         "the delaunay graph is built from points in the plane"),
+        (('law = "chirality-restricted"', 'law = "angle-restricted"'), "",
+         'use law = "chirality-restricted"'),
+        (('[robots]', '[robots]\nmodel = "unicycle"'), "", "moves in the plane"),
+    ],
+)  # fmt: skip
+def test_scenario_mistakes_in_space_are_named(tmp_path, change, key, words) -> None:
+    text = (EXAMPLES / "tetrahedron-mirror.toml").read_text()
+    assert change[0] in text
+    path = tmp_path / "bad.toml"
+    path.write_text(text.replace(*change, 1))
+    res = invoke("run", path, "--out", tmp_path / "out")
+    assert res.exit_code == 2, res.output
+    assert key in res.output and words in res.output, res.output
+    assert "Traceback" not in res.output
+
+
+def test_an_alpha_table_with_points_in_space_is_refused(tmp_path) -> None:
+    text = """
+[robots]
+positions = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+[formation]
+edges = "complete"
+alpha = [[1, 2, 3, 1.0], [2, 3, 1, 1.0], [3, 1, 2, 1.0]]
+[controller]
+law = "distance"
+[simulation]
+integrator = "euler"
+dt = 0.01
+duration = 1.0
+"""
+    path = tmp_path / "alpha.toml"
+    path.write_text(text)
+    res = invoke("validate", path)
+    assert res.exit_code == 2 and "formation.alpha" in res.output, res.output
+    assert "an alpha table restricts triangles in the plane" in res.output
+
+
+def test_rigidity_and_realisability_in_space() -> None:
+    from formationlab.formation.graph import is_rigid
+    from formationlab.formation.realisability import realisability_problems
+
+    k4 = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
+    assert is_rigid(k4, 4, dim=3) and is_rigid(k4, 4)
+    assert not is_rigid(k4[:5], 4, dim=3)  # a hinge: two triangles on a common edge
+    bip = np.array(BIPYRAMID_EDGES) - 1
+    assert is_rigid(bip, 5, dim=3)  # 3n - 6 = 9 edges, rigid
+    assert not is_rigid(bip[:-1], 5, dim=3)
+    octa = [
+        (i, j) for i in range(6) for j in range(i + 1, 6) if (i, j) not in ((0, 1), (2, 3), (4, 5))
+    ]
+    assert is_rigid(np.array(octa), 6, dim=3)  # 12 edges: the octahedron
+    # a regular tetrahedron's distances need space: the plane cannot realise them
+    assert realisability_problems(fl.Formation.from_distances(4, dim=3)) == []
+    assert realisability_problems(fl.Formation.from_distances(4))  # in the plane: a warning
+    assert fl.Formation.from_template(BIPYRAMID, edges=BIPYRAMID_EDGES).is_rigid
+
+
+def test_knn_and_within_graphs_take_points_in_space(rng) -> None:
+    from formationlab.formation.graphs import build_edges
+
+    pts = rng.normal(size=(30, 3))
+    knn = build_edges({"knn": 4}, pts)
+    assert np.all(np.bincount(knn.ravel(), minlength=30) >= 4)
+    within = build_edges({"within": 1.0}, pts)
+    r = np.linalg.norm(pts[within[:, 1]] - pts[within[:, 0]], axis=-1)
+    assert np.all(r <= 1.0 + 1e-9) and len(within) > 0

@@ -122,7 +122,7 @@ def plan_run(sc: Any, save_every: int) -> RunPlan:
     # a few states, fewer of a formation of many robots or edges (whose every state's
     # evaluation lists them all)
     probe = int(np.clip(_PROBE_ROBOTS // max(f.n, len(f.edges)), 1, _PROBE))
-    q = np.broadcast_to(np.asarray(sc.q0, float), (probe, f.n, 2)).copy()
+    q = np.broadcast_to(np.asarray(sc.q0, float), (probe, f.n, f.dim)).copy()
     tracemalloc.start()
     try:
         base = tracemalloc.get_traced_memory()[0]
@@ -132,7 +132,7 @@ def plan_run(sc: Any, save_every: int) -> RunPlan:
     finally:
         tracemalloc.stop()
     n, m, s = f.n, len(f.edges), int(sigma.shape[-1])
-    floats = 4 * n + 1 + m + s  # q, u, V, distance errors, sigma
+    floats = 2 * f.dim * n + 1 + m + s  # q, u, V, distance errors, sigma
     stored = _OBJECT_BYTES + 16 * n + 8 * floats  # the integrator's list and the arrays
     return RunPlan(
         steps=steps,

@@ -194,6 +194,11 @@ def animate_cmd(
     with ds:
         if "q" not in ds or "edge_robots" not in ds:
             raise UserInputError(f"{nc} is not a formationlab trajectory (no q or edge_robots)")
+        if ds.sizes.get("axis", 2) == 3:
+            raise UserInputError(
+                f"{nc} is a run in space (x, y, z): `formationlab animate` draws formations in "
+                "the plane so far; trajectories.png shows the paths in 3-D"
+            )
         title = str(ds.attrs.get("scenario_name", folder.name))
         done: list[Path] = []
         try:

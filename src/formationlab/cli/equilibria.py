@@ -89,6 +89,7 @@ def equilibria(
     from ..plotting.equilibria import continuation_figure, gallery_figure
 
     sc = load_scenario(scenario)
+    sc.in_plane("`formationlab equilibria`")
     for w in sc.warnings:
         warn(w if w.startswith(sc.source) else f"{sc.source}: {w}")
     if sc.model.name != "single-integrator" or sc.marching is not None:

@@ -180,6 +180,7 @@ class FormationEnv(ParallelEnv):
         self.tolerances = tolerances or Tolerances()
         self.dt = float(dt)
         self.n_steps = max(1, round(float(scenario.duration) / self.dt))
+        scenario.in_plane("the PettingZoo environment")
         self.system = closed_loop(scenario, sensing=sensing, faults=faults)
         self.terms = scenario.law.compiled_terms(self.formation)  # the law's local form
         # unicycles are driven by (v, omega): through the near-identity transform, which

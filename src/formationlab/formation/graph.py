@@ -13,7 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import FormationError
 from ..resources import check_memory
-from .rigidity import is_generically_rigid
+from .rigidity import is_generically_rigid, rigidity_matrix
 
 __all__ = [
     "DENSE_RIGIDITY_MAX",
@@ -107,8 +107,9 @@ def edges_connected(edges: NDArray[np.integer], n: int) -> bool:
     return bool(connected_components(graph, directed=False, return_labels=False) == 1)
 
 
-def is_rigid(edges: NDArray[np.integer], n: int, *, method: str = "auto") -> bool:
-    """Generic infinitesimal rigidity in the plane: the rigidity matrix has rank ``2n - 3``.
+def is_rigid(edges: NDArray[np.integer], n: int, *, method: str = "auto", dim: int = 2) -> bool:
+    """Generic infinitesimal rigidity: the rigidity matrix has rank ``2n - 3`` in the plane,
+    ``3n - 6`` in space (``dim = 3``, ``n >= 3``; ``2n - 3`` for three robots, one for two).
 
     Parameters
     ----------
@@ -121,10 +122,24 @@ def is_rigid(edges: NDArray[np.integer], n: int, *, method: str = "auto") -> boo
         random) placement, so the answer is the graph's, not a particular
         shape's; ``"pebble"``: rigid bodies and the pebble game
         (:func:`formationlab.formation.rigidity.is_generically_rigid`, exact, for any
-        size); ``"auto"``: dense up to :data:`DENSE_RIGIDITY_MAX` robots.
+        size; the plane only); ``"auto"``: dense up to :data:`DENSE_RIGIDITY_MAX` robots.
+    dim : {2, 3}
+        The space. In space no counting condition decides rigidity (Laman's theorem has no
+        analogue), so the rank at a random placement is the test: a placement drawn from a
+        Gaussian is generic with probability one, and a rank that rounding lowers would say
+        "not rigid" for a rigid graph, never the reverse (``numpy.linalg.matrix_rank``'s
+        tolerance, far above the rounding of these entries).
     """
     if method not in ("auto", "dense", "pebble"):
         raise ValueError(f'method must be "auto", "dense" or "pebble", got {method!r}')
+    if dim == 3:
+        if method == "pebble":
+            raise ValueError("the pebble game decides rigidity in the plane only")
+        want = 1 if n == 2 else 3 if n == 3 else 3 * n - 6
+        if len(edges) < want:
+            return False
+        q = np.random.default_rng(12345).normal(size=(n, 3))
+        return bool(np.linalg.matrix_rank(rigidity_matrix(q, edges).toarray()) == want)
     if method == "pebble" or (method == "auto" and n > DENSE_RIGIDITY_MAX):
         return is_generically_rigid(edges, n)
     if n == 2:

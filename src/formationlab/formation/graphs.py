@@ -68,11 +68,20 @@ def _sorted_unique(i: NDArray[np.int64], j: NDArray[np.int64]) -> NDArray[np.int
     return np.stack([key // base, key % base], axis=1)
 
 
-def _points(points: ArrayLike) -> NDArray[np.float64]:
+def _points(points: ArrayLike, what: str = "", dims: tuple[int, ...] = (2,)) -> NDArray[np.float64]:
+    """The builder's points, checked: ``(n, 2)``, or ``(n, 3)`` for the builders of ``dims``
+    that work in space (``what`` names the builder for the message)."""
     pts = np.asarray(points, dtype=float)
-    if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] < 2:
+    if pts.ndim == 2 and pts.shape[1] == 3 and 3 not in dims and pts.shape[0] >= 2:
         raise FormationError(
-            f"graph builders need points of shape (n, 2) with n >= 2, got {pts.shape}",
+            f"the {what} graph is built from points in the plane, and this template is in "
+            'space: use edges = { knn = k }, { within = r }, "complete" or a list of pairs',
+            key="edges",
+        )
+    if pts.ndim != 2 or pts.shape[1] not in dims or pts.shape[0] < 2:
+        shapes = " or ".join(f"(n, {d})" for d in dims)
+        raise FormationError(
+            f"graph builders need points of shape {shapes} with n >= 2, got {pts.shape}",
             key="template",
         )
     if not np.all(np.isfinite(pts)):
@@ -112,7 +121,7 @@ def delaunay_edges(points: ArrayLike, *, peel_angle: float = PEEL_ANGLE) -> NDAr
     FormationError
         The points are all on one line (no triangulation; use ``{ knn = 2 }``).
     """
-    pts = _points(points)
+    pts = _points(points, "delaunay")
     n = pts.shape[0]
     if n == 2:
         return np.array([[0, 1]], dtype=np.int64)
@@ -175,11 +184,11 @@ def knn_edges(points: ArrayLike, k: int) -> NDArray[np.int64]:
 
     Parameters
     ----------
-    points : array_like, shape (n, 2)
+    points : array_like, shape (n, 2) or, in space, (n, 3)
     k : int
         ``1 <= k < n``.
     """
-    pts = _points(points)
+    pts = _points(points, "knn", (2, 3))
     n = pts.shape[0]
     if isinstance(k, bool) or not isinstance(k, int | np.integer) or not 1 <= k < n:
         raise FormationError(
@@ -200,11 +209,11 @@ def within_edges(points: ArrayLike, r: float) -> NDArray[np.int64]:
 
     Parameters
     ----------
-    points : array_like, shape (n, 2)
+    points : array_like, shape (n, 2) or, in space, (n, 3)
     r : float
         > 0.
     """
-    pts = _points(points)
+    pts = _points(points, "within", (2, 3))
     if (
         isinstance(r, bool)
         or not isinstance(r, int | float | np.floating)
@@ -232,7 +241,7 @@ def henneberg_edges(points: ArrayLike, *, neighbours: int = 12) -> NDArray[np.in
     neighbours : int
         How many nearest points to look among first (more only when needed).
     """
-    pts = _points(points)
+    pts = _points(points, "henneberg")
     n = pts.shape[0]
     d2 = np.sum((pts - pts.mean(axis=0)) ** 2, axis=1)
     order = np.argsort(d2, kind="stable")
@@ -293,7 +302,7 @@ def build_edges(spec: str | Mapping[str, Any] | ArrayLike, points: ArrayLike) ->
     """
     if isinstance(spec, str):
         if spec == "complete":
-            return complete_edges(_points(points).shape[0])
+            return complete_edges(_points(points, "complete", (2, 3)).shape[0])
         if spec == "delaunay":
             return delaunay_edges(points)
         if spec == "henneberg":

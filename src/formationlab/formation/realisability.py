@@ -74,7 +74,7 @@ def best_realisation(f: Formation, *, seed: int = 0) -> tuple[NDArray[np.float64
 
     Returns
     -------
-    q : ndarray, shape (n, 2)
+    q : ndarray, shape (n, dim)
     error : float
         ``max |r_ij - d_ij|`` at ``q``.
     """
@@ -83,12 +83,12 @@ def best_realisation(f: Formation, *, seed: int = 0) -> tuple[NDArray[np.float64
     e, d = f.edges, f.distances
 
     def residual(x: NDArray[np.float64]) -> NDArray[np.float64]:
-        q = x.reshape(-1, 2)
+        q = x.reshape(-1, f.dim)
         return np.linalg.norm(q[e[:, 1]] - q[e[:, 0]], axis=-1) - d
 
     rng = np.random.default_rng(seed)
     scale = float(np.max(d))
-    starts = [rng.normal(scale=scale, size=(f.n, 2)) for _ in range(_STARTS)]
+    starts = [rng.normal(scale=scale, size=(f.n, f.dim)) for _ in range(_STARTS)]
     if f.template is not None:
         starts.insert(0, np.asarray(f.template, float))
     best_q, best = starts[0], np.inf
@@ -96,26 +96,28 @@ def best_realisation(f: Formation, *, seed: int = 0) -> tuple[NDArray[np.float64
         sol = least_squares(residual, q0.ravel(), xtol=1e-14, ftol=1e-14, gtol=1e-14)
         err = float(np.max(np.abs(residual(sol.x))))
         if err < best:
-            best_q, best = sol.x.reshape(-1, 2), err
+            best_q, best = sol.x.reshape(-1, f.dim), err
         if best <= 1e-9 * scale:
             break
     return best_q, best
 
 
 def _mds_error(f: Formation) -> float:
-    """How far the complete graph's distances are from planar: relative size of what
-    the double-centred squared-distance matrix has beyond two non-negative eigenvalues."""
+    """How far the complete graph's distances are from the formation's space: relative size
+    of what the double-centred squared-distance matrix has beyond ``dim`` non-negative
+    eigenvalues (two in the plane, three in space)."""
     n = f.n
     D2 = np.zeros((n, n))
     D2[f.edges[:, 0], f.edges[:, 1]] = D2[f.edges[:, 1], f.edges[:, 0]] = f.distances**2
     J = np.eye(n) - 1.0 / n
     w = np.linalg.eigvalsh(-0.5 * J @ D2 @ J)[::-1]  # Gram matrix of centred points
-    extra = np.concatenate([np.abs(w[2:]), np.maximum(-w[:2], 0.0)])
+    extra = np.concatenate([np.abs(w[f.dim :]), np.maximum(-w[: f.dim], 0.0)])
     return float(np.max(extra, initial=0.0) / max(float(w[0]), 1e-300))
 
 
 def realisability_problems(f: Formation) -> list[str]:
-    """Why no configuration in the plane meets ``f``'s desired distances; empty if one does.
+    """Why no configuration in ``f``'s space (the plane, or space for ``dim = 3``) meets its
+    desired distances; empty if one does.
 
     Each entry is a sentence for a warning: a violated triangle inequality
     (naming the robots), or, when every triangle passes, the best
@@ -133,6 +135,7 @@ def realisability_problems(f: Formation) -> list[str]:
     if err <= _RTOL * float(np.max(f.distances)):
         return []
     return [
-        "no configuration in the plane has these distances (the closest one found misses "
+        f"no configuration in {'space' if f.dim == 3 else 'the plane'} has these distances "
+        "(the closest one found misses "
         f"one by {err:.3g})"
     ]

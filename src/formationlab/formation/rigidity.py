@@ -49,19 +49,20 @@ __all__ = [
 
 
 def rigidity_matrix(q: NDArray[np.float64], edges: NDArray[np.int64]) -> csr_matrix:
-    """The sparse rigidity matrix ``R`` of positions ``q`` (n, 2): shape ``(m, 2n)``.
+    """The sparse rigidity matrix ``R`` of positions ``q`` (n, d): shape ``(m, d n)``.
 
-    Row ``e = (i, j)`` holds ``q_i - q_j`` in columns ``2i, 2i+1`` and
-    ``q_j - q_i`` in ``2j, 2j+1``: ``R qdot`` is half the rate of change of the
-    squared edge lengths.
+    Row ``e = (i, j)`` holds ``q_i - q_j`` in columns ``d i .. d i + d - 1`` and
+    ``q_j - q_i`` in those of ``j``: ``R qdot`` is half the rate of change of the
+    squared edge lengths. ``d`` is 2 in the plane, 3 in space.
     """
     q = np.asarray(q, dtype=float)
+    d = q.shape[-1]
     e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     diff = q[e[:, 0]] - q[e[:, 1]]
-    rows = np.repeat(np.arange(len(e)), 4)
-    cols = np.stack([2 * e[:, 0], 2 * e[:, 0] + 1, 2 * e[:, 1], 2 * e[:, 1] + 1], axis=1)
+    rows = np.repeat(np.arange(len(e)), 2 * d)
+    cols = np.concatenate([d * e[:, :1] + np.arange(d), d * e[:, 1:] + np.arange(d)], axis=1)
     vals = np.concatenate([diff, -diff], axis=1)
-    return coo_matrix((vals.ravel(), (rows, cols.ravel())), shape=(len(e), 2 * len(q))).tocsr()
+    return coo_matrix((vals.ravel(), (rows, cols.ravel())), shape=(len(e), d * len(q))).tocsr()
 
 
 def _adjacency(edges: NDArray[np.int64], n: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:

@@ -972,8 +972,9 @@ class Formation:
 
     @cached_property
     def is_rigid(self) -> bool:
-        """Generic infinitesimal rigidity of the graph in the plane (:func:`graph.is_rigid`)."""
-        return is_rigid(self.edges, self.n)
+        """Generic infinitesimal rigidity of the graph in the formation's space
+        (:func:`graph.is_rigid`)."""
+        return is_rigid(self.edges, self.n, dim=self.dim)
 
     def check_positions(self, q: ArrayLike, *, what: str = "initial positions") -> NDArray:
         """Validate positions ``q`` of shape ``(..., n, dim)``: finite, no overlapping robots.

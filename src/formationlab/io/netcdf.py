@@ -113,7 +113,7 @@ def _layout(
     coords: dict[str, Any] = {
         "time": ("time", np.asarray(result.t, float), {"units": "s", "long_name": "time"}),
         "robot": ("robot", robot, {"long_name": "robot number (1-based)"}),
-        "axis": ("axis", np.array(["x", "y"])),
+        "axis": ("axis", np.array(["x", "y", "z"][: f.dim])),
         "edge": ("edge", np.array(result.edge_labels)),
     }
     points = result.points
@@ -151,7 +151,11 @@ def _layout(
         series["sigma"] = (
             ("time", "surface"),
             result.sigma,
-            {"long_name": "switching function sigma = beta c_abc + theta (active >= 0)"},
+            {
+                "long_name": "switching function sigma = beta v_abcd + theta (active >= 0)"
+                if f.dim == 3
+                else "switching function sigma = beta c_abc + theta (active >= 0)"
+            },
         )
     if result.safety is not None:
         rec = result.safety

@@ -38,6 +38,7 @@ __all__ = [
     "plot_distance_errors",
     "plot_lyapunov",
     "plot_trajectories",
+    "plot_trajectories_3d",
     "robot_colors",
     "run_figures",
 ]
@@ -179,6 +180,56 @@ def plot_trajectories(
     return artists
 
 
+def plot_trajectories_3d(
+    result: Any, ax: Any = None, *, show_graph: bool = True, title: str | None = None
+) -> list[Any]:
+    """Robot paths in space (a formation with ``dim = 3``), on matplotlib's 3-D axes.
+
+    As :func:`plot_trajectories`: the graph dashed at the start and solid at the end, each
+    path in its robot's colour with a hollow circle at its start and a dot at its end;
+    beyond :data:`~formationlab.plotting.many.LABEL_LIMIT` robots the starts and ends only,
+    coloured by number. The axes share one scale (a cube of data is a cube on the page).
+    ``ax`` must be a 3-D axes (``fig.add_subplot(projection="3d")``); None makes one.
+    """
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+    if ax is None:
+        ax = Figure(figsize=(6.0, 6.0), layout="constrained").add_subplot(projection="3d")
+    f = result.formation
+    q = result.q
+    many = f.n > LABEL_LIMIT
+    colors = robot_colors(f.n)
+    artists: list[Any] = []
+    if show_graph:
+        for k, style in ((0, {"colors": "0.6", "linestyles": "--"}), (-1, {"colors": "0.2"})):
+            segs = np.stack([q[k, f.edges[:, 0]], q[k, f.edges[:, 1]]], axis=1)
+            artists.append(ax.add_collection3d(Line3DCollection(segs, linewidths=0.9, **style)))
+    if many:
+        number = np.arange(1, f.n + 1)
+        artists.append(ax.scatter(*q[0].T, c=number, cmap=ROBOT_MAP, s=6, alpha=0.3))
+        artists.append(ax.scatter(*q[-1].T, c=number, cmap=ROBOT_MAP, s=10))
+    else:
+        for i in range(f.n):
+            artists += ax.plot(*q[:, i].T, color=colors[i], lw=1.4, label=f"robot {i + 1}")
+            artists += ax.plot(*q[0, i, :, None], "o", mfc="none", mec=colors[i], ms=7)
+            artists += ax.plot(*q[-1, i, :, None], "o", color=colors[i], ms=6)
+            artists.append(ax.text(*q[0, i], f" {i + 1}"))
+    lo, hi = q.reshape(-1, 3).min(axis=0), q.reshape(-1, 3).max(axis=0)
+    centre, half = 0.5 * (lo + hi), 0.5 * max(float(np.max(hi - lo)), 1e-9)
+    ax.set_xlim(centre[0] - half, centre[0] + half)
+    ax.set_ylim(centre[1] - half, centre[1] + half)
+    ax.set_zlim(centre[2] - half, centre[2] + half)
+    ax.set_box_aspect((1.0, 1.0, 1.0))
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_zlabel("z [m]")
+    robots = f", {f.n:,} robots" if many else ""
+    ax.set_title(title or f"trajectories in space ({result.law.name} law{robots})")
+    if not many:
+        ax.legend(loc="upper left", fontsize="small")
+    return artists
+
+
 def _many_robots(ax: Axes, result: Any, colors: Any) -> list[Any]:
     """Paths, starts and final positions, one collection each.
 
@@ -215,7 +266,7 @@ def _many_robots(ax: Axes, result: Any, colors: Any) -> list[Any]:
 def plot_controls(
     result: Any, ax: Axes | None = None, *, axis: int = 0, title: str | None = None
 ) -> list[Any]:
-    """Control actions (robot velocities) along x (``axis=0``) or y (``axis=1``) over time.
+    """Control actions (robot velocities) along x (``axis=0``), y (1) or, in space, z (2).
 
     One line per robot up to :data:`~formationlab.plotting.many.LINE_LIMIT` robots (a
     legend up to ``LABEL_LIMIT``); beyond, bands of their distribution over the robots.
@@ -223,7 +274,7 @@ def plot_controls(
     ax = _axes(ax)
     n = result.formation.n
     colors = robot_colors(n)
-    name = "xy"[axis]
+    name = "xyz"[axis]
     artists = _shade_active(ax, result)
     if n > LINE_LIMIT:
         u = result.u
@@ -330,9 +381,10 @@ _TITLE_CHARACTERS = 55
 
 def run_figures(result: Any, *, prefix: str = "") -> dict[str, Figure]:
     """The standard figures of a run, by name: ``trajectories``, ``controls_x``,
-    ``controls_y``, ``lyapunov``, ``distance_errors`` (``bearing_errors`` for a formation
-    judged by its bearings; and ``safety`` for a run with obstacles or a safety filter).
-    Figures are not managed by pyplot (no GUI); save them with
+    ``controls_y`` (and ``controls_z`` in space), ``lyapunov``, ``distance_errors``
+    (``bearing_errors`` for a formation judged by its bearings; and ``safety`` for a run
+    with obstacles or a safety filter). Figures are not managed by pyplot (no GUI); save
+    them with
     :func:`formationlab.io.save_figure`."""
     out: dict[str, Figure] = {}
     panels: tuple[
@@ -346,10 +398,18 @@ def run_figures(result: Any, *, prefix: str = "") -> dict[str, Figure]:
     )
     if result.formation.bearings is not None:  # judged by its bearings: their errors
         panels = (*panels[:-1], ("bearing_errors", plot_bearing_errors, {}, (6.0, 3.6)))
+    space = result.formation.dim == 3
+    if space:  # in space: the paths on 3-D axes, and the velocities in z
+        panels = (
+            ("trajectories", plot_trajectories_3d, {}, (6.0, 6.0)),
+            *panels[1:3],
+            ("controls_z", plot_controls, {"axis": 2}, (6.0, 3.6)),
+            *panels[3:],
+        )
     for name, fn, kw, size in panels:
         with font_context():  # ``prefix`` is the user's scenario name: any script
             fig = Figure(figsize=size, layout="constrained")
-            ax = fig.add_subplot()
+            ax = fig.add_subplot(projection="3d" if fn is plot_trajectories_3d else None)
             fn(result, ax=ax, **kw)
             if prefix:
                 ax.set_title(_prefixed(displayable(prefix), ax.get_title()), wrap=True)

@@ -62,9 +62,26 @@ def build_formation(
             f"give one number or one per robot: there are {n} positions but "
             f"{len(rob.diameters)} diameters",
         )
+    dim = template.shape[1] if template is not None else 2
+    if not around:  # the start's points: pairs in the plane, triples in space
+        dim_start = len(rob.positions[0])  # type: ignore[index]
+        if template is not None and dim_start != dim:
+            raise fail(
+                "robots.positions",
+                f"the positions are {_space(dim_start)} and the template is {_space(dim)}; "
+                "give both as [x, y] pairs (the plane) or both as [x, y, z] triples (space)",
+            )
+        dim = dim_start
     orientation = frm.orientation
     if orientation is None:
         orientation = "template" if template is not None else "table" if frm.alpha else "free"
+    if dim == 3 and (orientation == "table" or frm.alpha is not None):
+        raise fail(
+            "formation.alpha" if frm.alpha is not None else "formation.orientation",
+            "an alpha table restricts triangles in the plane; in space the orientation is "
+            "the chirality of tetrahedra: give formation.template as [x, y, z] triples and "
+            'orientation = "template" (docs/three-d.md)',
+        )
     if template is not None:
         if len(template) != n:
             raise fail(
@@ -138,7 +155,7 @@ def build_formation(
             )
         else:
             formation = Formation.from_distances(
-                n, edges=frm.edges, distances=distances, diameters=rob.diameters
+                n, edges=frm.edges, distances=distances, diameters=rob.diameters, dim=dim
             )
     except UserInputError as exc:
         raise fail(_formation_key(exc, frm), str(exc)) from None
@@ -163,9 +180,11 @@ def build_formation(
             "between its parts",
         )
     if not formation.is_rigid:
+        need = 2 * n - 3 if dim == 2 or n <= 3 else 3 * n - 6
         warnings.append(
             "the graph is not rigid: the distances do not fix the shape (add edges to make "
-            f"it rigid; {n} robots need at least {2 * n - 3} well-placed edges)"
+            f"it rigid; {n} robots need at least {need} well-placed edges"
+            + (" in space)" if dim == 3 else ")")
         )
     if template is None:  # a template realises its own distances
         warnings.extend(
@@ -186,6 +205,10 @@ def _template(frm: Any, fail: Fail) -> NDArray[np.float64] | None:
         except UserInputError as exc:
             raise fail("formation.template", str(exc)) from None
     return np.asarray(frm.template, dtype=float)
+
+
+def _space(dim: int) -> str:
+    return "[x, y, z] triples (space)" if dim == 3 else "[x, y] pairs (the plane)"
 
 
 def _edges_text(edges: Any) -> str:

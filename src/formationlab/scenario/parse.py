@@ -203,6 +203,19 @@ class Scenario:
         at = f" (line {line})" if line else ""
         return ScenarioError(f"{self.source}: {key}{at}: {message}", key=key)
 
+    def in_plane(self, what: str, instead: str = "`formationlab run` runs it") -> None:
+        """Refuse, placed at the template (or the start), a formation in space for ``what``
+        (a command or a part) that takes formations in the plane only so far; ``instead``
+        says what does take it."""
+        if self.formation.dim == 2:
+            return
+        key = "formation.template" if self.formation.template is not None else "robots.positions"
+        raise self.error(
+            key,
+            f"{what} takes formations in the plane so far, and this one is in space (3-D "
+            f"points); {instead} (docs/three-d.md says what works in space)",
+        )
+
     def locate(self, exc: UserInputError, table: str = "") -> ScenarioError:
         """``exc`` placed in the file: its ``key`` (under ``table``) with the key's line."""
         if isinstance(exc, ScenarioError) and exc.key and str(exc).startswith(self.source):

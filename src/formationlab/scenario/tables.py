@@ -52,13 +52,20 @@ def _one_or_list(v: Any, what: str) -> float | list[float]:
 
 
 def _points(v: Any, what: str) -> list[list[float]]:
-    """A list of ``[x, y]`` pairs of finite numbers."""
+    """A list of ``[x, y]`` pairs of finite numbers, or (a formation in space) of
+    ``[x, y, z]`` triples; every row alike."""
     if not isinstance(v, list) or not v:
-        raise ValueError(f"{what} must be a list of [x, y] pairs, got {v!r}")
+        raise ValueError(
+            f"{what} must be a list of [x, y] pairs (or [x, y, z] in space), got {v!r}"
+        )
     out = []
     for t, row in enumerate(v):
-        if not isinstance(row, list) or len(row) != 2:
-            raise ValueError(f"{what}, row {t + 1}, must be a pair [x, y], got {row!r}")
+        size = len(out[0]) if out else None
+        if not isinstance(row, list) or len(row) not in (2, 3) or size not in (None, len(row)):
+            want = "a pair [x, y] or a triple [x, y, z]" if size is None else (
+                "a pair [x, y], as row 1" if size == 2 else "a triple [x, y, z], as row 1"
+            )  # fmt: skip
+            raise ValueError(f"{what}, row {t + 1}, must be {want}, got {row!r}")
         out.append([_finite(x, f"{what}, row {t + 1},") for x in row])
     return out
 

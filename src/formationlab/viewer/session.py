@@ -121,6 +121,10 @@ class LiveSession:
         self.step_budget_s = step_budget_s
         self.notices: list[str] = []
         self.integrator: FixedStepIntegrator = self._live_integrator(scenario.integrator)
+        try:
+            scenario.in_plane("the viewer")
+        except UserInputError as exc:  # the live view's refusal, by name
+            raise SessionError(str(exc)) from None
         self.system: System = closed_loop(scenario)
         self.speed = 1.0
         self.paused = False
