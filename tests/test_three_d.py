@@ -24,6 +24,7 @@ from formationlab.formation.chirality import (
     signed_volumes,
     volume_gradients,
 )
+from formationlab.io.scenario import load_scenario
 from formationlab.models import Unicycle
 from formationlab.outcomes.analysis import chirality_agreement
 from formationlab.safety.obstacles import Circle
@@ -295,7 +296,6 @@ def test_the_distance_law_from_the_same_file_ends_at_the_mirror(tmp_path: Path) 
 @pytest.mark.parametrize(
     "command, what",
     [
-        (["study"], "`formationlab study` takes formations in the plane"),
         (["equilibria"], "`formationlab equilibria` takes formations in the plane"),
         (["view", "--no-browser"], "the viewer takes formations in the plane"),
         (["run", "--animate"], "the animation (--animate) takes formations in the plane"),
@@ -395,3 +395,34 @@ def test_knn_and_within_graphs_take_points_in_space(rng) -> None:
     within = build_edges({"within": 1.0}, pts)
     r = np.linalg.norm(pts[within[:, 1]] - pts[within[:, 0]], axis=-1)
     assert np.all(r <= 1.0 + 1e-9) and len(within) > 0
+
+
+def test_a_study_in_space_measures_both_chiralities(tmp_path: Path) -> None:
+    """The tetrahedron from random starts: the distance law ends at the template or its
+    mirror image (both occur), the chirality-restricted law at the template; each trial is
+    the single run of the same start (the numpy path, as the study says)."""
+    import pandas as pd
+
+    text = (EXAMPLES / "study-tetrahedron.toml").read_text()
+    text = text.replace("trials = 10000", "trials = 60")
+    path = tmp_path / "study.toml"
+    path.write_text(text)
+    res = invoke("study", path, "--out", tmp_path / "out", "--quiet")
+    assert res.exit_code == 0, res.output
+    s = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert s["backend_used"] == "numpy" and "in space" in s["backend_note"]
+    trials = pd.read_parquet(tmp_path / "out" / "trials.parquet")
+    assert {"z1_init", "z4", "drift_vz"} <= set(trials.columns)
+    by_law = trials.groupby("law")["outcome"].value_counts().unstack(fill_value=0)
+    assert by_law.loc["distance", "desired"] >= 15 and by_law.loc["distance", "mirror"] >= 15
+    assert by_law.loc["chirality-restricted", "desired"] >= 57
+    assert by_law.loc["chirality-restricted"].get("mirror", 0) == 0
+    # a trial of the table is the single run of its start
+    sc = load_scenario(path)
+    row = trials[trials["law"] == "distance"].iloc[3]
+    q0 = np.array([[row[f"{a}{i}_init"] for a in "xyz"] for i in range(1, 5)])
+    one = fl.simulate(sc.formation, fl.DistanceLaw(), q0, duration=20.0,
+                      integrator=fl.get_integrator("euler", dt=0.01))  # fmt: skip
+    assert one.summary()["outcome"] == row["outcome"]
+    q_end = np.array([[row[f"{a}{i}"] for a in "xyz"] for i in range(1, 5)])
+    np.testing.assert_allclose(one.q[int(row["steps"])], q_end, atol=1e-9)  # where it stopped

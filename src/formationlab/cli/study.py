@@ -110,7 +110,6 @@ def study(
             err_console.print(message, highlight=False)
 
     sc = load_scenario(scenario)
-    sc.in_plane("`formationlab study`")
     for w in sc.warnings:
         warn(w if w.startswith(sc.source) else f"{sc.source}: {w}")
     config = parse_study(

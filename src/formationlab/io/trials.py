@@ -20,17 +20,20 @@ one per swept parameter   its value; NaN for a law the parameter does not apply 
 ``min_clearance``         least ``r_ij - a_ij`` over pairs and time
 ``steps``                 Euler steps taken (a trial stops once converged)
 ``drift_vx, drift_vy``    velocity of the centroid at the end, m/s, of the rigid motion
+                          (and ``drift_vz`` for a formation in space)
                           fitted over the last ``drift_window`` seconds
                           (:mod:`formationlab.outcomes.rigid_motion`): the drift of a
                           ``drifting`` or ``rotating`` trial; NaN when the trial
                           stopped before that window (or the run is shorter)
 ``drift_speed``           largest robot speed in that rigid motion, m/s
-``drift_omega``           its angular velocity, rad/s (counter-clockwise positive)
-``drift_cx, drift_cy``    its centre of rotation (NaN when ``drift_omega`` is 0)
+``drift_omega``           its angular velocity, rad/s (counter-clockwise positive; in
+                          space its size, the axis carrying the direction)
+``drift_cx, drift_cy``    its centre of rotation (NaN when ``drift_omega`` is 0, and in
+                          space, with ``drift_cz``: a rotation there has an axis)
 ``shape_rate``            how fast the shape changed over the window (the rigid fit's
                           largest residual over the window), m/s
-``x1_init, y1_init, ...`` initial positions
-``x1, y1, x2, y2, ...``   final positions
+``x1_init, y1_init, ...`` initial positions (``z1_init``, ... in space)
+``x1, y1, x2, y2, ...``   final positions (``z1``, ... in space)
 ========================  ======================================================
 
 Chunks live in ``DIR/chunks/<fingerprint>/`` (the fingerprint of the study's

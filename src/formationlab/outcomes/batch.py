@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..formation.geometry import row_norms
 from ..formation.spec import Formation
 from ..status import DIVERGED_SCALE, Status
 from ..validation import COORDINATE_LIMIT
@@ -113,8 +114,8 @@ class BatchResult:
         robot model's differ from the positions (near-identity hand points).
         """
         tol = tolerances or Tolerances()
-        q = x[..., :2] if q is None else q
-        u = v[..., :2] if u is None else u
+        q = x[..., : formation.dim] if q is None else q
+        u = v[..., : formation.dim] if u is None else u
         contact = np.isin(status, [s.code for s in Status if s.contact])
         # a trial stopped by a huge or non-finite step (Khatib's repulsion at a near
         # contact) holds coordinates whose squares overflow: its status already says
@@ -169,17 +170,12 @@ def _diverged(
     return status, outcome
 
 
-def _norm(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``sqrt(x^2 + y^2)`` of ``(..., 2)``, rounded as ``numpy.linalg.norm(v, axis=-1)``."""
-    return np.sqrt(v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1])
-
-
 def max_distance_errors(formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Largest ``|r_ij - d_ij|`` over the edges: ``(B, n, 2) -> (B,)``."""
+    """Largest ``|r_ij - d_ij|`` over the edges: ``(B, n, d) -> (B,)``."""
     e = formation.edges
     out = np.zeros(q.shape[0])
     for (i, j), d in zip(e, formation.distances, strict=True):
-        r = _norm(q[:, j, :] - q[:, i, :])
+        r = row_norms(q[:, j, :] - q[:, i, :])
         np.maximum(out, np.abs(r - d), out=out)
     return out
 

@@ -275,8 +275,7 @@ def shapes_figure(
     if not outs:
         return None
     n = max(int(c[1:]) for c in trials.columns if c[:1] == "x" and c[1:].isdigit())
-    xcols = [f"x{i + 1}" for i in range(n)]
-    ycols = [f"y{i + 1}" for i in range(n)]
+    cols = [[f"{a}{i + 1}" for i in range(n)] for a in "xyz" if f"{a}1" in trials.columns]
     fig, axes = plt.subplots(
         len(outs), per_outcome, figsize=(1.6 * per_outcome, 1.75 * len(outs)), squeeze=False
     )
@@ -291,15 +290,20 @@ def shapes_figure(
                 ax.axis("off")
                 continue
             row = pick.iloc[c]
-            q = np.stack([row[xcols].to_numpy(float), row[ycols].to_numpy(float)], axis=1)
+            q = np.stack([row[c].to_numpy(float) for c in cols], axis=1)
             q = q - q.mean(axis=0)
+            # in space: seen along its least extent (its two principal axes on the panel)
+            basis = np.linalg.svd(q, full_matrices=False)[2][:2] if q.shape[1] == 3 else None
+            if basis is not None:
+                q = q @ basis.T
             plot_shape(q, edges, diameters[int(row["group"])], ax, color=OUTCOME_COLORS[o])
             extra = "".join(f" {p}={row[p]:g}" for p in params if np.isfinite(row[p]))
             err = f"\n|e|max={row['max_distance_error']:.2g}"
             if np.isfinite(row.get("max_bearing_error", np.nan)):  # judged by its bearings
                 err = f"\n|g-g*|max={row['max_bearing_error']:.2g}"
             if o in ("drifting", "rotating") and "drift_vx" in row:
-                v = np.array([row["drift_vx"], row["drift_vy"]], dtype=float)
+                v = np.array([row[f"drift_v{a}"] for a in "xyz"[: len(cols)]], dtype=float)
+                v = v if basis is None else basis @ v
                 extent = float(np.ptp(q, axis=0).max())
                 speed = max(float(np.hypot(*v)), 1e-300)
                 draw_velocity(
@@ -336,10 +340,12 @@ _FIXED = {
     "steps",
     "drift_vx",
     "drift_vy",
+    "drift_vz",
     "drift_speed",
     "drift_omega",
     "drift_cx",
     "drift_cy",
+    "drift_cz",
     "shape_rate",
 }
 
@@ -357,7 +363,7 @@ def draw_velocity(
 
 
 def _is_position(c: str) -> bool:
-    return c[:1] in ("x", "y") and c[1:].split("_")[0].isdigit()
+    return c[:1] in ("x", "y", "z") and c[1:].split("_")[0].isdigit()
 
 
 def shape_error_figure(

@@ -48,6 +48,7 @@ from ..controllers import Law
 from ..dynamics import System
 from ..engine.trials import TrialRun, run_trials
 from ..errors import FormationError, ParameterError
+from ..formation.geometry import row_norms
 from ..formation.spec import Formation
 from ..integrators import Euler, StopRule, drive
 from ..integrators.base import steps_for
@@ -85,6 +86,7 @@ def batch_backend(
     safety: Any = None,
     sensed: bool = False,
     model: RobotModel | None = None,
+    dim: int = 2,
 ) -> tuple[Backend, str]:
     """The backend a batch runs on, and why it differs from ``backend`` ("" if it does not).
 
@@ -94,6 +96,8 @@ def batch_backend(
     stage may not compile.
     """
     del obstacles, safety, sensed, model  # every combination is compiled
+    if dim != 2 and backend == "numba":
+        return "numpy", "the compiled loop steps formations in the plane; this one is in space"
     return backend, ""  # type: ignore[return-value]
 
 
@@ -165,7 +169,7 @@ def run_batch(
     tol = tolerances or Tolerances()
     model = model or SingleIntegrator()
     formation = law.formation_for(formation)  # as the law is judged on it (bearings)
-    q0 = _check_initial(formation, q0, model.state_size())
+    q0 = _check_initial(formation, q0, len(model.names_in(formation.dim)))
     dt, duration = positive(dt, "dt"), positive(duration, "duration")
     n_steps = steps_for(float(duration), float(dt))
     if check_every is None:
@@ -184,7 +188,7 @@ def run_batch(
     elif backend == "numpy":
         system = System(formation=formation, law=law, model=model, sensing=sensing, faults=faults)
         if obstacles or safety is not None:
-            check_obstacle_starts(q0[..., :2], formation.diameters / 2, tuple(obstacles))
+            check_obstacle_starts(model.positions(q0), formation.diameters / 2, tuple(obstacles))
             system = System(
                 formation=formation, law=law, model=model, obstacles=tuple(obstacles),
                 safety=safety, sensing=sensing, faults=faults,
@@ -214,15 +218,13 @@ def _check_initial(formation: Formation, q0: ArrayLike, k: int = 2) -> NDArray[n
     q = np.require(np.asarray(q0, dtype=float), requirements=["C", "W"])  # one kernel signature
     n = formation.n
     if q.ndim != 3 or q.shape[1:] != (n, k) or q.shape[0] == 0:
-        what = "positions" if k == 2 else "states"
+        what = "positions" if k == formation.dim else "states"
         raise FormationError(f"initial {what} must have shape (B, {n}, {k}), got {q.shape}")
     if not np.all(np.isfinite(q)):
         raise FormationError("initial positions hold NaN or infinite numbers")
     for i, j in zip(*np.triu_indices(n, k=1), strict=True):
         d = q[:, j, :] - q[:, i, :]
-        gap = (
-            np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) - formation.contact_matrix[i, j]
-        )
+        gap = row_norms(d[..., : formation.dim]) - formation.contact_matrix[i, j]
         if np.any(gap <= 0):
             b = int(np.argmax(gap <= 0))
             raise FormationError(

@@ -26,7 +26,7 @@ from ..integrators import ImplicitEuler
 from ..models import RobotModel, SingleIntegrator
 from ..outcomes.analysis import Tolerances
 from ..outcomes.rigid_motion import RigidMotion
-from .batch import run_batch
+from .batch import batch_backend, run_batch
 from .config import BoxInitial, GaussianInitial, SettleModel, StudyConfig
 from .groups import Group
 from .sampling import model_initial_states, trial_initial_states
@@ -100,7 +100,9 @@ def plan_chunks(
                     dt=dt,
                     duration=duration,
                     tolerances=config.tol,
-                    backend=config.backend,
+                    backend=batch_backend(
+                        config.backend, obstacles, safety, g.sensed, model, g.formation.dim
+                    )[0],
                     sweep_keys=tuple(config.sweep),
                     settle=config.settle,
                     model=model,
@@ -168,28 +170,30 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
         steps=np.asarray(res.steps, dtype=np.int64),
         **motion_columns(res.motion),
     )
+    axes = "xyz"[: f.dim]  # the position columns: x, y (and z in space) per robot
     for i in range(f.n):
-        cols[f"x{i + 1}_init"] = q0[:, i, 0]
-        cols[f"y{i + 1}_init"] = q0[:, i, 1]
+        for a, name in enumerate(axes):
+            cols[f"{name}{i + 1}_init"] = q0[:, i, a]
     if "theta" in type(task.model).state_names:
         for i in range(f.n):
             cols[f"theta{i + 1}_init"] = x0[:, i, 2]
     qf = np.asarray(res.q_final, dtype=float)
     for i in range(f.n):
-        cols[f"x{i + 1}"] = qf[:, i, 0]
-        cols[f"y{i + 1}"] = qf[:, i, 1]
+        for a, name in enumerate(axes):
+            cols[f"{name}{i + 1}"] = qf[:, i, a]
     return pd.DataFrame(cols)
 
 
 def motion_columns(motion: RigidMotion) -> dict[str, NDArray[np.float64]]:
-    """The rigid-motion columns of ``trials.parquet`` (:mod:`formationlab.io.trials`)."""
+    """The rigid-motion columns of ``trials.parquet`` (:mod:`formationlab.io.trials`); in
+    space also ``drift_vz`` and ``drift_cz`` (the centre is NaN there: an axis, not a
+    point)."""
+    axes = list(enumerate("xyz"[: motion.velocity.shape[-1]]))
     return {
-        "drift_vx": np.asarray(motion.velocity[:, 0], dtype=float),
-        "drift_vy": np.asarray(motion.velocity[:, 1], dtype=float),
+        **{f"drift_v{a}": np.asarray(motion.velocity[:, k], dtype=float) for k, a in axes},
         "drift_speed": np.asarray(motion.speed, dtype=float),
         "drift_omega": np.asarray(motion.omega, dtype=float),
-        "drift_cx": np.asarray(motion.centre[:, 0], dtype=float),
-        "drift_cy": np.asarray(motion.centre[:, 1], dtype=float),
+        **{f"drift_c{a}": np.asarray(motion.centre[:, k], dtype=float) for k, a in axes},
         "shape_rate": np.asarray(motion.shape_rate, dtype=float),
     }
 

@@ -305,7 +305,10 @@ class StudySetup:
     def backend(self) -> tuple[str, str]:
         """The backend the trials run on and why it is not ``config.backend`` ("" if it is)."""
         sensed = any(g.sensed for g in self.groups)
-        return batch_backend(self.config.backend, self.obstacles, self.safety, sensed, self.model)
+        return batch_backend(
+            self.config.backend, self.obstacles, self.safety, sensed, self.model,
+            self.formation.dim,
+        )  # fmt: skip
 
     def safety_description(self) -> dict[str, Any] | None:
         """JSON-ready obstacles and filter (None without either)."""
@@ -499,9 +502,11 @@ def _kernel_cached(dispatcher: Any) -> bool:
 
 
 def _backend_used(setup: StudySetup) -> dict[str, Any]:
-    """``backend_used``, ``backend_note`` and ``safety`` of a study with obstacles or a filter."""
+    """``backend_used``, ``backend_note`` and ``safety`` of a study with obstacles or a filter;
+    ``backend_used`` and ``backend_note`` of one whose backend is not the one asked for (a
+    formation in space runs on the numpy path)."""
     used, note = setup.backend
     safety = setup.safety_description()
     if safety is None:
-        return {}
+        return {"backend_used": used, "backend_note": note} if note else {}
     return {"backend_used": used, "backend_note": note, "safety": safety}

@@ -96,7 +96,7 @@ def draw_block(
     center: NDArray[np.float64] | None = None,
     obstacles: Sequence[Any] = (),
 ) -> NDArray[np.float64]:
-    """``size`` initial states ``(size, n, 2)`` without overlapping robots, from ``rng``.
+    """``size`` initial states ``(size, n, dim)`` without overlapping robots, from ``rng``.
 
     All states are drawn at once; the rejected ones are drawn again (in order)
     until none is left.
@@ -107,12 +107,12 @@ def draw_block(
         When a state is still overlapping after :data:`MAX_DRAWS` rounds.
     """
     n = formation.n
-    q = _draw(initial, rng, (size, n, 2), center)
+    q = _draw(initial, rng, (size, n, formation.dim), center)
     bad = np.flatnonzero(_rejected(formation, q, obstacles))
     for _ in range(MAX_DRAWS):
         if bad.size == 0:
             return q
-        q[bad] = _draw(initial, rng, (bad.size, n, 2), center)
+        q[bad] = _draw(initial, rng, (bad.size, n, formation.dim), center)
         bad = bad[_rejected(formation, q[bad], obstacles)]
     what = (
         f"box half_width = {initial.half_width:g}"
@@ -166,12 +166,14 @@ def trial_initial_states(
         if center is None:
             raise ParameterError("a gaussian initial distribution needs a centre shape")
         c = np.asarray(center, dtype=float)
-        if c.shape != (formation.n, 2):
-            raise ParameterError(f"the centre shape must be ({formation.n}, 2), got {c.shape}")
+        if c.shape != (formation.n, formation.dim):
+            raise ParameterError(
+                f"the centre shape must be ({formation.n}, {formation.dim}), got {c.shape}"
+            )
     idx = np.asarray(trials, dtype=np.int64).reshape(-1)
     if idx.size and idx.min() < 0:
         raise ParameterError("trial numbers are >= 0")
-    out = np.empty((idx.size, formation.n, 2))
+    out = np.empty((idx.size, formation.n, formation.dim))
     blocks = idx // SEED_BLOCK
     for b in np.unique(blocks):
         rng = block_generator(int(seed), int(b))
