@@ -34,6 +34,7 @@ EXTRA = {
     "single-integrator": {},
     "unicycle": {"headings": [0.3, 2.0, -1.9]},
     "double-integrator": {"velocities": [[0.2, -0.1], [0.0, 0.3], [-0.2, 0.0]]},
+    "quadrotor": {"velocities": [[0.2, -0.1], [0.0, 0.3], [-0.2, 0.0]]},
 }
 
 

@@ -320,7 +320,7 @@ class System:
 
     @cached_property
     def _row_bytes(self) -> int:
-        return row_bytes(self.formation, self.model.state_size())
+        return row_bytes(self.formation, len(self.model.names_in(self.formation.dim)))
 
     def positions(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Robot centres ``(..., n, 2)``."""

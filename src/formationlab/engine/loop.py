@@ -52,6 +52,7 @@ from ..marching.stage import march
 from ..marching.terms import STILL
 from ..models.stage import headings, points, rates, speed, turn
 from ..models.terms import HEADING, NEAR_IDENTITY, SINGLE
+from ..outcomes.tolerances import NET_STEPS
 from ..safety.stage import CENTRALIZED, WAIT, filter_command, filter_scratch, obstacle_contact
 from ..sensing.stage import halt, informed, sensed_field
 from .contact import COLLISION, CONVERGED, END, NON_FINITE, SWEPT_MARGIN, TOO_LARGE, contact
@@ -259,7 +260,8 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
                 if kc >= 0:
                     net = math.sqrt(gap[b]) / ((k - kc) * dt)
                     ns[b] = net
-                    still = still or net <= run.speed
+                    if k - kc >= NET_STEPS:  # (the driver's rule)
+                        still = still or net <= run.speed
                 if sn is not None and sn.measured:  # robots waiting for a measurement
                     seen = informed(ids[b], law, ss)
                     still = still and seen and ss.seen_c[ids[b]]

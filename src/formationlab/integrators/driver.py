@@ -56,6 +56,7 @@ from numpy.typing import NDArray
 from ..dynamics import SensedView, System
 from ..errors import ParameterError
 from ..formation.geometry import row_norms
+from ..outcomes.tolerances import NET_STEPS
 from ..status import Status
 from .diagnostics import SwitchMonitor
 from .stepped import Stepped, StopRule
@@ -238,7 +239,8 @@ class Stepping:
                 net = self.net
                 net[live] = np.max(row_norms(d), -1)
                 net[live] /= (k - self.kc) * dt
-                still |= net[live] <= stop.speed
+                if k - self.kc >= NET_STEPS:  # (over one step: the instantaneous speed's job)
+                    still |= net[live] <= stop.speed
             if channel is not None:  # robots that wait for a measurement are not at rest
                 informed = channel.informed(x, live)
                 still &= informed & self.seen_c

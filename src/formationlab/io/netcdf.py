@@ -136,8 +136,8 @@ def _layout(
         ),
         "desired_distance": (("edge",), f.distances, {"long_name": "desired distance d_ij"}),
     }
-    names = list(type(result.model).state_names)
-    if len(names) > 2:
+    names = list(result.model.names_in(f.dim))
+    if len(names) > f.dim:
         coords["state"] = ("state", np.array(names))
         series["x"] = (("time", "robot", "state"), result.x, {"long_name": "full state"})
     if result.headings is not None:

@@ -2,7 +2,7 @@
 
 The law's control ``u_i`` (computed at the positions) acts as a force per unit
 mass, with linear damping ``k_d > 0``. State ``(..., n, 4)``: ``x``, ``y``,
-``vx``, ``vy``.
+``vx``, ``vy``; in space ``(..., n, 6)``: ``x, y, z, vx, vy, vz``.
 
 Lyapunov function. The distance law and the angle-restricted law are
 ``u = -(k_c / 2) grad V`` with ``V`` their :meth:`~formationlab.controllers.Law.potential`
@@ -41,12 +41,12 @@ from .base import RobotModel
 from .limits import check_limit, limit_speed
 from .registry import register_model
 
-__all__ = ["DoubleIntegrator", "energy"]
+__all__ = ["DoubleIntegrator", "energy", "initial_velocities"]
 
 
 def energy(potential: ArrayLike, x: NDArray[np.float64], k_c: float) -> NDArray[np.float64]:
-    """``E = V + sum_i |q_dot_i|^2 / k_c`` (module docstring); ``V (...)``, ``x (..., n, 4)``."""
-    w = x[..., 2:4]
+    """``E = V + sum_i |q_dot_i|^2 / k_c`` (module docstring); ``V (...)``, ``x (..., n, 2d)``."""
+    w = x[..., x.shape[-1] // 2 :]
     return np.asarray(potential, dtype=float) + np.sum(w * w, axis=(-2, -1)) / k_c
 
 
@@ -66,6 +66,7 @@ class DoubleIntegrator(RobotModel):
     name = "double-integrator"
     state_names = ("x", "y", "vx", "vy")
     initial_keys = ("velocities",)
+    dims = (2, 3)  # positions then velocities: (x, y, vx, vy) or (x, y, z, vx, vy, vz)
     command_is_velocity = False  # u is a force: the velocity lags it
     damping: float = 2.0
     max_speed: float | None = None
@@ -79,8 +80,17 @@ class DoubleIntegrator(RobotModel):
         """``k_d``: the force ``k_d v`` holds a robot at velocity ``v`` (``q_ddot = 0``)."""
         return float(self.damping)
 
+    def names_in(self, dim: int) -> tuple[str, ...]:
+        return ("x", "y", "z")[:dim] + ("vx", "vy", "vz")[:dim]
+
+    def positions(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        return x[..., : x.shape[-1] // 2]
+
+    def point_rates(self, x: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+        return v[..., : v.shape[-1] // 2]
+
     def derivative(self, x: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
-        w = x[..., 2:4]
+        w = x[..., x.shape[-1] // 2 :]
         a = -self.damping * w + u  # q_ddot = -k_d q_dot + u
         if self.max_speed is not None:
             w2 = np.sum(w * w, axis=-1)
@@ -98,32 +108,43 @@ class DoubleIntegrator(RobotModel):
         settle to: a robot at rest but pushed (the turning point of an
         oscillation) is not stopped.
         """
-        w, a = v[..., :2], v[..., 2:4]
+        d = v.shape[-1] // 2
+        w, a = v[..., :d], v[..., d:]
         terminal = w + a / self.damping
-        return np.maximum(super().speed(x, v), np.sqrt(np.sum(terminal * terminal, axis=-1)))
+        now = np.sqrt(w[..., 0] * w[..., 0] + w[..., 1] * w[..., 1]) if d == 2 else None
+        now = np.sqrt(np.sum(w * w, axis=-1)) if now is None else now
+        return np.maximum(now, np.sqrt(np.sum(terminal * terminal, axis=-1)))
 
     def initial_state(self, q0: ArrayLike, **initial: Any) -> NDArray[np.float64]:
-        """``(x, y, vx, vy)`` from positions ``q0`` ``(..., n, 2)`` and ``velocities``.
+        """``(x, y, vx, vy)`` from positions ``q0`` ``(..., n, 2)`` and ``velocities``
+        (``(x, y, z, vx, vy, vz)`` in space).
 
-        ``velocities``: ``(..., n, 2)`` or one ``[vx, vy]`` for all robots; default 0.
+        ``velocities``: ``(..., n, d)`` or one row for all robots; default 0.
         """
-        q0 = np.asarray(q0, dtype=float)
-        unknown = set(initial) - {"velocities"}
-        if unknown:
-            raise ParameterError(
-                "a double integrator's initial state takes velocities only, got "
-                + ", ".join(sorted(unknown))
-            )
-        given = initial.get("velocities")
-        w = np.zeros(q0.shape) if given is None else np.asarray(given, dtype=float)
-        if not np.all(np.isfinite(w)):
-            raise ParameterError(f"velocities must be finite numbers (m/s), got {given!r}")
-        try:
-            w = np.broadcast_to(w, q0.shape)
-        except ValueError:
-            raise ParameterError(
-                f"give one [vx, vy] or one per robot: there are {q0.shape[-2]} robots but "
-                f"velocities has shape {np.shape(w)}",
-                key="velocities",
-            ) from None
-        return np.concatenate([q0, w], axis=-1)
+        return initial_velocities(self.name, q0, initial)
+
+
+def initial_velocities(name: str, q0: ArrayLike, initial: dict[str, Any]) -> NDArray[np.float64]:
+    """The state ``(..., n, 2d)`` of positions ``q0`` ``(..., n, d)`` and their velocities:
+    ``initial["velocities"]``, one row for all robots or one per robot (default 0), for
+    the models whose state is positions then velocities (``name`` says which, in messages)."""
+    q0 = np.asarray(q0, dtype=float)
+    unknown = set(initial) - {"velocities"}
+    if unknown:
+        raise ParameterError(
+            f"a {name}'s initial state takes velocities only, got " + ", ".join(sorted(unknown))
+        )
+    given = initial.get("velocities")
+    w = np.zeros(q0.shape) if given is None else np.asarray(given, dtype=float)
+    if not np.all(np.isfinite(w)):
+        raise ParameterError(f"velocities must be finite numbers (m/s), got {given!r}")
+    row = "[vx, vy, vz]" if q0.shape[-1] == 3 else "[vx, vy]"
+    try:
+        w = np.broadcast_to(w, q0.shape)
+    except ValueError:
+        raise ParameterError(
+            f"give one {row} or one per robot: there are {q0.shape[-2]} robots but "
+            f"velocities has shape {np.shape(w)}",
+            key="velocities",
+        ) from None
+    return np.concatenate([q0, w], axis=-1)

@@ -7,7 +7,7 @@ from typing import Literal
 
 from ..validation import positive
 
-__all__ = ["OUTCOMES", "Outcome", "Tolerances"]
+__all__ = ["NET_STEPS", "OUTCOMES", "Outcome", "Tolerances"]
 
 Outcome = Literal[
     "desired", "mirror", "incorrect", "collision", "drifting", "rotating", "not-converged",
@@ -17,6 +17,15 @@ OUTCOMES: tuple[Outcome, ...] = (
     "desired", "mirror", "incorrect", "collision", "drifting", "rotating", "not-converged",
     "diverged",
 )  # fmt: skip
+
+
+#: The net speed stops a run only over a check interval of at least this many steps. Over
+#: one step it is the speed at the step's start, which the instantaneous speed already
+#: judges, and is wrong for a robot whose velocity is state: one at rest, commanded to
+#: move, has not moved yet after its first step (double integrators, quadrotors). The
+#: compiled loop reads it as a constant: naming numba here puts this module in the numba
+#: cache's digest (``_numba_cache``), so that a change compiles the loop again.
+NET_STEPS = 2
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -321,7 +321,7 @@ class SimulationResult:
             if n <= LIST_LIMIT:
                 extra["final_headings"] = self.headings[-1].tolist()
             extra["heading_spread"] = float(self.heading_spread[-1])  # type: ignore[index]
-        if type(self.model).state_size() > 2 and n <= LIST_LIMIT:
+        if len(self.model.names_in(self.formation.dim)) > self.formation.dim and n <= LIST_LIMIT:
             extra["final_state"] = self.x[-1].tolist()
         differ = self.points is not self.q and not np.array_equal(p_final, self.q[-1])
         if differ and n <= LIST_LIMIT:
@@ -651,8 +651,8 @@ def initial_state(
     """
     arr = np.asarray(q0, dtype=float)
     model.check_space(formation.dim)
-    k = model.state_size()
-    if arr.ndim >= 2 and arr.shape[-1] == k and k > 2:
+    k = len(model.names_in(formation.dim))
+    if arr.ndim >= 2 and arr.shape[-1] == k and k > formation.dim:
         if initial:
             raise ParameterError(
                 f"q0 is already a full {model.name} state (..., n, {k}); do not also give "

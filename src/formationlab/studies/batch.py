@@ -53,6 +53,7 @@ from ..formation.spec import Formation
 from ..integrators import Euler, StopRule, drive
 from ..integrators.base import steps_for
 from ..models import RobotModel, SingleIntegrator
+from ..models.terms import model_terms
 from ..outcomes.analysis import Tolerances
 from ..outcomes.batch import BatchResult, classify_batch, max_distance_errors
 from ..safety import check_obstacle_starts
@@ -95,9 +96,14 @@ def batch_backend(
     the reason stays in the interface (and in ``summary.json``) for a part that a future
     stage may not compile.
     """
-    del obstacles, safety, sensed, model  # every combination is compiled
+    del obstacles, safety, sensed  # every combination is compiled
     if dim != 2 and backend == "numba":
         return "numpy", "the compiled loop steps formations in the plane; this one is in space"
+    if model is not None and backend == "numba":
+        try:
+            model_terms(model)
+        except ParameterError:  # a model without a stage of the loop (yet)
+            return "numpy", f"the compiled loop has no stage for the robot model {model.name!r}"
     return backend, ""  # type: ignore[return-value]
 
 
@@ -204,9 +210,7 @@ def run_batch(
         qw, window_step = out.q_window, out.window_step
     else:
         raise ParameterError(f'backend must be "numba" or "numpy", got {backend!r}')
-    at = {} if model.state_size() == 2 else {  # the law's points and their velocities
-        "q": model.points(x), "u": model.point_rates(x, v)
-    }  # fmt: skip
+    at = {"q": model.points(x), "u": model.point_rates(x, v)}  # where the law acts
     return BatchResult.from_final(
         formation, x=x, v=v, status=status, steps=steps, min_clearance=mc, net_speed=ns,
         dt=float(dt), tolerances=tol, q_window=qw, window_step=window_step, **at,

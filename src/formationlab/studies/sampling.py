@@ -201,8 +201,7 @@ def model_initial_states(
     again while two of the law's points (near-identity hand points) overlap;
     double integrators start at rest. Single integrators: ``q0`` itself.
     """
-    k = model.state_size()
-    if k == 2:
+    if len(model.names_in(formation.dim)) == formation.dim:  # the state is the positions
         return q0
     if "theta" not in type(model).state_names:
         return model.initial_state(q0)  # at rest
