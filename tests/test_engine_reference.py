@@ -41,7 +41,14 @@ import pytest
 from formationlab.controllers import LAWS
 
 RECORDED = json.loads(ref.DATA.read_text())
-RUNS = sorted(RECORDED["runs"])
+#: the recorded runs; a default-backend run recorded with the same numbers as its numpy run
+#: took the same path (an integrator or a formation the compiled loop does not step: implicit
+#: Euler, Filippov, a formation in space), so it is compared once, as the numpy run
+RUNS = sorted(
+    name
+    for name, run in RECORDED["runs"].items()
+    if not (name.endswith("|auto") and run == RECORDED["runs"].get(name[:-5] + "|numpy"))
+)
 
 #: positions' tolerance, relative to their scale, under a smooth and a switching law, and
 #: under the centralized filter's QP (module docstring)

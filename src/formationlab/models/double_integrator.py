@@ -41,7 +41,7 @@ from .base import RobotModel
 from .limits import check_limit, limit_speed
 from .registry import register_model
 
-__all__ = ["DoubleIntegrator", "energy", "initial_velocities"]
+__all__ = ["DoubleIntegrator", "VelocityState", "energy", "initial_velocities"]
 
 
 def energy(potential: ArrayLike, x: NDArray[np.float64], k_c: float) -> NDArray[np.float64]:
@@ -50,9 +50,34 @@ def energy(potential: ArrayLike, x: NDArray[np.float64], k_c: float) -> NDArray[
     return np.asarray(potential, dtype=float) + np.sum(w * w, axis=(-2, -1)) / k_c
 
 
+@dataclass(frozen=True, kw_only=True)
+class VelocityState(RobotModel):
+    """What the models whose state is positions then velocities share (double integrators,
+    quadrotors): ``(x, y, vx, vy)`` in the plane, ``(x, y, z, vx, vy, vz)`` in space, and
+    the start's velocities (:func:`initial_velocities`)."""
+
+    state_names = ("x", "y", "vx", "vy")
+    initial_keys = ("velocities",)
+    dims = (2, 3)
+
+    def names_in(self, dim: int) -> tuple[str, ...]:
+        return ("x", "y", "z")[:dim] + ("vx", "vy", "vz")[:dim]
+
+    def positions(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        return x[..., : x.shape[-1] // 2]
+
+    def point_rates(self, x: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+        return v[..., : v.shape[-1] // 2]
+
+    def initial_state(self, q0: ArrayLike, **initial: Any) -> NDArray[np.float64]:
+        """Positions ``q0`` ``(..., n, d)`` then ``velocities`` (one row for all robots or
+        one per robot; default 0)."""
+        return initial_velocities(self.name, q0, initial)
+
+
 @register_model
 @dataclass(frozen=True, kw_only=True)
-class DoubleIntegrator(RobotModel):
+class DoubleIntegrator(VelocityState):
     """Damped double integrators (module docstring).
 
     Parameters
@@ -64,9 +89,6 @@ class DoubleIntegrator(RobotModel):
     """
 
     name = "double-integrator"
-    state_names = ("x", "y", "vx", "vy")
-    initial_keys = ("velocities",)
-    dims = (2, 3)  # positions then velocities: (x, y, vx, vy) or (x, y, z, vx, vy, vz)
     command_is_velocity = False  # u is a force: the velocity lags it
     damping: float = 2.0
     max_speed: float | None = None
@@ -79,15 +101,6 @@ class DoubleIntegrator(RobotModel):
     def velocity_gain(self) -> float:
         """``k_d``: the force ``k_d v`` holds a robot at velocity ``v`` (``q_ddot = 0``)."""
         return float(self.damping)
-
-    def names_in(self, dim: int) -> tuple[str, ...]:
-        return ("x", "y", "z")[:dim] + ("vx", "vy", "vz")[:dim]
-
-    def positions(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
-        return x[..., : x.shape[-1] // 2]
-
-    def point_rates(self, x: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
-        return v[..., : v.shape[-1] // 2]
 
     def derivative(self, x: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
         w = x[..., x.shape[-1] // 2 :]
@@ -114,14 +127,6 @@ class DoubleIntegrator(RobotModel):
         now = np.sqrt(w[..., 0] * w[..., 0] + w[..., 1] * w[..., 1]) if d == 2 else None
         now = np.sqrt(np.sum(w * w, axis=-1)) if now is None else now
         return np.maximum(now, np.sqrt(np.sum(terminal * terminal, axis=-1)))
-
-    def initial_state(self, q0: ArrayLike, **initial: Any) -> NDArray[np.float64]:
-        """``(x, y, vx, vy)`` from positions ``q0`` ``(..., n, 2)`` and ``velocities``
-        (``(x, y, z, vx, vy, vz)`` in space).
-
-        ``velocities``: ``(..., n, d)`` or one row for all robots; default 0.
-        """
-        return initial_velocities(self.name, q0, initial)
 
 
 def initial_velocities(name: str, q0: ArrayLike, initial: dict[str, Any]) -> NDArray[np.float64]:

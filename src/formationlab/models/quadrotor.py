@@ -31,14 +31,12 @@ controller (docs/robot-models.md).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..validation import check_fields
-from .base import RobotModel
-from .double_integrator import initial_velocities
+from .double_integrator import VelocityState
 from .limits import check_limit, limit_speed
 from .registry import register_model
 
@@ -55,7 +53,7 @@ def quadrotor_energy(
 
 @register_model
 @dataclass(frozen=True, kw_only=True)
-class Quadrotor(RobotModel):
+class Quadrotor(VelocityState):
     """A quadrotor under its velocity controller: first-order velocity lag with limits.
 
     Parameters
@@ -70,9 +68,6 @@ class Quadrotor(RobotModel):
     """
 
     name = "quadrotor"
-    state_names = ("x", "y", "vx", "vy")
-    initial_keys = ("velocities",)
-    dims = (2, 3)
     time_constant: float = 0.25
     max_accel: float | None = 2.0
     max_speed: float | None = 1.0
@@ -86,15 +81,6 @@ class Quadrotor(RobotModel):
         """False: the velocity lags the command (the safety filter's premise fails)."""
         return False
 
-    def names_in(self, dim: int) -> tuple[str, ...]:
-        return ("x", "y", "z")[:dim] + ("vx", "vy", "vz")[:dim]
-
-    def positions(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
-        return x[..., : x.shape[-1] // 2]
-
-    def point_rates(self, x: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
-        return v[..., : v.shape[-1] // 2]
-
     def derivative(self, x: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
         w = x[..., x.shape[-1] // 2 :]
         a = (limit_speed(u, self.max_speed) - w) / self.time_constant  # the lag
@@ -107,8 +93,3 @@ class Quadrotor(RobotModel):
         w, a = v[..., :d], v[..., d:]
         terminal = w + self.time_constant * a
         return np.maximum(np.sqrt(np.sum(w * w, axis=-1)), np.sqrt(np.sum(terminal**2, axis=-1)))
-
-    def initial_state(self, q0: ArrayLike, **initial: Any) -> NDArray[np.float64]:
-        """Positions ``q0`` ``(..., n, d)`` then ``velocities`` (one row for all robots or one
-        per robot; default 0, hovering)."""
-        return initial_velocities(self.name, q0, initial)
