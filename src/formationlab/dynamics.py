@@ -323,7 +323,7 @@ class System:
         return row_bytes(self.formation, len(self.model.names_in(self.formation.dim)))
 
     def positions(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Robot centres ``(..., n, 2)``."""
+        """Robot centres ``(..., n, dim)``."""
         return self.model.positions(np.asarray(x, dtype=float))
 
     @cached_property

@@ -38,7 +38,7 @@ from ..errors import FormationError
 from ..neighbours.kdtree import close_pairs
 from ..validation import coordinates
 from .chirality import chirality_from_shape, chirality_surfaces
-from .geometry import parity
+from .geometry import parity, row_norms
 from .graph import as_edges, complete_edges, edges_connected, is_rigid
 from .orientation import alpha_from_shape, both_orders, neighbour_triples, switching_surfaces
 
@@ -997,7 +997,7 @@ class Formation:
         else:  # only pairs that could touch
             pi, pj = close_pairs(arr, float(self.diameters.max())).T
         diff = arr[..., pj, :] - arr[..., pi, :]
-        r = np.sqrt(np.sum(diff * diff, axis=-1))
+        r = row_norms(diff)
         gap = r - 0.5 * (self.diameters[pi] + self.diameters[pj])
         if np.any(gap <= 0):
             flat = np.argwhere(gap <= 0)[0]

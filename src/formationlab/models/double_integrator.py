@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import ParameterError
+from ..formation.geometry import row_norms
 from ..validation import check_fields
 from .base import RobotModel
 from .limits import check_limit, limit_speed
@@ -124,9 +125,7 @@ class DoubleIntegrator(VelocityState):
         d = v.shape[-1] // 2
         w, a = v[..., :d], v[..., d:]
         terminal = w + a / self.damping
-        now = np.sqrt(w[..., 0] * w[..., 0] + w[..., 1] * w[..., 1]) if d == 2 else None
-        now = np.sqrt(np.sum(w * w, axis=-1)) if now is None else now
-        return np.maximum(now, np.sqrt(np.sum(terminal * terminal, axis=-1)))
+        return np.maximum(row_norms(w), row_norms(terminal))
 
 
 def initial_velocities(name: str, q0: ArrayLike, initial: dict[str, Any]) -> NDArray[np.float64]:

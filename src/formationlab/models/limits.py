@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from ..formation.geometry import row_norms
 from ..validation import check_fields
 
 __all__ = ["check_limit", "limit_speed", "limit_unicycle", "scale_factor"]
@@ -41,7 +42,7 @@ def limit_speed(u: NDArray[np.float64], max_speed: float | None) -> NDArray[np.f
     """``u_i min(1, v_max / |u_i|)`` per robot; ``(..., n, d) -> (..., n, d)``."""
     if max_speed is None:
         return u
-    size = np.sqrt(np.sum(u * u, axis=-1))
+    size = row_norms(u)
     return u * scale_factor(size, max_speed)[..., None]
 
 

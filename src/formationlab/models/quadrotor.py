@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..formation.geometry import row_norms
 from ..validation import check_fields
 from .double_integrator import VelocityState
 from .limits import check_limit, limit_speed
@@ -92,4 +93,4 @@ class Quadrotor(VelocityState):
         d = v.shape[-1] // 2
         w, a = v[..., :d], v[..., d:]
         terminal = w + self.time_constant * a
-        return np.maximum(np.sqrt(np.sum(w * w, axis=-1)), np.sqrt(np.sum(terminal**2, axis=-1)))
+        return np.maximum(row_norms(w), row_norms(terminal))

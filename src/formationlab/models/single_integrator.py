@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..formation.geometry import row_norms
 from .base import RobotModel
 from .limits import check_limit, limit_speed
 from .registry import register_model
@@ -44,7 +45,7 @@ class SingleIntegrator(RobotModel):
         return v
 
     def speed(self, x: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
-        return np.sqrt(np.sum(v * v, axis=-1))
+        return row_norms(v)
 
     def derivative(self, x: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
         return limit_speed(u, self.max_speed)  # eq. (1)

@@ -299,7 +299,11 @@ def restrictions_on_at_target(formation: Formation, law: Any) -> str | None:
         robots = ", ".join(str(int(x) + 1) for x in tets[worst])
         size = abs(float(sigma[worst] - theta) / float(beta3[worst]))  # |v_abcd|
         label = "v_" + "".join(str(int(x) + 1) for x in tets[worst])
-        tip = f"use theta below {bound:.3g} (the flattest restricted tetrahedron), " * (bound > 0)
+        tip = (
+            f"use theta below {bound:.3g} (the flattest restricted tetrahedron), "
+            if bound > 0
+            else ""
+        )
         return (
             f"{on.size} of the {sigma.size} restrictions of law {law.name!r} are on at the "
             f"desired shape (e.g. robots {robots}: |{label}| = {size:.3g} <= theta = "
