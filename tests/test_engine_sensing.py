@@ -175,8 +175,14 @@ def test_every_model_senses_on_the_compiled_loop_as_in_the_driver(model, mix) ->
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kind", ["barrier-decentralized", "barrier"])
-def test_sensing_with_obstacles_and_a_filter_on_the_compiled_loop(kind) -> None:
+def test_sensing_with_obstacles_and_a_filter_on_the_compiled_loop() -> None:
+    # both filters in one test: they share one compiled kernel (about a minute to compile),
+    # which two test workers would each compile at the same time
+    for kind in ("barrier-decentralized", "barrier"):
+        _sensing_with_obstacles_and_a_filter(kind)
+
+
+def _sensing_with_obstacles_and_a_filter(kind: str) -> None:
     sc = load_scenario(EXAMPLES / "triangle-obstacle.toml")
     f = sc.formation
     q0 = trial_initial_states(f, BoxInitial(half_width=3.0), 3, np.arange(30),

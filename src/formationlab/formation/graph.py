@@ -13,7 +13,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import FormationError
 from ..resources import check_memory
-from .rigidity import is_generically_rigid, rigidity_matrix
+from .rigidity import (
+    grows_rigid_in_space,
+    is_generically_rigid,
+    moves_only_rigidly,
+    rigidity_matrix,
+)
 
 __all__ = [
     "DENSE_RIGIDITY_MAX",
@@ -122,13 +127,19 @@ def is_rigid(edges: NDArray[np.integer], n: int, *, method: str = "auto", dim: i
         random) placement, so the answer is the graph's, not a particular
         shape's; ``"pebble"``: rigid bodies and the pebble game
         (:func:`formationlab.formation.rigidity.is_generically_rigid`, exact, for any
-        size; the plane only); ``"auto"``: dense up to :data:`DENSE_RIGIDITY_MAX` robots.
+        size; the plane only); ``"auto"``: dense up to :data:`DENSE_RIGIDITY_MAX` robots,
+        then the pebble game in the plane and the tests for large graphs in space (below).
     dim : {2, 3}
         The space. In space no counting condition decides rigidity (Laman's theorem has no
         analogue), so the rank at a random placement is the test: a placement drawn from a
         Gaussian is generic with probability one, and a rank that rounding lowers would say
         "not rigid" for a rigid graph, never the reverse (``numpy.linalg.matrix_rank``'s
-        tolerance, far above the rounding of these entries).
+        tolerance, far above the rounding of these entries). A graph of tetrahedra joined
+        face to face (a Delaunay tetrahedralisation, the 12 nearest on the cubic lattices)
+        is recognised first above :data:`DENSE_RIGIDITY_MAX` robots, exactly and in
+        ``O(m)`` (:func:`~formationlab.formation.rigidity.grows_rigid_in_space`); other large
+        graphs get the sparse test of
+        :func:`~formationlab.formation.rigidity.moves_only_rigidly`.
     """
     if method not in ("auto", "dense", "pebble"):
         raise ValueError(f'method must be "auto", "dense" or "pebble", got {method!r}')
@@ -136,8 +147,13 @@ def is_rigid(edges: NDArray[np.integer], n: int, *, method: str = "auto", dim: i
         if method == "pebble":
             raise ValueError("the pebble game decides rigidity in the plane only")
         want = 1 if n == 2 else 3 if n == 3 else 3 * n - 6
+        edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
         if len(edges) < want:
             return False
+        if n >= 4 and np.bincount(edges.ravel(), minlength=n).min() < 3:
+            return False  # a robot with fewer than three neighbours turns about them
+        if method == "auto" and n > DENSE_RIGIDITY_MAX:  # grown: exact, O(m)
+            return grows_rigid_in_space(edges, n) or moves_only_rigidly(edges, n)
         q = np.random.default_rng(12345).normal(size=(n, 3))
         return bool(np.linalg.matrix_rank(rigidity_matrix(q, edges).toarray()) == want)
     if method == "pebble" or (method == "auto" and n > DENSE_RIGIDITY_MAX):

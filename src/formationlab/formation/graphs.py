@@ -5,7 +5,8 @@ array of shape ``(m, 2)``; none builds an ``n x n`` matrix, so they work for
 100,000 points (``benchmarks/bench_graphs.py``).
 
 * :func:`delaunay_edges`: the Delaunay triangulation (scipy, Qhull), with the
-  flat triangles of the boundary peeled off (see the function).
+  flat triangles of the boundary peeled off (see the function); in space the
+  Delaunay tetrahedralisation without its slivers.
 * :func:`knn_edges`: the symmetric ``k``-nearest-neighbour graph.
 * :func:`within_edges`: every pair closer than a distance.
 * :func:`henneberg_edges`: a minimally rigid graph (``2n - 3`` edges) by
@@ -32,18 +33,25 @@ from .graph import complete_edges
 __all__ = [
     "BUILDERS",
     "PEEL_ANGLE",
+    "SLIVER_QUALITY",
     "build_edges",
     "delaunay_edges",
     "henneberg_edges",
     "knn_edges",
     "nearest_gap",
     "overlapping_pairs",
+    "tetrahedron_quality",
     "within_edges",
 ]
 
 #: Boundary triangles of a Delaunay triangulation whose angle opposite the boundary is at
 #: least this (radians) are peeled off: flat slivers along the convex hull.
 PEEL_ANGLE = 2.0 * math.pi / 3.0
+
+#: Tetrahedra of a Delaunay tetrahedralisation whose quality ``6 sqrt(2) V / l^3`` (``l`` the
+#: root mean square of the six edges; 1 for a regular tetrahedron, 0 for four points in a
+#: plane) is below this are slivers, and give no edges.
+SLIVER_QUALITY = 0.1
 
 #: Relative tolerance of :func:`within_edges` (lattice neighbours at exactly ``r`` count).
 WITHIN_RTOL = 1e-9
@@ -105,12 +113,23 @@ def delaunay_edges(points: ArrayLike, *, peel_angle: float = PEEL_ANGLE) -> NDAr
     Interior triangles are never removed: a Delaunay triangulation has no flat
     interior triangle.
 
+    In space (points ``(n, 3)``) the Delaunay tetrahedralisation fills the convex hull
+    with tetrahedra, some of them slivers: four (nearly) coplanar points, as on every face
+    of a cube of the simple cubic lattice (Qhull splits the cospherical cube into
+    tetrahedra, some flat) and along the hull. A sliver's edges fix its four points only
+    to first order in its height, so its edges are left out: the graph is the edges of the
+    tetrahedra whose quality (:func:`tetrahedron_quality`) is at least
+    :data:`SLIVER_QUALITY`. The tetrahedra that remain are joined face to face on the
+    lattices and on random points tried (``tests/test_space_swarms.py``), which makes the
+    graph rigid (each tetrahedron added over a face is a Henneberg step in space);
+    :attr:`Formation.is_rigid` checks it for any points.
+
     Parameters
     ----------
-    points : array_like, shape (n, 2)
+    points : array_like, shape (n, 2) or, in space, (n, 3)
     peel_angle : float
         Radians; ``pi`` keeps only the exactly flat slivers out, anything above ``pi``
-        keeps every triangle.
+        keeps every triangle (the plane only).
 
     Returns
     -------
@@ -119,26 +138,54 @@ def delaunay_edges(points: ArrayLike, *, peel_angle: float = PEEL_ANGLE) -> NDAr
     Raises
     ------
     FormationError
-        The points are all on one line (no triangulation; use ``{ knn = 2 }``).
+        The points are all on one line (no triangulation; use ``{ knn = 2 }``), or in
+        space all in one plane.
     """
-    pts = _points(points, "delaunay")
+    pts = _points(points, "delaunay", (2, 3))
     n = pts.shape[0]
     if n == 2:
         return np.array([[0, 1]], dtype=np.int64)
+    space = pts.shape[1] == 3
     try:
         tri = Delaunay(pts)
     except QhullError:
+        where = "in one plane" if space else "on one line"
         raise FormationError(
-            "the template's points are all on one line, so they have no Delaunay "
-            "triangulation; use edges = { knn = 2 } or a list of pairs",
+            f"the template's points are all {where}, so they have no Delaunay "
+            "triangulation; use edges = { knn = k } or a list of pairs",
             key="edges",
         ) from None
     simp = tri.simplices.astype(np.int64)
+    if space:
+        s = simp[tetrahedron_quality(pts[simp]) >= SLIVER_QUALITY]
+        i = np.concatenate([s[:, a] for a, _ in _TET_EDGES])
+        j = np.concatenate([s[:, b] for _, b in _TET_EDGES])
+        return _sorted_unique(i, j)
     alive = _peel(pts, simp, tri.neighbors.astype(np.int64), peel_angle)
     s = simp[alive]
     i = np.concatenate([s[:, 0], s[:, 1], s[:, 2]])
     j = np.concatenate([s[:, 1], s[:, 2], s[:, 0]])
     return _sorted_unique(i, j)
+
+
+#: The six edges of a tetrahedron, as pairs of its corners.
+_TET_EDGES = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
+
+
+def tetrahedron_quality(corners: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The quality ``6 sqrt(2) V / l^3`` of tetrahedra ``corners (..., 4, 3)``: ``V`` the
+    volume, ``l`` the root mean square of the six edges; 1 for the regular tetrahedron, 0
+    for four points in a plane (a scale-free measure of flatness; Parthasarathy, Graichen
+    and Hathaway, "A comparison of tetrahedron quality measures", Finite Elements in
+    Analysis and Design 15, 1994)."""
+    c = np.asarray(corners, dtype=float)
+    e = c[..., 1:, :] - c[..., :1, :]  # the three edges from the first corner
+    volume = (
+        np.abs(np.einsum("...k,...k->...", e[..., 0, :], np.cross(e[..., 1, :], e[..., 2, :])))
+        / 6.0
+    )
+    l2 = sum(np.sum((c[..., a, :] - c[..., b, :]) ** 2, axis=-1) for a, b in _TET_EDGES) / 6.0
+    return 6.0 * math.sqrt(2.0) * volume / l2**1.5
 
 
 def _peel(

@@ -1,4 +1,5 @@
-"""Lattice templates: compact patches of the triangular, square and honeycomb lattices.
+"""Lattice templates: compact patches of the plane's triangular, square and honeycomb
+lattices, and of the simple, face-centred and body-centred cubic lattices in space.
 
 A swarm's desired shape is often a piece of a regular lattice. :func:`lattice`
 returns the ``count`` lattice points nearest to the patch's centre, so the
@@ -14,6 +15,15 @@ The three lattices share one integer grid ``(i, j)``:
 * ``"hexagonal"`` (honeycomb): the triangular grid without its index-3
   sublattice ``i - j = 0 (mod 3)``, the centres of the hexagons; 3 neighbours.
   The patch is centred on a hexagon's centre.
+
+The cubic lattices share one integer grid ``(i, j, k)``, and ``count`` nearest points of a
+ball are kept, ordered by squared radius, then height ``k``, then polar angle:
+
+* ``"cubic"`` (simple cubic): ``p = s (i, j, k)``; 6 neighbours.
+* ``"fcc"`` (face-centred cubic, the densest packing of equal spheres): the points with
+  ``i + j + k`` even, ``p = s (i, j, k) / sqrt(2)``; 12 neighbours.
+* ``"bcc"`` (body-centred cubic): the points with ``i, j, k`` all even or all odd,
+  ``p = s (i, j, k) / sqrt(3)``; 8 neighbours.
 
 Examples
 --------
@@ -36,20 +46,30 @@ from ..errors import FormationError
 from ..resources import check_memory
 from ..validation import choices
 
-__all__ = ["LATTICES", "SPACING_FLOOR", "LatticeKind", "lattice"]
+__all__ = ["LATTICES", "LATTICE_DIM", "SPACING_FLOOR", "LatticeKind", "lattice"]
 
-LatticeKind = Literal["triangular", "square", "hexagonal"]
+LatticeKind = Literal["triangular", "square", "hexagonal", "cubic", "fcc", "bcc"]
 
 #: The smallest lattice spacing: the sixth power of a distance (the barrier's ``h^3``, with
 #: ``h`` a squared distance) stays a normal double down to about 1e-51.
 SPACING_FLOOR = 1e-50
 
-#: The lattice kinds :func:`lattice` knows, with the area per point in units of ``spacing**2``.
+#: The lattice kinds :func:`lattice` knows, with the area per point in units of ``spacing**2``
+#: in the plane, the volume per point in units of ``spacing**3`` in space.
 LATTICES: dict[str, float] = {
     "triangular": math.sqrt(3.0) / 2.0,
     "square": 1.0,
     "hexagonal": 3.0 * math.sqrt(3.0) / 4.0,
+    "cubic": 1.0,
+    "fcc": 1.0 / math.sqrt(2.0),  # a cube of side 2 grid units holds 4 points
+    "bcc": 4.0 / (3.0 * math.sqrt(3.0)),  # a cube of side 2 grid units holds 2 points
 }
+
+#: The space of each lattice kind.
+LATTICE_DIM: dict[str, int] = {"cubic": 3, "fcc": 3, "bcc": 3}
+
+#: Nearest-neighbour distance of the cubic lattices in grid units.
+_GRID_SPACING = {"cubic": 1.0, "fcc": math.sqrt(2.0), "bcc": math.sqrt(3.0)}
 
 
 #: bytes per point of the square grid a lattice patch is cut from, at the peak (indices,
@@ -62,8 +82,9 @@ def lattice(kind: str, count: int, spacing: float = 1.0) -> NDArray[np.float64]:
 
     Parameters
     ----------
-    kind : {"triangular", "square", "hexagonal"}
-        The lattice; ``"hexagonal"`` is the honeycomb (three neighbours per point).
+    kind : {"triangular", "square", "hexagonal", "cubic", "fcc", "bcc"}
+        The lattice; ``"hexagonal"`` is the honeycomb (three neighbours per point); the
+        last three are in space.
     count : int
         Number of points, at least 2.
     spacing : float
@@ -71,10 +92,10 @@ def lattice(kind: str, count: int, spacing: float = 1.0) -> NDArray[np.float64]:
 
     Returns
     -------
-    ndarray, shape (count, 2)
-        Points ordered by distance from the centre (the origin), then by angle
-        in ``(-pi, pi]``; the first point is the centre for the triangular and
-        square lattices.
+    ndarray, shape (count, 2) or, for the cubic lattices, (count, 3)
+        Points ordered by distance from the centre (the origin), then (in space) by
+        height, then by angle in ``(-pi, pi]``; the first point is the centre for every
+        lattice but the honeycomb.
 
     Raises
     ------
@@ -111,6 +132,8 @@ def lattice(kind: str, count: int, spacing: float = 1.0) -> NDArray[np.float64]:
             key="template",
         )
     count = int(count)
+    if LATTICE_DIM.get(kind) == 3:
+        return _cubic(kind, count, float(spacing))
     # radius (in spacings) of a disc holding about `count` points, with margin
     radius = math.sqrt(count * LATTICES[kind] / math.pi) + 3.0
     side = 2 * (math.ceil(2.0 * radius) + 2) + 1  # of the square grid it is cut from
@@ -130,6 +153,35 @@ def lattice(kind: str, count: int, spacing: float = 1.0) -> NDArray[np.float64]:
     r2_int = np.rint(r2).astype(np.int64)  # exact: an integer in lattice units
     order = np.lexsort((angle, r2_int))[:count]
     return np.ascontiguousarray(xy[order] * float(spacing))
+
+
+def _cubic(kind: str, count: int, spacing: float) -> NDArray[np.float64]:
+    """The ``count`` points of a cubic lattice nearest to the origin (see the module)."""
+    unit = _GRID_SPACING[kind]  # grid units per spacing
+    # radius (in grid units) of a ball holding about `count` points, with margin
+    radius = unit * ((3.0 * count * LATTICES[kind] / (4.0 * math.pi)) ** (1.0 / 3.0) + 2.0)
+    half = math.ceil(radius) + 1
+    check_memory(
+        _GRID_BYTES * (2 * half + 1) ** 3, f"a {kind} lattice of {count:,} points",
+        key="template", fix="use fewer points",
+    )  # fmt: skip
+    r = np.arange(-half, half + 1, dtype=np.int64)
+    i, j, k = (a.ravel() for a in np.meshgrid(r, r, r, indexing="ij"))
+    if kind == "fcc":
+        keep = (i + j + k) % 2 == 0
+    elif kind == "bcc":
+        keep = (i % 2 == j % 2) & (j % 2 == k % 2)
+    else:
+        keep = np.ones(i.shape, dtype=bool)
+    i, j, k = i[keep], j[keep], k[keep]
+    r2 = i * i + j * j + k * k  # exact: an integer in grid units
+    inside = r2 <= radius * radius
+    assert np.count_nonzero(inside) >= count  # the margin above always suffices
+    i, j, k, r2 = i[inside], j[inside], k[inside], r2[inside]
+    angle = np.arctan2(j.astype(float), i.astype(float))
+    order = np.lexsort((angle, k, r2))[:count]
+    xyz = np.stack([i[order], j[order], k[order]], axis=1).astype(float)
+    return np.ascontiguousarray(xyz * (spacing / unit))
 
 
 def _grid(kind: str, half: int) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:

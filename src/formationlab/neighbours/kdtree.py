@@ -19,21 +19,21 @@ __all__ = ["close_pairs", "non_edges", "pairs_within"]
 
 
 def pairs_within(state: NDArray[np.float64], radius: float) -> NDArray[np.int64]:
-    """Pairs ``i < j`` of one state ``(n, 2)`` at most ``radius`` apart, sorted; ``(p, 2)``."""
+    """Pairs ``i < j`` of one state ``(n, d)`` at most ``radius`` apart, sorted; ``(p, 2)``."""
     ij = cKDTree(state).query_pairs(r=float(radius), output_type="ndarray")
     ij = np.sort(ij.astype(np.int64).reshape(-1, 2), axis=1)
     return ij[np.lexsort((ij[:, 1], ij[:, 0]))]
 
 
 def close_pairs(q: NDArray[np.float64], cutoff: float) -> NDArray[np.int64]:
-    """Pairs ``i < j`` closer than ``cutoff`` in any state of ``q`` ``(..., n, 2)``; ``(p, 2)``.
+    """Pairs ``i < j`` closer than ``cutoff`` in any state of ``q`` ``(..., n, d)``; ``(p, 2)``.
 
     Sorted and unique (the union over the batch).
     """
     q = np.asarray(q, dtype=float)
     n = q.shape[-2]
     found = []
-    for state in q.reshape(-1, n, 2):
+    for state in q.reshape(-1, n, q.shape[-1]):
         ok = np.all(np.isfinite(state), axis=-1)
         idx = np.flatnonzero(ok)
         found.append(idx[pairs_within(state[idx], cutoff)].reshape(-1, 2))
