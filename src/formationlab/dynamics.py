@@ -111,7 +111,7 @@ class System:
             if self.formation.n > SENSING_LIMIT:
                 assert self.sensing is not None
                 Channel(self.sensing, self.formation, self.law, self.model, [], 1.0)  # says why
-            self.law.compiled_terms(self.formation)  # a law without kernel terms says so now
+            self.law.sensed_terms(self.formation)  # a law without its own-frame terms says so now
         if self.marching is not None:
             self.marching.check(self.formation)
         if self.filtered:
@@ -122,11 +122,22 @@ class System:
             self.law.obstacle_repulsion()  # a law without one refuses obstacles now
 
     def _check_space(self) -> None:
-        """Refuse, by name, what the closed loop cannot do yet for a formation in space."""
+        """Refuse, by name, what the closed loop cannot do yet for a formation in space.
+
+        Sensing (local frames as rotations of SO(3), noise on each coordinate, range, delay,
+        losses, mismatch) and faults run in space; a frame error, an angle in the plane,
+        does not, nor do marching, obstacles and the safety filters.
+        """
         dim = self.formation.dim
         self.model.check_space(dim)
+        if self.sensing is not None and self.sensing.frame_error > 0:
+            raise ParameterError(
+                f"sensing.frame_error turns the common frame by an angle in the plane; a "
+                f"formation in space ({dim}-D) has no such angle: remove sensing.frame_error "
+                '(frames = "local" gives every robot a random rotation in space)',
+                key="sensing.frame_error",
+            )
         parts = {
-            "sensing": self.sensed or (self.faults is not None and self.faults.any),
             "marching": self.marching is not None,
             "obstacles": bool(self.obstacles),
             "safety": self.filtered,

@@ -88,6 +88,11 @@ class Law:
     #: The spaces the law works in (``Formation.dim``), and what to use in the others.
     dims: ClassVar[tuple[int, ...]] = (2, 3)
     elsewhere: ClassVar[str] = ""
+    #: The spaces in which robots that sense (:mod:`formationlab.sensing`) compute their own
+    #: commands from the law's kernel terms (:meth:`sensed_terms`): the plane for every law
+    #: with kernel terms; space for a law whose every term is an edge's or a pair's, a
+    #: function of one measured relative position and its length (the laws of distances).
+    sensed_dims: ClassVar[tuple[int, ...]] = (2,)
 
     def formation_for(self, formation: Formation) -> Formation:
         """The formation as this law is judged on it: a law of distances (and orientation)
@@ -169,6 +174,30 @@ class Law:
                 "the compiled loop steps formations in the plane; a formation in space runs "
                 'on the numpy path (backend="numpy", which "auto" chooses)'
             )
+        return self._own_terms(formation, pairs=pairs)
+
+    def sensed_terms(self, formation: Formation) -> KernelTerms:
+        """The terms every robot's own command is computed from
+        (:func:`formationlab.sensing.local_controls`, with pair arrays).
+
+        In the plane :meth:`compiled_terms`; in space the kernel terms of a law that works
+        there on its own measurements (:attr:`sensed_dims`), refused by name otherwise.
+        """
+        if formation.dim == 2:
+            return self.compiled_terms(formation)
+        if formation.dim not in self.sensed_dims:
+            able = sorted(n for n, c in LAWS.items() if formation.dim in c.sensed_dims)
+            raise ParameterError(
+                f"robots that sense each other in space (the [sensing] table) run the laws "
+                f"{', '.join(repr(a) for a in able)}; the law {self.name!r} computes its "
+                "robots' own commands in the plane only so far: run it without [sensing]",
+                key="sensing",
+            )
+        return self._own_terms(formation, pairs=True)
+
+    def _own_terms(self, formation: Formation, *, pairs: bool) -> KernelTerms:
+        """:meth:`kernel_terms`, refused when they are another law's (``control`` overridden
+        without them)."""
 
         def owner(name: str) -> type:
             return next(c for c in type(self).__mro__ if name in c.__dict__)

@@ -160,6 +160,7 @@ class DistanceLaw(Law):
     """
 
     name = "distance"
+    sensed_dims = (2, 3)  # edges and pairs only: lengths, any space
     barrier_at_contact = True
     k_c: float = 2.0
     repulsion: Repulsion = field(default_factory=Repulsion)

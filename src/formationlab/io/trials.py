@@ -28,8 +28,11 @@ one per swept parameter   its value; NaN for a law the parameter does not apply 
 ``drift_speed``           largest robot speed in that rigid motion, m/s
 ``drift_omega``           its angular velocity, rad/s (counter-clockwise positive; in
                           space its size, the axis carrying the direction)
-``drift_cx, drift_cy``    its centre of rotation (NaN when ``drift_omega`` is 0, and in
-                          space, with ``drift_cz``: a rotation there has an axis)
+``drift_cx, drift_cy``    its centre of rotation (NaN when ``drift_omega`` is 0); in
+                          space, with ``drift_cz``, the point of its screw axis nearest
+                          the centroid
+``drift_ax, ...``         in space, the unit direction of that axis (``drift_ay``,
+                          ``drift_az``; the velocity along it is the screw's advance)
 ``shape_rate``            how fast the shape changed over the window (the rigid fit's
                           largest residual over the window), m/s
 ``x1_init, y1_init, ...`` initial positions (``z1_init``, ... in space)

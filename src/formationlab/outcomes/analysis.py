@@ -251,7 +251,7 @@ def final_motion(t: ArrayLike, q: ArrayLike, tolerances: Tolerances | None = Non
     q = np.asarray(q, dtype=float)
     j = int(np.searchsorted(t, t[-1] - tol.drift_window * (1.0 - 1e-9), side="right")) - 1
     if j < 0:
-        return RigidMotion.unknown()
+        return RigidMotion.unknown(dim=q.shape[-1])
     return rigid_motion(q[j], q[-1], t[-1] - t[j])
 
 

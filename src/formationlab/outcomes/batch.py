@@ -122,7 +122,7 @@ class BatchResult:
         # what happened, and its inf / NaN figures are what the table should show
         with np.errstate(over="ignore", invalid="ignore"):
             if q_window is None:
-                motion = RigidMotion.unknown((len(q),))
+                motion = RigidMotion.unknown((len(q),), dim=formation.dim)
             else:
                 motion = rigid_motion(q_window, q, (steps - window_step) * float(dt))
             outcome = classify_batch(

@@ -21,6 +21,17 @@ most ``Tolerances.shape`` while the rigid motion moves some robot faster than
 that; ``rotating`` when the rotation alone moves the robots about their
 centroid faster than ``Tolerances.shape`` (``|omega| max_i |B_i|``).
 
+In space (``(..., n, 3)``) the fit is Kabsch's, and the motion of constant velocity and
+angular velocity is a screw (Chasles's theorem): a rotation by ``phi`` about a fixed axis
+and a translation ``tau`` along it. Its axis, its rate ``omega = phi / T`` and the
+centroid's velocity at the end of the window are fitted exactly as in the plane, the
+plane's formulas applied across the axis (the centroid's chord across the axis turned by
+``phi / 2`` and lengthened by ``(phi / 2) / sin(phi / 2)``) and ``tau / T`` along it; the
+centre is the point of the screw axis nearest the centroid. Sun, Mou, Anderson and Morse,
+"Rigid motions of 3-D undirected formations with mismatch between desired distances"
+(IEEE Transactions on Automatic Control 62(8), 2017) show that mismatched distances drive a
+formation in space into such a helical motion.
+
 Why a window of seconds and not the check interval of the stopping rule:
 explicit Euler on a switching surface chatters by about ``dt max_i |u_i|``
 (``~1e-2`` m on the hexagon) at every step; over 10 ms that is a shape rate of
@@ -66,6 +77,9 @@ class RigidMotion:
         ``max_i |B_i - R(phi) A_i| / T``: how fast the shape changed, m/s.
     window : ndarray, shape S
         The window ``T``, seconds (NaN: no positions that far back).
+    axis : ndarray, shape S + (3,), or None
+        In space, the unit direction of the rotation's axis (``omega >= 0`` about it, by
+        the right hand); None in the plane, where the axis is ``k`` and ``omega`` signed.
     """
 
     velocity: NDArray[np.float64]
@@ -75,19 +89,36 @@ class RigidMotion:
     spin: NDArray[np.float64]
     shape_rate: NDArray[np.float64]
     window: NDArray[np.float64]
+    axis: NDArray[np.float64] | None = None
 
     def __getitem__(self, index: int | slice | NDArray[np.intp]) -> RigidMotion:
         """The motions of some trials of a batch."""
-        return RigidMotion(**{k: getattr(self, k)[index] for k in _FIELDS})
+        axis = None if self.axis is None else self.axis[index]
+        return RigidMotion(**{k: getattr(self, k)[index] for k in _FIELDS}, axis=axis)
 
     @classmethod
-    def unknown(cls, shape: tuple[int, ...] = ()) -> RigidMotion:
+    def unknown(cls, shape: tuple[int, ...] = (), dim: int = 2) -> RigidMotion:
         """No window (a run shorter than it, or a trial that stopped before it): all NaN."""
-        nan, nan2 = np.full(shape, np.nan), np.full((*shape, 2), np.nan)
+        nan, nan2 = np.full(shape, np.nan), np.full((*shape, dim), np.nan)
         return cls(
             velocity=nan2, omega=nan, centre=nan2.copy(), speed=nan.copy(), spin=nan.copy(),
-            shape_rate=nan.copy(), window=nan.copy(),
+            shape_rate=nan.copy(), window=nan.copy(), axis=nan2.copy() if dim == 3 else None,
         )  # fmt: skip
+
+    @property
+    def axial_velocity(self) -> NDArray[np.float64]:
+        """In space, the translation's rate along the axis, ``velocity . axis`` (m/s): the
+        screw's advance; zero for a rotation about a fixed axis or a motion in the plane."""
+        if self.axis is None:
+            return np.zeros(np.shape(self.omega))
+        return np.sum(self.velocity * self.axis, axis=-1)
+
+    @property
+    def pitch(self) -> NDArray[np.float64]:
+        """The screw's advance per radian, ``axial_velocity / omega`` (m/rad; inf for a
+        translation along the axis, NaN for rest)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self.axial_velocity / self.omega
 
 
 _FIELDS = ("velocity", "omega", "centre", "speed", "spin", "shape_rate", "window")
@@ -145,9 +176,15 @@ def _rigid_motion_in_space(p: NDArray, q: NDArray, t: NDArray) -> RigidMotion:
 
     The rotation ``R`` is the least-squares (Kabsch) fit of the centred shapes, from the
     singular value decomposition of ``sum_i B_i A_i^T`` with the sign that keeps ``det R =
-    +1`` (a rotation, never a reflection); ``omega`` is its angle over ``T`` (>= 0: in
-    space the axis carries the direction), the velocity the centroid's chord over ``T``,
-    and the centre NaN (a rotation in space has an axis, not a centre).
+    +1`` (a rotation, never a reflection) (W. Kabsch, "A solution for the best rotation to
+    relate two sets of vectors", Acta Crystallographica A32, 1976); ``omega`` is its angle
+    over ``T`` (>= 0: in space the axis carries the direction). The motion of constant
+    velocity and angular velocity through both fits is a screw about a fixed axis (module
+    docstring): the centroid's chord ``c = Q_bar - P_bar`` splits into ``tau a`` along the
+    axis ``a`` and ``c_perp`` across it; the velocity at the end of the window is ``(tau a
+    + s (cos(phi/2) c_perp + sin(phi/2) a x c_perp)) / T``, ``s = (phi/2) / sin(phi/2)``
+    (the plane's arc across the axis), and the centre the axis's point nearest ``Q_bar``,
+    ``Q_bar + (a x v) / omega`` (NaN where ``omega = 0``).
     """
     with np.errstate(invalid="ignore", divide="ignore"):
         t = np.where(t > 0, t, np.nan)
@@ -169,13 +206,21 @@ def _rigid_motion_in_space(p: NDArray, q: NDArray, t: NDArray) -> RigidMotion:
                       rot[..., 1, 0] - rot[..., 0, 1]], axis=-1)  # fmt: skip
         size = np.linalg.norm(w, axis=-1)
         axis = w / np.where(size > 0, size, 1.0)[..., None]
-        velocity = (qc - pc) / t[..., None]
+        chord = qc - pc
+        tau = np.sum(chord * axis, axis=-1)[..., None]  # the translation along the axis
+        across = chord - tau * axis
+        half = 0.5 * angle[..., None]
+        stretch = np.where(half == 0.0, 1.0, half / np.sin(np.where(half == 0.0, 1.0, half)))
+        turned = np.cos(half) * across + np.sin(half) * np.cross(axis, across)
+        velocity = (tau * axis + stretch * turned) / t[..., None]
+        still = np.where(omega == 0.0, np.nan, omega)[..., None]
+        centre = qc + np.cross(axis, velocity) / still
         move = velocity[..., None, :] + omega[..., None, None] * np.cross(axis[..., None, :], b)
         speed = np.max(np.linalg.norm(move, axis=-1), axis=-1)
         spin = np.abs(omega) * np.max(np.linalg.norm(b, axis=-1), axis=-1)
     return RigidMotion(
-        velocity=velocity, omega=omega, centre=np.full(velocity.shape, np.nan), speed=speed,
-        spin=spin, shape_rate=shape_rate, window=t,
+        velocity=velocity, omega=omega, centre=centre, speed=speed, spin=spin,
+        shape_rate=shape_rate, window=t, axis=axis,
     )  # fmt: skip
 
 

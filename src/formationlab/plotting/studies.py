@@ -346,6 +346,9 @@ _FIXED = {
     "drift_cx",
     "drift_cy",
     "drift_cz",
+    "drift_ax",
+    "drift_ay",
+    "drift_az",
     "shape_rate",
 }
 

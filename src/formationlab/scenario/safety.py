@@ -65,6 +65,15 @@ def build_safety(
     """
     if not obstacles and safety is None:
         return (), None
+    if formation.dim != 2:  # as System._check_space says, with the table's line
+        table = "safety" if safety is not None else "obstacles"
+        line = line_of(text, table) or _obstacle_line(text, 0)
+        at = f" (line {line})" if line else ""
+        raise ScenarioError(
+            f"{source}: [{table}]{at}: a formation in space ({formation.dim}-D) runs without "
+            f"{table} so far (they are planar); remove the table",
+            key=table,
+        )
     try:
         check_extra()
     except MissingExtraError as exc:

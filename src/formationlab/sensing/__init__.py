@@ -13,7 +13,7 @@ The closed loop (:class:`formationlab.System`) takes a :class:`Sensing` and
 
 from .channel import BLOCK, SENSING_LIMIT, Channel, Seed
 from .config import FRAMES, Faults, Sensing, Stop, delay_ring, delay_steps
-from .local import local_controls, measured, rotate
+from .local import from_frames, local_controls, measured, rotate, uniform_rotations
 
 __all__ = [
     "BLOCK",
@@ -26,7 +26,9 @@ __all__ = [
     "Stop",
     "delay_ring",
     "delay_steps",
+    "from_frames",
     "local_controls",
     "measured",
     "rotate",
+    "uniform_rotations",
 ]

@@ -5,13 +5,16 @@ so do the PettingZoo environment and the asynchronous runner). Everything random
 drawn from each trial's own seed, in an order that does not depend on the other
 trials, so a trial's run is the same alone, in any batch, on any worker:
 
-* at creation, each robot's frame (a uniform rotation, for robots without a heading)
-  and each robot's error in each of its desired distances (``mismatch``);
+* at creation, each robot's frame (a uniform rotation, for robots without a heading: an
+  angle in the plane, a rotation of SO(3) in space,
+  :func:`~formationlab.sensing.local.uniform_rotations`) and each robot's error in each
+  of its desired distances (``mismatch``);
 * per step ``k``, the noise of the measurements taken at ``k`` and the losses of the
   measurements delivered at ``k`` (drawn in blocks of :data:`BLOCK` steps).
 
-At step ``k`` robot ``i`` measures ``z_ij(k) = R(-a_i(k)) (p_j(k) - p_i(k)) + noise``
-of every robot within ``range`` (centre to centre); the measurement it uses is the one
+At step ``k`` robot ``i`` measures ``z_ij(k) = R_i^T (p_j(k) - p_i(k)) + noise`` (``R_i =
+R(a_i(k))`` in the plane; noise on each of the ``d`` coordinates) of every robot within
+``range`` (centre to centre); the measurement it uses is the one
 taken at ``k - m`` (``m = delay / dt``), unless that one is lost (probability
 ``drop``), in which case it keeps the last one it received. A robot out of range when
 the measurement was taken is not seen: its terms are left out, nothing is held.
@@ -34,7 +37,7 @@ from ..errors import ParameterError
 from ..formation.spec import Formation
 from ..models import RobotModel
 from .config import Sensing, delay_ring
-from .local import local_controls, measured, rotate
+from .local import from_frames, local_controls, measured, uniform_rotations
 
 __all__ = ["BLOCK", "SENSING_LIMIT", "Channel", "Seed"]
 
@@ -85,7 +88,8 @@ class Channel:
             )
         assert n <= PAIR_LIMIT
         self.sensing, self.formation, self.model, self.n = sensing, formation, model, n
-        self.terms: KernelTerms = law.compiled_terms(formation)
+        self.terms: KernelTerms = law.sensed_terms(formation)
+        self.dim = formation.dim
         self.B = len(seeds)
         self.m = delay_ring(sensing.delay, dt, n, self.B) if sensing.delay > 0 else 0
         self.k = -1  # the last step observed
@@ -93,8 +97,13 @@ class Channel:
         kids = [r.spawn(4) for r in roots]  # frames, mismatch, noise, drops
         self._noise = [np.random.Generator(np.random.PCG64(c[2])) for c in kids]
         self._drop = [np.random.Generator(np.random.PCG64(c[3])) for c in kids]
-        self.fixed_angles: NDArray[np.float64] | None = None
-        if sensing.frames == "local" and not model.has_heading:
+        self.fixed_angles: NDArray[np.float64] | None = None  # in the plane
+        self.fixed_rotations: NDArray[np.float64] | None = None  # in space, (B, n, 3, 3)
+        if sensing.frames == "local" and not model.has_heading and self.dim == 3:
+            self.fixed_rotations = np.stack(
+                [uniform_rotations(np.random.Generator(np.random.PCG64(c[0])), n) for c in kids]
+            ).reshape(self.B, n, 3, 3)
+        elif sensing.frames == "local" and not model.has_heading:
             self.fixed_angles = np.stack(
                 [np.random.Generator(np.random.PCG64(c[0])).uniform(0, 2 * np.pi, n) for c in kids]
             )
@@ -123,8 +132,16 @@ class Channel:
 
     # ------------------------------------------------------------------ frames and views
 
+    def frames(self, x: NDArray[np.float64], live: NDArray[np.intp]) -> NDArray[np.float64] | None:
+        """Each robot's frame at states ``x`` of trials ``live``: angles ``(L, n)`` in the plane
+        (:meth:`angles`), rotation matrices ``(L, n, 3, 3)`` in space; None: the common frame."""
+        if self.fixed_rotations is not None:
+            return self.fixed_rotations[live]
+        return self.angles(x, live)
+
     def angles(self, x: NDArray[np.float64], live: NDArray[np.intp]) -> NDArray[np.float64] | None:
-        """Each robot's frame ``(L, n)`` at states ``x`` of trials ``live`` (None: common frame)."""
+        """Each robot's frame ``(L, n)`` in the plane at states ``x`` of trials ``live`` (None:
+        the common frame, or a formation in space)."""
         if self.fixed_angles is not None:  # fixed random frames, or the frame errors
             return self.fixed_angles[live]
         if self.sensing.frames != "local":
@@ -141,17 +158,17 @@ class Channel:
 
     def field(self, x: NDArray[np.float64], live: NDArray[np.intp]):
         """``(z, seen)`` of states ``x`` now (a channel without noise, delay or drops)."""
-        return measured(self.model.points(x), self.angles(x, live)), self.in_range(x)
+        return measured(self.model.points(x), self.frames(x, live)), self.in_range(x)
 
     def block(self, which: str, trials: NDArray[np.intp]) -> NDArray[np.float64]:
         """The next :data:`BLOCK` steps of noise or losses of each of ``trials``.
 
-        ``which = "noise"``: standard normals ``(L, BLOCK, n, n, 2)``; ``"drop"``: uniforms
+        ``which = "noise"``: standard normals ``(L, BLOCK, n, n, d)``; ``"drop"``: uniforms
         in ``[0, 1)`` ``(L, BLOCK, n, n)``; each trial's from its own generator, so a
         trial's draws depend only on its seed and on how many blocks it has drawn.
         """
         n = self.n
-        out = np.empty((len(trials), BLOCK, n, n, *((2,) if which == "noise" else ())))
+        out = np.empty((len(trials), BLOCK, n, n, *((self.dim,) if which == "noise" else ())))
         for row, b in enumerate(trials):
             if which == "noise":
                 out[row] = self._noise[b].standard_normal(out.shape[1:])
@@ -179,16 +196,16 @@ class Channel:
         if k != self.k + 1:
             raise RuntimeError(f"the channel observes steps in order: step {k} after {self.k}")
         self.k = k
-        n, s = self.n, self.sensing
+        n, s, dim = self.n, self.sensing, self.dim
         if k == 0:
             shape = (self.B, n, n)
-            self._ring_z = np.zeros((self.m + 1, *shape, 2))
+            self._ring_z = np.zeros((self.m + 1, *shape, dim))
             self._ring_in = np.zeros((self.m + 1, *shape), dtype=bool)
-            self._held = np.zeros((*shape, 2))
-        z = measured(self.model.points(x), self.angles(x, live))
+            self._held = np.zeros((*shape, dim))
+        z = measured(self.model.points(x), self.frames(x, live))
         if s.noise > 0:
             z = z + s.noise * np.where(
-                self._eye[..., None], 0.0, self._draw("noise", live, k, (n, n, 2))
+                self._eye[..., None], 0.0, self._draw("noise", live, k, (n, n, dim))
             )
         rng = self.in_range(x)
         inside = np.ones((live.size, n, n), dtype=bool) if rng is None else rng
@@ -232,11 +249,10 @@ class Channel:
     def local(
         self, z: NDArray, seen: NDArray | None, live: NDArray[np.intp]
     ) -> NDArray[np.float64]:
-        """Every robot's command in its own frame from its measurements; ``(L, n, 2)``."""
+        """Every robot's command in its own frame from its measurements; ``(L, n, d)``."""
         own = None if self.own_distance is None else self.own_distance[live]
         return local_controls(self.terms, z, seen=seen, own_distance=own)
 
     def world(self, u_local: NDArray, x: NDArray, live: NDArray[np.intp]) -> NDArray[np.float64]:
-        """Commands ``(L, n, 2)`` in the common frame: ``R(a_i) u_i``."""
-        a = self.angles(x, live)
-        return u_local if a is None else rotate(u_local, a)
+        """Commands ``(L, n, d)`` in the common frame: ``R_i u_i``."""
+        return from_frames(u_local, self.frames(x, live))

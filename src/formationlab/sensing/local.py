@@ -26,6 +26,12 @@ commute with ``k x`` and leave lengths and triple products unchanged, so with ex
 measurements the result rotated back equals the centralized law (to rounding: tested
 to ``1e-12`` for every law). A reflection does not commute with ``k x``: the
 angle-restricted law needs a common sense of rotation, not a common frame.
+
+In space (``d = 3``) a robot's frame is a rotation ``R_i`` of SO(3): it measures
+``z_ij = R_i^T (p_j - p_i)`` and its command ``u_i`` is ``R_i`` times the one it computes.
+The laws of distances run there (:attr:`~formationlab.controllers.Law.sensed_dims`): an
+edge's term is ``g(|z_ij|) z_ij``, along the measured relative position, and a pair's
+Khatib repulsion likewise, so each commutes with every rotation.
 """
 
 from __future__ import annotations
@@ -33,7 +39,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from ..controllers.kinds.edges import edge_force
+from ..controllers.kinds.edges import edge_force, edge_force_at
 from ..controllers.kinds.khatib import repulsion_gain
 from ..controllers.kinds.restriction import (
     restriction_force,
@@ -45,7 +51,7 @@ from ..controllers.kinds.signed_area import area_force, area_gain, signed_area
 from ..controllers.terms import KernelTerms
 from ..formation.geometry import scatter_rows
 
-__all__ = ["local_controls", "rotate"]
+__all__ = ["from_frames", "local_controls", "measured", "rotate", "uniform_rotations"]
 
 
 def rotate(v: NDArray[np.float64], angle: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -55,13 +61,41 @@ def rotate(v: NDArray[np.float64], angle: NDArray[np.float64]) -> NDArray[np.flo
     return np.stack([c * x - s * y, s * x + c * y], axis=-1)
 
 
-def measured(p: NDArray[np.float64], angle: NDArray[np.float64] | None) -> NDArray[np.float64]:
-    """``z[..., i, j] = R(-angle_i) (p_j - p_i)``, each robot's view; ``(..., n, n, 2)``.
+def uniform_rotations(rng: np.random.Generator, n: int) -> NDArray[np.float64]:
+    """``n`` rotation matrices ``(n, 3, 3)`` drawn uniformly (Haar measure) on SO(3).
 
-    ``angle`` ``(..., n)`` is each robot's frame (None: the common frame).
+    The unit quaternion of a Gaussian vector of four coordinates is uniform on the sphere
+    ``S^3``, which covers SO(3) twice with the Haar measure (K. Shoemake, "Uniform random
+    rotations", Graphics Gems III, 1992); scipy's ``Rotation.from_quat`` normalises it and
+    gives its matrix. Four standard normals per robot, drawn from ``rng``.
+    """
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_quat(rng.standard_normal((n, 4))).as_matrix()
+
+
+def measured(p: NDArray[np.float64], frame: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    """``z[..., i, j] = R_i^T (p_j - p_i)``, each robot's view; ``(..., n, n, d)``.
+
+    ``frame`` is each robot's frame ``R_i``: angles ``(..., n)`` in the plane (``R_i =
+    R(angle_i)``), rotation matrices ``(..., n, 3, 3)`` in space; None: the common frame.
     """
     z = p[..., None, :, :] - p[..., :, None, :]
-    return z if angle is None else rotate(z, -np.asarray(angle)[..., :, None])
+    if frame is None:
+        return z
+    if p.shape[-1] == 2:
+        return rotate(z, -np.asarray(frame)[..., :, None])
+    return np.einsum("...iba,...ijb->...ija", frame, z)  # R_i^T z_ij
+
+
+def from_frames(u: NDArray[np.float64], frame: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    """``R_i u_i``: every robot's vector ``(..., n, d)`` from its own frame to the common one
+    (``frame`` as in :func:`measured`)."""
+    if frame is None:
+        return u
+    if u.shape[-1] == 2:
+        return rotate(u, frame)
+    return np.einsum("...iab,...ib->...ia", frame, u)
 
 
 def _gather(z: NDArray, obs: NDArray, tgt: NDArray) -> NDArray:
@@ -90,8 +124,10 @@ def local_controls(
     terms : KernelTerms
         The law's terms (``law.compiled_terms(formation)``), with pair arrays (at most
         ``PAIR_LIMIT`` robots).
-    z : ndarray, shape (..., n, n, 2)
-        ``z[..., i, j]``: robot ``i``'s measurement of ``p_j - p_i`` in its frame.
+    z : ndarray, shape (..., n, n, d)
+        ``z[..., i, j]``: robot ``i``'s measurement of ``p_j - p_i`` in its frame; in space
+        (``d = 3``) the terms are the edges' and the pairs' only
+        (:meth:`~formationlab.controllers.Law.sensed_terms`).
     seen : ndarray of bool, shape (..., n, n), optional
         Whether robot ``i`` has a measurement of ``j``; terms that need an unseen robot
         are left out of the robot's control. Default: everyone sees everyone.
@@ -101,11 +137,11 @@ def local_controls(
 
     Returns
     -------
-    ndarray, shape (..., n, 2)
+    ndarray, shape (..., n, d)
         ``u_i`` in robot ``i``'s frame.
     """
     z = np.asarray(z, dtype=float)
-    n = z.shape[-2]
+    n, dim = z.shape[-2], z.shape[-1]
     t = terms
     rows: list[NDArray] = []
     vals: list[NDArray] = []
@@ -124,11 +160,14 @@ def local_controls(
         bearing = t.edge_bearing  # (m, 2), or one unused row: broadcast
         for side, (obs, tgt) in enumerate(((ei, ej), (ej, ei))):
             v = _gather(z, obs, tgt)
-            b = (1.0 - 2.0 * side) * bearing  # g*_ji = -g*_ij
-            fx, fy = edge_force(
-                t.kind, v[..., 0], v[..., 1], d[..., side], a, t.edge_gain, b[:, 0], b[:, 1]
-            )  # eq. (8)
-            add(obs, np.stack([fx, fy], axis=-1), _seen(seen, obs, tgt))
+            if dim == 2:
+                b = (1.0 - 2.0 * side) * bearing  # g*_ji = -g*_ij
+                fx, fy = edge_force(
+                    t.kind, v[..., 0], v[..., 1], d[..., side], a, t.edge_gain, b[:, 0], b[:, 1]
+                )  # eq. (8)
+                add(obs, np.stack([fx, fy], axis=-1), _seen(seen, obs, tgt))
+            else:
+                add(obs, _along(t, v, d[..., side], a), _seen(seen, obs, tgt))
         other = ~t.pair_is_edge
         if t.repulsion_gain != 0 and other.any():
             pi, pj, pa = t.pair_i[other], t.pair_j[other], t.pair_contact[other]
@@ -157,5 +196,15 @@ def local_controls(
                 term = np.stack(area_force(g, *_xy(p1), *_xy(p2)), axis=-1)
                 add(v_, term, _seen(seen, v_, o1) & _seen(seen, v_, o2))
     if not rows:
-        return np.zeros((*z.shape[:-3], n, 2))
+        return np.zeros((*z.shape[:-3], n, dim))
     return scatter_rows(np.concatenate(vals, axis=-2), np.concatenate(rows), n)
+
+
+def _along(t: KernelTerms, v: NDArray, d: NDArray, a: NDArray) -> NDArray:
+    """An edge's term ``g(r) v`` of a law of distances at ``v = z_ij`` in any space: the
+    plane's formula (:func:`~formationlab.controllers.kinds.edges.edge_force_at`, eq. 8 or
+    Krick et al.'s) evaluated on the edge's own line, at ``(r, 0)``, and pointed along
+    ``v``; ``(..., m, d)``."""
+    r = np.sqrt(np.sum(v * v, axis=-1))
+    f, _ = edge_force_at(t.kind, r, 0.0 * r, r, d, a, t.edge_gain, 0.0, 0.0)  # eq. (8)
+    return (f / r)[..., None] * v

@@ -279,7 +279,9 @@ class SimulationResult:
         ``diagnostics`` (integrator statistics),
         ``tolerances``; for a ``drifting`` or ``rotating`` outcome ``rigid_motion``:
         ``velocity`` (of the centroid, ``[vx, vy]``), ``speed``, ``angular_velocity``,
-        ``centre`` (of the rotation; None for a drift), ``shape_rate`` and ``window``;
+        ``centre`` (of the rotation; None for a drift), ``shape_rate`` and ``window``; in
+        space also the screw's ``axis`` (the unit direction of the rotation, ``centre`` its
+        point nearest the centroid), ``axial_velocity`` along it and ``pitch`` (m/rad);
         for models with more state ``final_state`` (rows of ``state_names``), for
         unicycles ``final_headings`` and ``heading_spread`` (radians), and with
         marching ``marching`` (final shape error, centroid velocity, its error against
@@ -425,11 +427,19 @@ class SimulationResult:
 
 def _motion_dict(m: RigidMotion, outcome: str) -> dict[str, Any]:
     v = np.asarray(m.velocity, dtype=float)
+    screw = {}  # in space: the screw's axis, its advance along it and per radian
+    if m.axis is not None:
+        screw = {
+            "axis": np.asarray(m.axis, dtype=float).tolist(),
+            "axial_velocity": float(m.axial_velocity),
+            "pitch": float(m.pitch),
+        }
     return {
         "velocity": v.tolist(),
-        "speed": float(np.hypot(*v)),
+        "speed": float(np.hypot(*v) if v.size == 2 else np.linalg.norm(v)),
         "angular_velocity": float(m.omega),
         "centre": np.asarray(m.centre).tolist() if outcome == "rotating" else None,
+        **screw,
         "shape_rate": float(m.shape_rate),
         "window": float(m.window),
     }

@@ -186,14 +186,19 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
 
 def motion_columns(motion: RigidMotion) -> dict[str, NDArray[np.float64]]:
     """The rigid-motion columns of ``trials.parquet`` (:mod:`formationlab.io.trials`); in
-    space also ``drift_vz`` and ``drift_cz`` (the centre is NaN there: an axis, not a
-    point)."""
+    space also ``drift_vz`` and ``drift_cz`` (the centre is the screw axis's point nearest
+    the centroid) and the axis, ``drift_ax``, ``drift_ay``, ``drift_az``."""
     axes = list(enumerate("xyz"[: motion.velocity.shape[-1]]))
     return {
         **{f"drift_v{a}": np.asarray(motion.velocity[:, k], dtype=float) for k, a in axes},
         "drift_speed": np.asarray(motion.speed, dtype=float),
         "drift_omega": np.asarray(motion.omega, dtype=float),
         **{f"drift_c{a}": np.asarray(motion.centre[:, k], dtype=float) for k, a in axes},
+        **(
+            {}
+            if motion.axis is None
+            else {f"drift_a{a}": np.asarray(motion.axis[:, k], dtype=float) for k, a in axes}
+        ),
         "shape_rate": np.asarray(motion.shape_rate, dtype=float),
     }
 
