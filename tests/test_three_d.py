@@ -297,7 +297,6 @@ def test_the_distance_law_from_the_same_file_ends_at_the_mirror(tmp_path: Path) 
 @pytest.mark.parametrize(
     "command, what",
     [
-        (["equilibria"], "`formationlab equilibria` takes formations in the plane"),
         (["view", "--no-browser"], "the viewer takes formations in the plane"),
         (["run", "--animate"], "the animation (--animate) takes formations in the plane"),
     ],

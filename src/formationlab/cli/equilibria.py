@@ -89,7 +89,6 @@ def equilibria(
     from ..plotting.equilibria import continuation_figure, gallery_figure
 
     sc = load_scenario(scenario)
-    sc.in_plane("`formationlab equilibria`")
     for w in sc.warnings:
         warn(w if w.startswith(sc.source) else f"{sc.source}: {w}")
     if sc.model.name != "single-integrator" or sc.marching is not None:
@@ -114,7 +113,7 @@ def equilibria(
     def study_ends(law_: Law) -> tuple[NDArray[np.float64], NDArray[np.str_]]:
         assert from_study is not None
         numbers = {k: v for k, v in dataclasses.asdict(law_).items() if isinstance(v, int | float)}
-        return read_study_end_states(from_study, sc.n, law_.name, numbers)
+        return read_study_end_states(from_study, sc.n, law_.name, numbers, dim=sc.formation.dim)
 
     report = find_equilibria(
         sc,

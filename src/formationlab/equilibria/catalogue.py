@@ -6,7 +6,9 @@ refines the others with :func:`~.refine.refine`, classifies them with
 :func:`~.classify.classify_equilibrium` and merges duplicates with
 :func:`~.dedup.same_equilibrium`. Candidates whose run ended ``drifting`` or
 ``rotating`` are refined to relative equilibria (``refine(..., moving=True)``:
-shape and rigid motion together), the others to static ones.
+shape and rigid motion together), the others to static ones. In space (positions
+``(B, n, 3)``) relative equilibria are not refined yet: those end states are counted as
+skipped, ``"moving-in-space"``.
 """
 
 from __future__ import annotations
@@ -45,7 +47,8 @@ class Catalogue:
         Trials that ended at each equilibrium.
     skipped : dict of str to int
         Candidates not attributed to an equilibrium, by reason
-        (``"collision"``, ``"not-refined"``, ``"non-finite"``: the field overflows there).
+        (``"collision"``, ``"not-refined"``, ``"non-finite"``: the field overflows there;
+        ``"moving-in-space"``: a drifting or rotating end state of a formation in space).
     """
 
     formation: Formation
@@ -110,13 +113,13 @@ def catalogue(
     moving_match_tol: float = 2e-2,
     system: System | None = None,
 ) -> Catalogue:
-    """Refine, classify and merge the end states ``candidates`` (``(B, n, 2)``).
+    """Refine, classify and merge the end states ``candidates`` (``(B, n, d)``).
 
     Parameters
     ----------
     outcomes : ndarray of str, shape (B,), optional
         Outcome of each trial; ``"collision"`` trials are skipped.
-    extra : list of ndarray (n, 2), optional
+    extra : list of ndarray (n, d), optional
         States to refine and include with count 0 (e.g. seeds of saddles).
     match_tol : float
         A raw candidate within this (pairwise distances, RMS fit) of an
@@ -130,7 +133,7 @@ def catalogue(
         (:mod:`~formationlab.equilibria.constrained`); the others as equilibria of
         ``law``.
     """
-    cand = np.asarray(candidates, dtype=float).reshape(-1, formation.n, 2)
+    cand = np.asarray(candidates, dtype=float).reshape(-1, formation.n, formation.dim)
     outs = np.asarray(outcomes) if outcomes is not None else np.full(len(cand), "")
     found: list[Equilibrium] = []
     counts: list[int] = []
@@ -146,6 +149,10 @@ def catalogue(
         finite = np.array([bool(np.isfinite(law.control(formation, q)).all()) for q in cand])
     finite = finite.reshape(-1) if finite.size else np.zeros(0, bool)
     keep = (outs != "collision") & finite
+    if formation.dim == 3:  # relative equilibria are refined in the plane only
+        moving_in_space = keep & np.isin(outs, MOVING)
+        skipped["moving-in-space"] += int(np.sum(moving_in_space))
+        keep &= ~moving_in_space
     pending = [(q, 1, o in MOVING) for q, o, k in zip(cand, outs, keep, strict=True) if k]
     skipped["collision"] += int(np.sum(outs == "collision"))
     skipped["non-finite"] += int(np.sum((outs != "collision") & ~finite))
@@ -198,6 +205,8 @@ def _posed(eq: Equilibrium, invariance: str = "rotation") -> Equilibrium:
     """``eq`` in its canonical pose, its velocity turned with it (scaled: left as it is)."""
     if invariance == "scale":
         return replace(eq, q=canonical_pose(eq.q, "scale"))
+    if eq.q.shape[-1] == 3:  # static only in space: no velocity to turn
+        return replace(eq, q=canonical_pose(eq.q))
     d = eq.q[1] - eq.q[0]
     c, s = d / max(float(np.hypot(*d)), 1e-300)
     v = np.array(

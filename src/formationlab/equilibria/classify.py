@@ -26,6 +26,13 @@ co-moving frame, where they are at rest: the Jacobian of ``u(q) - omega k x q``
 (the translation ``v`` is constant), whose rigid-motion modes span an invariant
 subspace (``J T = k x T`` maps translations and the rotation to translations),
 removed as for static equilibria.
+
+**In space** (positions ``(n, 3)``) the same classes, with the six rigid-motion modes
+(three translations, three rotations; five on a line) removed
+(:func:`~formationlab.equilibria.jacobian.rigid_modes_in_space`) and the chirality
+restriction's surfaces in the place of the plane's; the outcome is judged by chirality
+(``mirror``: every restricted tetrahedron reversed). Relative equilibria are refined in
+the plane only (:func:`~formationlab.equilibria.refine`).
 """
 
 from __future__ import annotations
@@ -55,7 +62,7 @@ class Equilibrium:
 
     Attributes
     ----------
-    q : ndarray, shape (n, 2)
+    q : ndarray, shape (n, d)
         One representative (any translate, rotation or allowed relabelling is
         the same equilibrium).
     distances : ndarray, shape (m,)
@@ -86,7 +93,7 @@ class Equilibrium:
     attractive : bool or None
         Filippov equilibria: whether the surfaces attract from both sides
         (a sliding mode exists there). None otherwise.
-    velocity : ndarray, shape (2,)
+    velocity : ndarray, shape (d,)
         Relative equilibria: velocity of the centroid, m/s (in the frame of ``q``).
     omega : float
         Relative equilibria: angular velocity, rad/s (counter-clockwise positive).
@@ -123,6 +130,8 @@ class Equilibrium:
     @property
     def speed(self) -> float:
         """Largest robot speed of the rigid motion, m/s (0 for a static equilibrium)."""
+        if self.q.shape[-1] == 3:  # static only in space (refine refuses moving ones)
+            return 0.0
         return float(field_motion(self.q, self.velocity, self.omega).speed)
 
     @property
@@ -158,11 +167,11 @@ def _sliding_field(
     ``u_w`` is affine in ``w``, so ``w*`` solves a small linear system at every ``q``.
     """
 
-    def grad_sigma(q: NDArray) -> NDArray:  # (..., k, n, 2), central differences
+    def grad_sigma(q: NDArray) -> NDArray:  # (..., k, n, d), central differences
         h = 1e-7 * max(1.0, float(np.max(np.abs(q))))
         out = np.zeros((*q.shape[:-2], len(on), *q.shape[-2:]))
         for a in range(q.shape[-2]):
-            for b in range(2):
+            for b in range(q.shape[-1]):
                 e = np.zeros(q.shape[-2:])
                 e[a, b] = h
                 ds = (law.switching(formation, q + e) - law.switching(formation, q - e)) / (2 * h)
@@ -180,7 +189,7 @@ def _sliding_field(
             ws = w.copy()
             ws[..., s] = 1.0
             cols.append(law.control_with(formation, q, ws) - base)
-        d = np.stack(cols, axis=-3)  # (..., k, n, 2)
+        d = np.stack(cols, axis=-3)  # (..., k, n, d)
         g = grad_sigma(q)
         a = np.einsum("...tnd,...snd->...ts", g, d)
         b = -np.einsum("...tnd,...nd->...t", g, base)
@@ -206,11 +215,16 @@ def classify_equilibrium(
     attractive: bool | None = None
     omega = float(refined.omega)
     # the co-moving frame of a rotating equilibrium turns with it: d/dq of -omega k x q
-    turn = omega * np.kron(np.eye(formation.n), np.array([[0.0, -1.0], [1.0, 0.0]]))
+    space = q.shape[-1] == 3  # (static only: refine refuses relative equilibria in space)
+    turn = (
+        np.zeros((q.size, q.size))
+        if space
+        else omega * np.kron(np.eye(formation.n), np.array([[0.0, -1.0], [1.0, 0.0]]))
+    )
     if on:
         sliding, grad_sigma = _sliding_field(formation, law, w, on)
         jac = jacobian(sliding, q) - turn
-        normals = grad_sigma(q).reshape(len(on), -1).T  # (2n, k)
+        normals = grad_sigma(q).reshape(len(on), -1).T  # (dn, k)
         lam = reduced_eigenvalues(jac, q, extra=normals, invariance=law.invariance)
         wk = w.copy()
         wk[on] = 0.0
@@ -243,10 +257,13 @@ def classify_equilibrium(
         stability = "saddle"
     else:
         stability = "stable"
-    motion = field_motion(q, refined.velocity, omega)
-    u = q - q.mean(axis=0)
-    u = refined.velocity + omega * np.stack([-u[:, 1], u[:, 0]], axis=-1)
-    outcome = classify(formation, q, u, tolerances, motion=motion)
+    if space:  # at rest: the outcome of a run that stops here
+        outcome = classify(formation, q, np.zeros_like(q), tolerances)
+    else:
+        motion = field_motion(q, refined.velocity, omega)
+        u = q - q.mean(axis=0)
+        u = refined.velocity + omega * np.stack([-u[:, 1], u[:, 0]], axis=-1)
+        outcome = classify(formation, q, u, tolerances, motion=motion)
     r = np.linalg.norm(q[formation.edges[:, 1]] - q[formation.edges[:, 0]], axis=-1)
     return Equilibrium(
         q=q,

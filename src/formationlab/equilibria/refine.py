@@ -20,7 +20,10 @@ surface near one); :func:`refine` solves ``u(q) = 0`` from there with
 Translation and rotation leave ``u`` unchanged (up to turning it), so the
 roots form three-dimensional orbits. The solver works modulo those: three
 gauge equations pin the centroid to the start's and the mean angular
-displacement about it to zero.
+displacement about it to zero. In space (positions ``(n, 3)``) the orbits have six
+dimensions and the gauge six equations: the centroid, and the mean angular displacement
+``sum_i p0_i x p_i`` about it, a vector. The chirality-restricted law's surfaces
+``beta v + theta = 0`` (docs/three-d.md) are refined on as the plane's.
 
 **Relative equilibria** (``moving=True``): shapes that the field moves as a
 rigid body, ``u_i(q) = v + omega k x (q_i - q_bar)`` (a drift ``v`` of the
@@ -31,7 +34,9 @@ beside the shape (and the Filippov weights): ``2n + 3 (+ |S|)`` unknowns for
 square system as for a static equilibrium, which is its case ``v = 0,
 omega = 0``. Every surface ``sigma_s`` is a function of the shape only, so a
 rigid motion keeps a state on the surfaces it lies on: the Filippov
-combination is taken as for static equilibria.
+combination is taken as for static equilibria. Relative equilibria in space (a screw,
+``v + omega x (q_i - q_bar)``) are not solved for yet: ``moving=True`` refuses a formation
+in space by name.
 """
 
 from __future__ import annotations
@@ -46,6 +51,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from ..controllers import Law
+from ..errors import ParameterError
 from ..formation.spec import Formation
 from .relative import MAX_NEAR, all_subsets, attracts, rigid_field, rigid_guess
 
@@ -58,7 +64,7 @@ class Refined:
 
     Attributes
     ----------
-    q : ndarray, shape (n, 2)
+    q : ndarray, shape (n, d)
         The equilibrium (same centroid as the start).
     weights : ndarray, shape (s,)
         Step of each switching surface: 1 active, 0 inactive, in between on a
@@ -72,7 +78,7 @@ class Refined:
         consistent with the signs of ``sigma(q)``.
     message : str
         What happened, in words.
-    velocity : ndarray, shape (2,)
+    velocity : ndarray, shape (d,)
         Relative equilibria: velocity ``v`` of the centroid (zero for a static one).
     omega : float
         Relative equilibria: angular velocity about the centroid, rad/s.
@@ -103,19 +109,24 @@ def _gauge(
     """Centroid of ``q`` minus ``c0`` (2) and the mean angular displacement from ``p0``
     (``invariance = "rotation"``) or the mean radial one (``"scale"``) (1).
 
-    ``q`` has shape ``(..., n, 2)``; returns ``(..., 3)``.
+    ``q`` has shape ``(..., n, 2)``; returns ``(..., 3)``. In space, ``(..., n, 3)``:
+    the centroid (3) and the mean angular displacement ``sum_i p0_i x p_i / (n scale)``
+    (3), or the radial one (1).
     """
     c = q.mean(axis=-2)
     p = q - c[..., None, :]
     if invariance == "scale":  # p0 . (p - p0): the size pinned to the start's
         third = np.sum(p0 * (p - p0), axis=(-2, -1)) / (q.shape[-2] * scale)
+    elif q.shape[-1] == 3:
+        turn = np.sum(np.cross(p0, p), axis=-2) / (q.shape[-2] * scale)
+        return np.concatenate([c - c0, turn], axis=-1)
     else:
         third = np.sum(p0[:, 0] * p[..., 1] - p0[:, 1] * p[..., 0], axis=-1) / (q.shape[-2] * scale)
     return np.concatenate([c - c0, third[..., None]], axis=-1)
 
 
 def _field(law: Law, formation: Formation, weights: NDArray) -> Callable[[NDArray], NDArray]:
-    """``q (..., n, 2) -> u (..., n, 2)`` with the steps frozen at ``weights``."""
+    """``q (..., n, d) -> u (..., n, d)`` with the steps frozen at ``weights``."""
     if law.smooth or weights.size == 0:
         return lambda q: law.control(formation, q)
     return lambda q: law.control_with(
@@ -153,7 +164,7 @@ def refine(
     band: float | None = None,
     moving: bool = False,
 ) -> Refined:
-    """Refine ``q0`` (shape ``(n, 2)``) to an equilibrium of ``law`` on ``formation``.
+    """Refine ``q0`` (shape ``(n, d)``) to an equilibrium of ``law`` on ``formation``.
 
     Parameters
     ----------
@@ -177,7 +188,7 @@ def refine(
     moving : bool
         Solve for a relative equilibrium: the shape and its rigid motion ``(v, omega)``
         together (module docstring); the residual is then ``max_i |u_i - v - omega k x
-        (q_i - q_bar)|``.
+        (q_i - q_bar)|``. In the plane only: a formation in space is refused.
 
     Returns
     -------
@@ -185,6 +196,12 @@ def refine(
         ``success`` says whether an equilibrium was found; ``message`` why not.
     """
     q0 = np.asarray(q0, dtype=float)
+    if moving and q0.shape[-1] == 3:
+        raise ParameterError(
+            "relative equilibria (a formation that drifts or turns as a rigid body) are "
+            "refined in the plane only so far, and this formation is in space; refine its "
+            "static equilibria (moving=False)"
+        )
     band = (5e-2 if moving else 1e-2) if band is None else band
     scale = _scale(q0)
     sigma0 = np.asarray(law.switching(formation, q0), dtype=float)
@@ -218,7 +235,7 @@ def refine(
             residual=res_f,
             success=ok,
             message="Filippov equilibrium on a switching surface" if ok else "",
-            **_motion(m),
+            **_motion(m, q0.shape[-1]),
         )
 
     smooth_law = law.smooth or sigma0.size == 0
@@ -250,7 +267,7 @@ def refine(
             residual=res,
             success=True,
             message="equilibrium in the interior of a smooth region",
-            **_motion(m),
+            **_motion(m, q0.shape[-1]),
         )
     why = (
         f"the root finder stopped at largest |u_i| = {res:.3g}"
@@ -258,7 +275,13 @@ def refine(
         else "the root of the frozen field lies across a switching surface"
     )
     best = Refined(
-        q=smooth, weights=w0, surfaces=(), residual=res, success=False, message=why, **_motion(m)
+        q=smooth,
+        weights=w0,
+        surfaces=(),
+        residual=res,
+        success=False,
+        message=why,
+        **_motion(m, q0.shape[-1]),
     )
     for subset in subsets:
         cand = try_filippov(subset)
@@ -278,9 +301,9 @@ def refine(
     return best
 
 
-def _motion(m: NDArray | None) -> dict[str, Any]:
+def _motion(m: NDArray | None, dim: int = 2) -> dict[str, Any]:
     if m is None:
-        return {}
+        return {} if dim == 2 else {"velocity": np.zeros(dim)}
     return {"velocity": np.array(m[:2], dtype=float), "omega": float(m[2])}
 
 
@@ -300,14 +323,14 @@ def _solve_piece(
 
     With ``m0``, of the field minus a rigid motion solved for from ``m0``.
     """
-    n = q0.shape[0]
+    n, d = q0.shape
     size = q0.size
     c0 = q0.mean(axis=0)
     p0 = q0 - c0
     field = _field(law, formation, w)
 
     def fun(x: NDArray) -> NDArray:
-        q = x[..., :size].reshape(*x.shape[:-1], n, 2)
+        q = x[..., :size].reshape(*x.shape[:-1], n, d)
         u = field(q)
         if m0 is not None:
             u = u - rigid_field(q, x[..., size:])
@@ -317,7 +340,7 @@ def _solve_piece(
 
     x0 = q0.ravel() if m0 is None else np.concatenate([q0.ravel(), m0])
     x = _solve(fun, x0, method="lm")
-    return x[:size].reshape(n, 2), (None if m0 is None else x[size:])
+    return x[:size].reshape(n, d), (None if m0 is None else x[size:])
 
 
 def _solve_filippov(
@@ -333,7 +356,7 @@ def _solve_filippov(
 
     With ``m0``: ``u_w(q) = v + omega k x (q - q_bar)``, with ``(v, omega)`` unknowns too.
     """
-    n = q0.shape[0]
+    n, d = q0.shape
     size = q0.size
     c0 = q0.mean(axis=0)
     p0 = q0 - c0
@@ -343,7 +366,7 @@ def _solve_filippov(
     def unpack(x: NDArray) -> tuple[NDArray, NDArray]:
         w = np.broadcast_to(w0, (*x.shape[:-1], w0.size)).copy()
         w[..., idx] = x[..., size:k]
-        return x[..., :size].reshape(*x.shape[:-1], n, 2), w
+        return x[..., :size].reshape(*x.shape[:-1], n, d), w
 
     def fun(x: NDArray) -> NDArray:
         q, w = unpack(x)

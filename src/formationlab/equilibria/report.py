@@ -82,6 +82,9 @@ class EquilibriaConfig:
         Longest settling run of each start, seconds (default 60).
     collinear : float
         Fraction of the starts with all robots on one line, in [0, 1] (default 0.2).
+    coplanar : float
+        For a formation in space, the fraction of the starts with all robots on one plane,
+        in [0, 1] (default 0.2; taken after the collinear ones). Not used in the plane.
     integrator : str, optional
         Fixed-step integrator of the settling runs (default: ``rk4`` for smooth laws,
         ``implicit-euler`` for switching laws).
@@ -99,6 +102,7 @@ class EquilibriaConfig:
     seed: int = Field(default=0, ge=0)
     duration: float = Field(default=60.0, gt=0, le=1e7)
     collinear: float = Field(default=0.2, ge=0, le=1)
+    coplanar: float = Field(default=0.2, ge=0, le=1)
     integrator: str | None = None
     dt: float = Field(default=0.01, gt=0)
     follow: str | None = None
@@ -232,10 +236,10 @@ class EquilibriaReport:
         out = []
         for k, (eq, count) in enumerate(zip(cat.equilibria, cat.counts, strict=True)):
             extra = f", {eq.unstable_directions} unstable" if eq.unstable_directions else ""
-            speed = float(np.hypot(*eq.velocity))
             if eq.outcome == "drifting":
-                extra += f", |v| = {speed:.4g} m/s"
+                extra += f", |v| = {float(np.hypot(*eq.velocity)):.4g} m/s"
             elif eq.outcome == "rotating":
+                speed = float(np.hypot(*eq.velocity))
                 extra += f", omega = {eq.omega:.4g} rad/s, |v| = {speed:.4g} m/s"
             if eq.constraints:
                 extra += f", deadlock on {', '.join(eq.constraints)}"
@@ -290,7 +294,7 @@ def find_equilibria(
     config : EquilibriaConfig, optional
         Default: the scenario's ``[equilibria]`` table (:func:`parse_equilibria`).
     end_states : callable, optional
-        ``end_states(law) -> (q, outcomes)``, shapes ``(B, n, 2)`` and ``(B,)``: the end
+        ``end_states(law) -> (q, outcomes)``, shapes ``(B, n, d)`` and ``(B,)``: the end
         states of a study's trials of ``law``, used instead of random starts.
     end_states_source : str, optional
         Where ``end_states`` read from (recorded in ``source``).
@@ -320,7 +324,13 @@ def find_equilibria(
         source["study"] = {"path": end_states_source, "trials": len(q)}
     elif config.starts:
         rng = np.random.default_rng(config.seed)
-        q0 = random_starts(sc.formation, config.starts, rng, collinear=config.collinear)
+        q0 = random_starts(
+            sc.formation,
+            config.starts,
+            rng,
+            collinear=config.collinear,
+            coplanar=config.coplanar,
+        )
         settler = config.settler(law)
         if sc.obstacles:  # starts touching an obstacle are left out
             keep = system.obstacle_clearances(q0).min(axis=(-2, -1)) > 0  # type: ignore[union-attr]
@@ -337,6 +347,8 @@ def find_equilibria(
             "collinear": config.collinear,
             "integrator": settler.name,
         }
+        if sc.formation.dim == 3:
+            source["random_starts"]["coplanar"] = config.coplanar
     cat = catalogue(
         formation, law, np.concatenate(cands), outcomes=np.concatenate(outs), system=system
     )

@@ -6,6 +6,10 @@ closed loop hold them: for laws along the lines joining robots (the distance
 law of eq. 8 and Khatib's repulsion) every line is invariant, so starts with
 all robots on one line end at a *collinear* equilibrium. :func:`random_starts`
 therefore mixes a fraction of collinear starts with starts spread in a square.
+In space every plane is invariant too (the distance laws' terms lie along the lines
+joining robots), so a further fraction of the starts has all robots on one random plane
+(the chirality restriction pushes across the planes of its tetrahedra, and takes such
+starts out of their plane).
 
 :func:`settle` integrates a batch of starts together with a fixed-step
 integrator through the stepping driver; a trial whose step the contact rule
@@ -37,19 +41,27 @@ def random_starts(
     *,
     half_width: float | None = None,
     collinear: float = 0.2,
+    coplanar: float = 0.2,
 ) -> NDArray[np.float64]:
-    """``count`` random initial states, shape ``(count, n, 2)``, none overlapping.
+    """``count`` random initial states, shape ``(count, n, d)``, none overlapping.
 
     Parameters
     ----------
     half_width : float, optional
-        Starts are uniform in ``[-L, L]^2``; default ``L = 3 max d_ij``, the
+        Starts are uniform in ``[-L, L]^d``; default ``L = 3 max d_ij``, the
         spread of the paper's section 4 (``(-3, -3), (3, -3), (0, 3)``, ``d = 1``).
     collinear : float
         Fraction of the starts with all robots on one random line through the
         origin (uniform in ``[-L, L]`` along it).
+    coplanar : float
+        In space (``formation.dim == 3``), the fraction of the starts, after the collinear
+        ones, with all robots on one random plane through the origin (uniform in
+        ``[-L, L]^2`` in it); not used in the plane.
     """
     count, collinear = whole(count, "starts", minimum=0), fraction(collinear, "collinear")
+    coplanar = fraction(coplanar, "coplanar")
+    if formation.dim == 3:
+        return _starts_in_space(formation, count, rng, half_width, collinear, coplanar)
     n = formation.n
     L = float(half_width if half_width is not None else 3.0 * formation.distances.max())
     gap = 2.0 * formation.contact_matrix.max()
@@ -76,6 +88,45 @@ def random_starts(
     return out
 
 
+def _starts_in_space(
+    formation: Formation,
+    count: int,
+    rng: np.random.Generator,
+    half_width: float | None,
+    collinear: float,
+    coplanar: float,
+) -> NDArray[np.float64]:
+    """:func:`random_starts` in space: ``(count, n, 3)``, in ``[-L, L]^3``, a fraction on a
+    line and one on a plane (through the origin, of directions uniform on the sphere)."""
+    n = formation.n
+    L = float(half_width if half_width is not None else 3.0 * formation.distances.max())
+    gap = 2.0 * formation.contact_matrix.max()
+    n_line = round(collinear * count)
+    n_plane = min(round(coplanar * count), count - n_line)
+    out = np.empty((count, n, 3))
+    iu, ju = np.triu_indices(n, k=1)
+    for b in range(count):
+        for _ in range(1000):
+            if b < n_line:
+                axis = rng.standard_normal(3)
+                q = rng.uniform(-L, L, size=n)[:, None] * (axis / np.linalg.norm(axis))
+            elif b < n_line + n_plane:  # an orthonormal pair spanning a random plane
+                frame, _ = np.linalg.qr(rng.standard_normal((3, 2)))
+                q = rng.uniform(-L, L, size=(n, 2)) @ frame.T
+            else:
+                q = rng.uniform(-L, L, size=(n, 3))
+            r = np.linalg.norm(q[ju] - q[iu], axis=-1)
+            if np.all(r > gap):
+                break
+        else:  # pragma: no cover - only for absurdly crowded formations
+            raise ParameterError(
+                f"could not place {n} robots without overlap in [-{L:g}, {L:g}]^3; "
+                "use a larger half_width"
+            )
+        out[b] = q
+    return out
+
+
 def settle(
     formation: Formation,
     law: Law,
@@ -87,7 +138,7 @@ def settle(
     tolerances: Tolerances | None = None,
     system: System | None = None,
 ) -> BatchResult:
-    """Integrate a batch of starts ``q0`` (``(B, n, 2)``) until they stop or ``duration``.
+    """Integrate a batch of starts ``q0`` (``(B, n, d)``) until they stop or ``duration``.
 
     The stepping driver (:func:`formationlab.integrators.drive`) with the
     scheme wrapped in :class:`~formationlab.integrators.substeps.Substepped`:
@@ -119,7 +170,7 @@ def settle(
     """
     q = formation.check_positions(q0)
     if q.ndim != 3:
-        raise ParameterError(f"settle takes starts of shape (B, n, 2), got {q.shape}")
+        raise ParameterError(f"settle takes starts of shape (B, n, d), got {q.shape}")
     if integrator is None:
         integrator = RK4(dt=0.01) if law.smooth else ImplicitEuler(dt=0.01)
     stepper = Substepped(inner=integrator, reach=0.05 * float(formation.distances.min()))

@@ -32,6 +32,7 @@ def read_study_end_states(
     n: int,
     law: str,
     parameters: dict[str, float] | None = None,
+    dim: int = 2,
 ) -> tuple[NDArray[np.float64], NDArray[np.str_]]:
     """Final positions and outcomes of a study's trials of ``law``.
 
@@ -40,17 +41,20 @@ def read_study_end_states(
     study : path-like
         A study's output folder (holding ``trials.parquet``) or the file itself.
     n : int
-        Number of robots: columns ``x1, y1, ..., xn, yn`` (1-based) must exist.
+        Number of robots: columns ``x1, y1, ..., xn, yn`` (1-based) must exist
+        (and ``z1, ..., zn`` for a formation in space, ``dim = 3``).
     law : str
         Only rows whose ``law`` column equals this name are read.
     parameters : dict, optional
         The law's parameters (e.g. ``{"k_a": 3.0}``). A study that swept one of
         them has a column of that name; only rows at this value (or NaN, not
         applicable) are read, so that the end states belong to the law refined.
+    dim : int
+        The formation's space: 2 (the plane) or 3.
 
     Returns
     -------
-    q : ndarray, shape (B, n, 2)
+    q : ndarray, shape (B, n, dim)
     outcome : ndarray of str, shape (B,)
 
     Raises
@@ -70,7 +74,8 @@ def read_study_end_states(
     except (OSError, ValueError, ImportError) as exc:  # pyarrow's errors are ValueErrors
         reason = getattr(exc, "strerror", None) or str(exc).split("\n")[0]
         raise ScenarioError(f"cannot read {path} as a study's trials table: {reason}") from None
-    need = ["outcome", *(f"{c}{i}" for i in range(1, n + 1) for c in "xy")]
+    axes = "xyz"[:dim]
+    need = ["outcome", *(f"{c}{i}" for i in range(1, n + 1) for c in axes)]
     missing = [c for c in need if c not in frame.columns]
     if missing:
         raise ScenarioError(
@@ -95,5 +100,6 @@ def read_study_end_states(
                     f"scenario's {key} = {float(value):g}; set {key} to one of those"
                 )
             frame = frame[keep]
-    q = np.stack([frame[[f"x{i}", f"y{i}"]].to_numpy(dtype=float) for i in range(1, n + 1)], axis=1)
+    columns = [[f"{c}{i}" for c in axes] for i in range(1, n + 1)]
+    q = np.stack([frame[c].to_numpy(dtype=float) for c in columns], axis=1)
     return q, frame["outcome"].to_numpy(dtype=str)

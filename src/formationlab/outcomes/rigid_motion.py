@@ -50,7 +50,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..formation.geometry import cross, perp
 from .tolerances import Tolerances
 
-__all__ = ["RigidMotion", "field_motion", "rigid_motion", "rigid_outcome"]
+__all__ = ["RigidMotion", "field_motion", "kabsch", "rigid_motion", "rigid_outcome"]
 
 #: codes of :func:`rigid_outcome`
 NOT_RIGID, DRIFTING, ROTATING = 0, 1, 2
@@ -171,6 +171,23 @@ def rigid_motion(before: ArrayLike, after: ArrayLike, window: ArrayLike) -> Rigi
     )  # fmt: skip
 
 
+def kabsch(a: NDArray, b: NDArray) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """The rotation ``R`` (``det R = +1``) that best carries the centred points ``a`` onto
+    ``b`` in space, least ``sum_i |B_i - R A_i|^2``; shapes ``(..., n, 3) -> (..., 3, 3)``.
+
+    From the singular value decomposition of ``sum_i B_i A_i^T``, with the sign of its last
+    singular direction chosen to keep a rotation, never a reflection (W. Kabsch, "A solution
+    for the best rotation to relate two sets of vectors", Acta Crystallographica A32, 1976).
+    Also returns where the sum is finite (elsewhere ``R`` is that of zero points).
+    """
+    h = np.einsum("...ni,...nj->...ij", b, a)  # sum_i B_i A_i^T
+    ok = np.all(np.isfinite(h), axis=(-2, -1))
+    u, _, vt = np.linalg.svd(np.where(ok[..., None, None], h, 0.0))
+    flip = np.sign(np.linalg.det(u @ vt))
+    u[..., :, 2] *= np.where(flip == 0, 1.0, flip)[..., None]
+    return u @ vt, ok
+
+
 def _rigid_motion_in_space(p: NDArray, q: NDArray, t: NDArray) -> RigidMotion:
     """:func:`rigid_motion` of positions in space ``(..., n, 3)``.
 
@@ -190,12 +207,7 @@ def _rigid_motion_in_space(p: NDArray, q: NDArray, t: NDArray) -> RigidMotion:
         t = np.where(t > 0, t, np.nan)
         pc, qc = p.mean(axis=-2), q.mean(axis=-2)
         a, b = p - pc[..., None, :], q - qc[..., None, :]
-        h = np.einsum("...ni,...nj->...ij", b, a)  # sum_i B_i A_i^T
-        ok = np.all(np.isfinite(h), axis=(-2, -1))
-        u, _, vt = np.linalg.svd(np.where(ok[..., None, None], h, 0.0))
-        flip = np.sign(np.linalg.det(u @ vt))
-        u[..., :, 2] *= np.where(flip == 0, 1.0, flip)[..., None]
-        rot = u @ vt  # the rotation carrying A onto B (det +1)
+        rot, ok = kabsch(a, b)  # the rotation carrying A onto B (det +1)
         ra = np.einsum("...ij,...nj->...ni", rot, a)
         shape_rate = np.max(np.linalg.norm(b - ra, axis=-1), axis=-1) / t
         cos = np.clip(0.5 * (np.trace(rot, axis1=-2, axis2=-1) - 1.0), -1.0, 1.0)

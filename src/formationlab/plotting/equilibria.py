@@ -1,4 +1,8 @@
-"""Pictures of equilibria: the gallery of shapes and continuation curves."""
+"""Pictures of equilibria: the gallery of shapes and continuation curves.
+
+A formation in space is drawn on matplotlib's 3-D axes (:func:`plot_equilibrium_3d`),
+one scale on the three axes, as :func:`~formationlab.plotting.runs.plot_trajectories_3d`.
+"""
 
 from __future__ import annotations
 
@@ -11,7 +15,13 @@ from matplotlib.patches import Circle
 
 from .fonts import displayable, font_context
 
-__all__ = ["arrow_seconds", "continuation_figure", "gallery_figure", "plot_equilibrium"]
+__all__ = [
+    "arrow_seconds",
+    "continuation_figure",
+    "gallery_figure",
+    "plot_equilibrium",
+    "plot_equilibrium_3d",
+]
 
 _COLOURS = {
     "stable": "tab:green",
@@ -39,8 +49,7 @@ def plot_equilibrium(
     artists: list[Any] = []
     err = eq.distances - formation.distances
     for (i, j), e in zip(formation.edges, err, strict=True):
-        colour = "k" if abs(e) < 1e-2 else ("tab:red" if e > 0 else "tab:blue")
-        (line,) = ax.plot(*q[[i, j]].T, color=colour, lw=1.2, zorder=1)
+        (line,) = ax.plot(*q[[i, j]].T, color=_edge_colour(e), lw=1.2, zorder=1)
         artists.append(line)
     for i, (x, y) in enumerate(q):
         c = Circle((x, y), formation.diameters[i] / 2, fc="white", ec="k", zorder=2)
@@ -74,6 +83,45 @@ def plot_equilibrium(
     return artists
 
 
+def _edge_colour(e: float) -> str:
+    return "k" if abs(e) < 1e-2 else ("tab:red" if e > 0 else "tab:blue")
+
+
+def plot_equilibrium_3d(
+    formation: Any, eq: Any, ax: Any = None, *, title: str = "", span: float | None = None
+) -> list[Any]:
+    """Draw one equilibrium in space on 3-D axes: robots (numbered 1..n) and the edges.
+
+    As :func:`plot_equilibrium`: edges coloured by ``r_ij - d_ij`` (blue short, red long,
+    black met); the title's colour is the class (green stable, orange saddle, purple
+    Filippov, grey degenerate), 3-D axes having no frame to colour. ``span`` fixes the side
+    of the cube shown (a common scale for a gallery). ``ax`` must be a 3-D axes
+    (``fig.add_subplot(projection="3d")``); None makes one. Returns the artists.
+    """
+    if ax is None:
+        ax = plt.figure(figsize=(3, 3)).add_subplot(projection="3d")
+    q = np.asarray(eq.q)
+    artists: list[Any] = []
+    err = eq.distances - formation.distances
+    for (i, j), e in zip(formation.edges, err, strict=True):
+        artists += ax.plot(*q[[i, j]].T, color=_edge_colour(e), lw=1.2)
+    artists.append(ax.scatter(*q.T, s=40, c="white", edgecolors="k", depthshade=False))
+    for i, p in enumerate(q):
+        artists.append(ax.text(*p, f" {i + 1}", fontsize=8))
+    if span is None:
+        span = _span(q, formation)
+    centre = (q.max(axis=0) + q.min(axis=0)) / 2
+    for k, axis in enumerate((ax.set_xlim, ax.set_ylim, ax.set_zlim)):
+        axis(centre[k] - span / 2, centre[k] + span / 2)
+    ax.set_box_aspect((1.0, 1.0, 1.0))
+    ax.set_xticks([])
+    ax.set_yticks([])
+    ax.set_zticks([])
+    if title:
+        ax.set_title(title, fontsize=8, color=_COLOURS.get(eq.stability, "k"))
+    return artists
+
+
 def arrow_seconds(v: Any, span: float) -> float:
     """Seconds of motion drawn by a velocity arrow: 1 s, less if it would leave the panel."""
     speed = float(np.hypot(*np.asarray(v, dtype=float)))
@@ -88,7 +136,8 @@ def gallery_figure(catalogue: Any, *, columns: int = 4, title: str = "", limit: 
     """The equilibria of a catalogue, the desired one first, with class and count.
 
     At most ``limit`` panels (the catalogue's order: desired, then by count);
-    the title says how many more there are.
+    the title says how many more there are. A formation in space: 3-D panels
+    (:func:`plot_equilibrium_3d`).
     """
     eqs = catalogue.equilibria[:limit]
     more = len(catalogue.equilibria) - len(eqs)
@@ -98,10 +147,12 @@ def gallery_figure(catalogue: Any, *, columns: int = 4, title: str = "", limit: 
     cols = min(columns, k)
     rows = -(-k // cols)
     title = displayable(title)  # holds the user's scenario name: any script
+    space = catalogue.formation.dim == 3
     with font_context():
         fig, axes = plt.subplots(
-            rows, cols, figsize=(2.6 * cols, 3.1 * rows + 0.4), squeeze=False, layout="constrained"
-        )
+            rows, cols, figsize=(2.6 * cols, 3.1 * rows + 0.4), squeeze=False, layout="constrained",
+            subplot_kw={"projection": "3d"} if space else None,
+        )  # fmt: skip
     for ax in axes.ravel()[len(eqs) :]:
         ax.axis("off")
     span = max((_span(eq.q, catalogue.formation) for eq in eqs), default=1.0)
@@ -123,7 +174,8 @@ def gallery_figure(catalogue: Any, *, columns: int = 4, title: str = "", limit: 
             lines.append(f"|v| = {speed:.3g} m/s (arrow: {secs:.2g} s)")
         if eq.outcome == "rotating":
             lines.append(f"omega = {eq.omega:.3g} rad/s (+: centre)")
-        plot_equilibrium(catalogue.formation, eq, ax, title="\n".join(lines), span=span)
+        draw = plot_equilibrium_3d if space else plot_equilibrium
+        draw(catalogue.formation, eq, ax, title="\n".join(lines), span=span)
     if not eqs:
         axes[0, 0].text(0.5, 0.5, "no equilibrium found", ha="center", va="center")
     if title:
