@@ -298,7 +298,6 @@ def test_the_distance_law_from_the_same_file_ends_at_the_mirror(tmp_path: Path) 
     "command, what",
     [
         (["view", "--no-browser"], "the viewer takes formations in the plane"),
-        (["run", "--animate"], "the animation (--animate) takes formations in the plane"),
     ],
 )
 def test_commands_that_are_planar_refuse_a_run_in_space_by_name(tmp_path, command, what) -> None:
@@ -312,11 +311,6 @@ def test_commands_that_are_planar_refuse_a_run_in_space_by_name(tmp_path, comman
     assert f"formation.template (line {line})" in res.output and what in res.output
     assert "Traceback" not in res.output
     assert not (tmp_path / "out").exists()
-
-
-def test_animate_refuses_a_run_in_space(tetra_run: Path) -> None:
-    res = invoke("animate", tetra_run)
-    assert res.exit_code == 2 and "is a run in space" in res.output, res.output
 
 
 @pytest.mark.parametrize(

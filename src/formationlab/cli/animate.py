@@ -155,6 +155,9 @@ def animate_cmd(
 ) -> None:
     """Animate a finished run: robots as discs of their diameters and the graph's edges.
 
+    A run in space (axis x, y, z) is drawn on 3-D axes of one scale, the robots as
+    numbered points, under a camera that turns a degree per frame.
+
     Reads DIR/trajectory.nc and writes DIR/animation.gif (pillow),
     DIR/animation.mp4 (ffmpeg from imageio-ffmpeg) and DIR/animation.html (a
     self-contained player), with at most --frames frames evenly spaced in time.
@@ -194,11 +197,6 @@ def animate_cmd(
     with ds:
         if "q" not in ds or "edge_robots" not in ds:
             raise UserInputError(f"{nc} is not a formationlab trajectory (no q or edge_robots)")
-        if ds.sizes.get("axis", 2) == 3:
-            raise UserInputError(
-                f"{nc} is a run in space (x, y, z): `formationlab animate` draws formations in "
-                "the plane so far; trajectories.png shows the paths in 3-D"
-            )
         title = str(ds.attrs.get("scenario_name", folder.name))
         done: list[Path] = []
         try:

@@ -85,8 +85,6 @@ def run(
     sc = load_scenario(scenario)
     for w in sc.warnings:
         warn(w)
-    if animate:
-        sc.in_plane("the animation (--animate)", "run it without --animate")
     formats = usable_formats(FORMATS_ALL, explicit=False) if animate else ()
     plan = _plan(sc, save_every)
     if plan is not None:

@@ -3,8 +3,9 @@
 :func:`animate_run` builds a :class:`matplotlib.animation.FuncAnimation` from
 positions ``(T, n, 2)``; the frames are a thinned, evenly spaced subset of the
 saved times (at most ``max_frames``), so the cost and size of the GIF, MP4 and
-HTML player stay bounded whatever the run's length. Saving is done by
-:mod:`formationlab.io.animation`.
+HTML player stay bounded whatever the run's length (:mod:`.frames`). Positions
+``(T, n, 3)``, a run in space, are drawn on 3-D axes by :mod:`.animation_space`.
+Saving is done by :mod:`formationlab.io.animation`.
 """
 
 from __future__ import annotations
@@ -21,49 +22,21 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 from numpy.typing import ArrayLike, NDArray
 
+from .animation_space import animate_space
 from .colors import robot_colors
 from .fonts import displayable, font_context
-from .many import (
-    COLLECTION_LIMIT,
-    LABEL_LIMIT,
-    broken_line,
-    draw_discs,
-    even_indices,
-    segments,
+from .frames import (
+    TRAIL_VERTICES,
+    frame_indices,
+    path_indices,
+    play,
+    stop_times,
+    used_indices,
 )
+from .many import COLLECTION_LIMIT, LABEL_LIMIT, broken_line, draw_discs, segments
 from .safety import ACTIVE_COLOR, draw_obstacles
 
 __all__ = ["TRAIL_VERTICES", "animate_run", "frame_indices", "path_indices", "used_indices"]
-
-
-def frame_indices(t: ArrayLike, max_frames: int) -> NDArray[np.int64]:
-    """Indices into ``t`` (shape ``(T,)``) of at most ``max_frames`` frames evenly spaced in time.
-
-    The first and the last saved states are always included.
-    """
-    if max_frames < 2:
-        raise ValueError(f"an animation needs at least 2 frames, got max_frames={max_frames}")
-    return even_indices(t, max_frames)
-
-
-def path_indices(t: ArrayLike, max_frames: int, n: int) -> NDArray[np.int64]:
-    """Indices of the saved states the trails are drawn through: evenly spaced, at least the
-    frames, at most 2000, and for many robots at most :data:`TRAIL_VERTICES` ``/ n``."""
-    most = max(2000, max_frames) if n <= LABEL_LIMIT else max(TRAIL_VERTICES // n, 2)
-    return even_indices(t, most)
-
-
-def used_indices(t: ArrayLike, max_frames: int, n: int) -> NDArray[np.int64]:
-    """The saved states an animation of ``n`` robots reads: its frames and its trails' states.
-
-    :func:`animate_run` of ``t[rows]``, ``q[rows]`` draws what it draws of ``t``, ``q``
-    (the frames and the trails pick the same states), so a reader loads only these.
-    """
-    return np.union1d(frame_indices(t, max_frames), path_indices(t, max_frames, n))
-
-
-#: most vertices of all the trails of a frame together, beyond LABEL_LIMIT robots
-TRAIL_VERTICES = 200_000
 
 
 def animate_run(
@@ -91,8 +64,11 @@ def animate_run(
     ----------
     t : array_like, shape (T,)
         Saved times, seconds.
-    q : array_like, shape (T, n, 2)
-        Positions at those times.
+    q : array_like, shape (T, n, 2) or (T, n, 3)
+        Positions at those times. In space (``(T, n, 3)``) the animation is
+        :func:`~formationlab.plotting.animation_space.animate_space`'s, and the arguments
+        of the plane only (``headings``, ``points`` apart from ``q``, ``obstacles``,
+        ``active``, ``active_pairs``) are refused.
     edges : array_like of int, shape (m, 2)
         0-based robot pairs of the graph, drawn as lines between the robots.
     diameters : array_like, shape (n,)
@@ -133,14 +109,17 @@ def animate_run(
     q = np.asarray(q, dtype=float)
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     diameters = np.asarray(diameters, dtype=float)
+    if q.ndim == 3 and q.shape[-1] == 3 and q.shape[0] == t.shape[0]:
+        _planar_only(q, headings, points, obstacles, active, active_pairs)
+        return animate_space(
+            t, q, edges=edges, diameters=diameters, max_frames=max_frames, fps=fps,
+            trail=trail, title=title, size=size, dpi=dpi, stops=stops,
+        )  # fmt: skip
     if q.ndim != 3 or q.shape[-1] != 2 or q.shape[0] != t.shape[0]:
-        raise ValueError(f"q must have shape (T, n, 2) with T = len(t), got {q.shape}")
+        raise ValueError(f"q must have shape (T, n, 2) or (T, n, 3) with T = len(t), got {q.shape}")
     n = q.shape[1]
     many = n > LABEL_LIMIT
-    frames = frame_indices(t, max_frames)
-    # trails are drawn through at most ~2000 states (fewer for many robots: the cost of a
-    # frame stays bounded), so long runs stay cheap to render
-    path = path_indices(t, max_frames, n)
+    frame_indices(t, max_frames)  # checks max_frames before a figure is made
     colors = np.asarray(robot_colors(n)) if many else robot_colors(n)
 
     title = displayable(title)  # the user's scenario name: any script
@@ -172,9 +151,7 @@ def animate_run(
         ax.add_collection(noses)
     marks = ax.plot([], [], "k+", ms=3 if many else 6, zorder=5)[0] if hand is not None else None
     graph = _Lines(ax, len(edges), colors="0.3", linewidth=0.5 if many else 1.0, zorder=2)
-    stop_at = np.full(n, np.inf)
-    for robot, at in stops:
-        stop_at[int(robot)] = float(at)
+    stop_at = stop_times(n, stops)
     if n > COLLECTION_LIMIT:
         span = max(float(np.max(hi - lo)) + 2 * pad, 1e-9)
         points_per_unit = _AXES_SHARE * size * 72.0 / span
@@ -185,8 +162,7 @@ def animate_run(
         robots = _Patches(ax, diameters, colors)
     clock = ax.set_title("")
 
-    def draw(k: int) -> list[Any]:
-        idx = frames[k]
+    def draw(k: int, idx: int, sel: NDArray[np.int64]) -> list[Any]:
         now = q[idx]
         joined = ends[idx]
         graph.set(np.stack([joined[edges[:, 0]], joined[edges[:, 1]]], axis=1))
@@ -200,23 +176,41 @@ def animate_run(
         if marks is not None and hand is not None:
             marks.set_data(hand[idx, :, 0], hand[idx, :, 1])
             extra.append(marks)
-        since = -np.inf if trail is None else t[idx] - trail
-        sel = path[(path < idx) & (t[path] >= since)]
-        sel = np.append(sel, idx)
         hit = pairs[pairs[:, 0] == idx]
         constrained.set_segments(segments(np.stack([now[hit[:, 1]], now[hit[:, 2]]], axis=1)))
         dead = t[idx] >= stop_at
         ring = np.zeros(n, bool) if on is None else on[idx]
         drawn = robots.draw(q[sel], dead, ring)
-        clock.set_text(f"{title + ': ' if title else ''}t = {t[idx]:.2f} s")
-        return [graph.artist, constrained, *drawn, clock, *extra]
+        return [graph.artist, constrained, *drawn, *extra]
 
-    draw(0)
-    # lay the figure out once (the limits are fixed), not at every frame: the constrained
-    # layout measures every tick label each time, about half the cost of a frame
-    fig.draw_without_rendering()
-    fig.set_layout_engine("none")
-    return FuncAnimation(fig, draw, frames=len(frames), interval=1000 / fps, blit=False)
+    return play(
+        fig, t, draw, max_frames=max_frames, n=n, trail=trail, clock=clock, title=title, fps=fps
+    )
+
+
+def _planar_only(
+    q: NDArray[np.float64],
+    headings: ArrayLike | None,
+    points: ArrayLike | None,
+    obstacles: Sequence[Any],
+    active: ArrayLike | None,
+    active_pairs: ArrayLike | None,
+) -> None:
+    """Refuse, by name, what a run in space cannot have: headings (no robot model in space
+    has one), hand points apart from the centres, obstacles and a safety filter."""
+    planar = {
+        "headings": headings is not None,
+        "points": points is not None and not np.array_equal(np.asarray(points, float), q),
+        "obstacles": len(obstacles) > 0,
+        "active": active is not None,
+        "active_pairs": active_pairs is not None,
+    }
+    given = [name for name, on in planar.items() if on]
+    if given:
+        raise ValueError(
+            f"{', '.join(given)} belong to runs in the plane; an animation in space (q of shape "
+            "(T, n, 3)) draws robots, edges, trails and stops only"
+        )
 
 
 class _Robots:

@@ -80,17 +80,18 @@ def segments(lines: NDArray[np.float64]) -> Any:
     return lines
 
 
-def broken_line(lines: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Lines ``(k, points, 2)`` as the ``x`` and ``y`` of one line broken by NaN between them.
+def broken_line(lines: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+    """Lines ``(k, points, d)`` as the coordinates (``x``, ``y`` and, in space, ``z``) of one
+    line broken by NaN between them.
 
     matplotlib makes one path object per line of a collection (tens of microseconds each),
     so beyond :data:`COLLECTION_LIMIT` lines one broken line of one colour draws instead.
     """
-    k, p, _ = lines.shape
-    xy = np.full((k, p + 1, 2), np.nan)
+    k, p, d = lines.shape
+    xy = np.full((k, p + 1, d), np.nan)
     xy[:, :p] = lines
-    xy = xy.reshape(-1, 2)
-    return xy[:, 0], xy[:, 1]
+    xy = xy.reshape(-1, d)
+    return tuple(xy[:, a] for a in range(d))
 
 
 def draw_lines(ax: Axes, lines: NDArray[np.float64], colors: Any, **style: Any) -> Any:
