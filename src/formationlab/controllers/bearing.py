@@ -26,6 +26,11 @@ scale ``s = sqrt(1/n sum_i ||p_i - p_bar||^2)`` are constant along the flow (``e
 g*_ij <= 0``; from almost every start the robots reach ``p*``; the one other equilibrium,
 every bearing reversed (``p*`` turned by pi in the plane), is unstable.
 
+All of it holds in any dimension (their setting is ``R^d``). In space the reversed
+equilibrium ``-p*`` is the point reflection of the target, the mirror image of the other
+chirality: the bearing law reaches the template's chirality from almost every start,
+where the distance law reaches each chirality about half the time (docs/three-d.md).
+
 The law has no barrier at contact: two robots may meet, where their bearing is undefined. To
 compare collision counts with the distance laws, Khatib's repulsion between robots that are
 not neighbours may be added with ``k_r > 0`` (default 0, the law as published; with it the
@@ -45,7 +50,12 @@ from ..formation.geometry import scatter_rows
 from ..formation.spec import Formation
 from ..validation import check_fields
 from .base import Law, ObstacleRepulsion, Repulsion, register
-from .kinds.bearing import bearing_force, bearing_misalignment
+from .kinds.bearing import (
+    bearing_force,
+    bearing_force_in_space,
+    bearing_misalignment,
+    bearing_misalignment_in_space,
+)
 from .squared_distance import grad_repulsion
 from .terms import BEARING, KernelTerms, build_terms
 
@@ -70,14 +80,19 @@ def _bearings(formation: Formation) -> NDArray[np.float64]:
 
 
 def bearing_controls(formation: Formation, q: NDArray[np.float64], k: float = 1.0) -> NDArray:
-    """``p_i' = -k sum_{j in N_i} P_{g_ij} g*_ij`` (Zhao and Zelazo 2016, eq. 11); (..., n, 2)."""
+    """``p_i' = -k sum_{j in N_i} P_{g_ij} g*_ij`` (Zhao and Zelazo 2016, eq. 11); ``(..., n,
+    d)``, in the plane or in space."""
     q = np.asarray(q, dtype=float)
     b = _bearings(formation)
     i, j = formation.edges[:, 0], formation.edges[:, 1]
     r = q[..., j, :] - q[..., i, :]
     with np.errstate(divide="ignore", invalid="ignore"):
-        fx, fy = bearing_force(r[..., 0], r[..., 1], b[:, 0], b[:, 1], k)  # eq. (11)
-    f = np.stack([fx, fy], axis=-1)
+        if q.shape[-1] == 3:
+            rx, ry, rz = r[..., 0], r[..., 1], r[..., 2]
+            f = bearing_force_in_space(rx, ry, rz, b[:, 0], b[:, 1], b[:, 2], k)  # eq. (11)
+        else:
+            f = bearing_force(r[..., 0], r[..., 1], b[:, 0], b[:, 1], k)  # eq. (11)
+    f = np.stack(f, axis=-1)
     return scatter_rows(f, i, formation.n) - scatter_rows(f, j, formation.n)
 
 
@@ -110,7 +125,11 @@ def bearing_lyapunov_rate(
     length = np.linalg.norm(p[..., j, :] - p[..., i, :], axis=-1)  # ||e*_ij||
     r = q[..., j, :] - q[..., i, :]
     with np.errstate(divide="ignore", invalid="ignore"):
-        m = bearing_misalignment(r[..., 0], r[..., 1], b[:, 0], b[:, 1])
+        if q.shape[-1] == 3:
+            rx, ry, rz = r[..., 0], r[..., 1], r[..., 2]
+            m = bearing_misalignment_in_space(rx, ry, rz, b[:, 0], b[:, 1], b[:, 2])
+        else:
+            m = bearing_misalignment(r[..., 0], r[..., 1], b[:, 0], b[:, 1])
     return -k * np.sum(length * m, axis=-1)
 
 
@@ -118,7 +137,7 @@ def leader_target(
     formation: Formation, leaders: ArrayLike, p_leaders: ArrayLike
 ) -> NDArray[np.float64]:
     """Where the followers belong when the ``leaders`` (robot numbers, 1-based) stand at
-    ``p_leaders`` ``(l, 2)``: the formation of the desired bearings through them, ``(n, 2)``.
+    ``p_leaders`` ``(l, d)``: the formation of the desired bearings through them, ``(n, d)``.
 
     Zhao and Zelazo, "Translational and scaling formation maneuver control via a
     bearing-based approach", IEEE Transactions on Control of Network Systems 4(3):429-438,
@@ -136,11 +155,12 @@ def leader_target(
             f"a bearing formation needs at least two leaders among robots 1..{n} to fix its "
             f"position and scale, got {np.asarray(leaders).tolist()}", key="leaders",
         )  # fmt: skip
-    pl = np.asarray(p_leaders, dtype=float).reshape(lead.size, 2)
+    pl = np.asarray(p_leaders, dtype=float).reshape(lead.size, formation.dim)
     follow = np.setdiff1d(np.arange(n), lead)
     lap = bearing_laplacian(b, formation.edges, n).toarray()
-    cols_f = (2 * follow[:, None] + np.arange(2)).ravel()
-    cols_l = (2 * lead[:, None] + np.arange(2)).ravel()
+    d = formation.dim
+    cols_f = (d * follow[:, None] + np.arange(d)).ravel()
+    cols_l = (d * lead[:, None] + np.arange(d)).ravel()
     l_ff, l_fl = lap[np.ix_(cols_f, cols_f)], lap[np.ix_(cols_f, cols_l)]
     if np.linalg.matrix_rank(l_ff) < l_ff.shape[0]:
         raise FormationError(
@@ -148,9 +168,9 @@ def leader_target(
             "Zelazo 2017, Theorem 1): choose leaders whose bearings pin every follower",
             key="leaders",
         )
-    out = np.empty((n, 2))
+    out = np.empty((n, d))
     out[lead] = pl
-    out[follow] = np.linalg.solve(l_ff, -l_fl @ pl.ravel()).reshape(-1, 2)  # Theorem 1
+    out[follow] = np.linalg.solve(l_ff, -l_fl @ pl.ravel()).reshape(-1, d)  # Theorem 1
     return out
 
 
@@ -178,8 +198,6 @@ class BearingLaw(Law):
 
     name = "bearing"
     invariance = "scale"  # u(s q) = u(q): bearings fix the shape up to translation and scale
-    dims = (2,)
-    elsewhere = "the bearing law in space is not built yet; use a law of distances"
     k: float = 1.0
     k_r: float = 0.0
     repulsion: Repulsion = field(default_factory=Repulsion)

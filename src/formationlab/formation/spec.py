@@ -83,12 +83,18 @@ def _index(a: NDArray[np.integer], n: int) -> NDArray[np.integer]:
     return np.ascontiguousarray(a, dtype=np.int32 if n <= _INDEX_LIMIT else np.int64)
 
 
-def _unit_bearings(bearings: ArrayLike, m: int) -> NDArray[np.float64]:
-    """Desired bearings ``(m, 2)``, one per edge, as read-only unit vectors."""
+def _bearing_rows(dim: int) -> str:
+    """How a bearing is written in ``dim`` dimensions (for messages)."""
+    return "[x, y]" if dim == 2 else "[x, y, z]"
+
+
+def _unit_bearings(bearings: ArrayLike, m: int, dim: int = 2) -> NDArray[np.float64]:
+    """Desired bearings ``(m, d)``, one per edge, as read-only unit vectors."""
     b = np.array(bearings, dtype=float)
-    if b.shape != (m, 2):
+    if b.shape != (m, dim):
         raise FormationError(
-            f"bearings must be one [x, y] per edge ({m} edges), got shape {b.shape}",
+            f"bearings must be one {_bearing_rows(dim)} per edge ({m} edges), got shape "
+            f"{b.shape}",
             key="bearings",
         )
     norm = np.sqrt(np.sum(b * b, axis=-1))
@@ -96,7 +102,7 @@ def _unit_bearings(bearings: ArrayLike, m: int) -> NDArray[np.float64]:
     if bad.size:
         raise FormationError(
             f"bearing {bad[0] + 1} (edge {bad[0] + 1}) is {b[bad[0]].tolist()}: a bearing is a "
-            "finite direction, not zero; give [x, y] with x or y non-zero",
+            f"finite direction, not zero; give {_bearing_rows(dim)} with a non-zero entry",
             key="bearings",
         )
     b /= norm[:, None]
@@ -245,7 +251,7 @@ class Formation:
     dim : int
         The space the robots move in: 2 (the plane, the paper's) or 3. Follows the
         template's columns when a template is given.
-    bearings : ndarray, shape (m, 2), optional
+    bearings : ndarray, shape (m, d), optional
         The desired bearings ``g*_ij`` of the edges (unit vectors from robot ``i`` to robot
         ``j``, edges in the stored order ``i < j``): a formation defined by bearings (Zhao
         and Zelazo 2016), whose outcome is judged by them (:mod:`formationlab.outcomes`).
@@ -333,13 +339,9 @@ class Formation:
                 "chirality of tetrahedra (chiral_quads, chiral_signs, or a 3-D template)",
                 key="alpha",
             )
-        if dim == 3 and self.bearings is not None:
-            raise FormationError(
-                "desired bearings are planar here; the bearing law in 3-D is not built yet: "
-                "give the formation by distances (and chirality)",
-                key="bearings",
-            )
-        bearings = None if self.bearings is None else _unit_bearings(self.bearings, len(edges))
+        bearings = (
+            None if self.bearings is None else _unit_bearings(self.bearings, len(edges), dim)
+        )
         half = triples[:, 1] < triples[:, 2]  # the mirrors follow from eq. (3)
         index, halves = _index(edges, n), _index(triples[half], n)
         values = values[half]
@@ -683,8 +685,9 @@ class Formation:
 
         Parameters
         ----------
-        bearings : array_like, shape (m, 2), optional
-            One direction per edge (normalised here). Without it, the template's bearings
+        bearings : array_like, shape (m, d), optional
+            One direction per edge (normalised here), ``d`` the formation's space. Without
+            it, the template's bearings
             ``(t_j - t_i) / ||t_j - t_i||``, the natural way to give them.
         edges : array_like of pairs, optional
             The edges the rows of ``bearings`` belong to, in their order and direction
@@ -704,10 +707,10 @@ class Formation:
             given = t[self.edges[:, 1]] - t[self.edges[:, 0]]
         else:
             given = np.asarray(bearings, dtype=float)
-            if given.ndim != 2 or given.shape != (m, 2):
+            if given.ndim != 2 or given.shape != (m, self.dim):
                 raise FormationError(
-                    f"bearings must be one [x, y] per edge ({m} edges), got shape "
-                    f"{given.shape}", key="bearings",
+                    f"bearings must be one {_bearing_rows(self.dim)} per edge ({m} edges), "
+                    f"got shape {given.shape}", key="bearings",
                 )  # fmt: skip
             if edges is not None:
                 given = _in_edge_order(given, edges, self.edges, self.n, one_based)

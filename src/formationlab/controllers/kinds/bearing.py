@@ -18,19 +18,33 @@ import numpy as np
 
 from . import formula
 
-__all__ = ["bearing_error", "bearing_force", "bearing_misalignment"]
+__all__ = [
+    "bearing_error",
+    "bearing_force",
+    "bearing_force_in_space",
+    "bearing_misalignment",
+    "bearing_misalignment_in_space",
+]
+
+
+@formula
+def bearing_force_in_space(rx, ry, rz, bx, by, bz, gain):
+    """Robot ``i``'s term ``-gain P_{g_ij} g*_ij`` of an edge seen at ``r_ij = (rx, ry, rz)``
+    with desired bearing ``g*_ij = (bx, by, bz)`` (a unit vector), as ``(x, y, z)`` (Zhao and
+    Zelazo 2016, eq. 11: ``P_g g* = g* - g (g . g*)``, in any dimension)."""
+    r = np.sqrt(rx * rx + ry * ry + rz * rz)
+    gx = rx / r  # g_ij = e_ij / ||e_ij||
+    gy = ry / r
+    gz = rz / r
+    dot = gx * bx + gy * by + gz * bz
+    return -gain * (bx - gx * dot), -gain * (by - gy * dot), -gain * (bz - gz * dot)  # eq. (11)
 
 
 @formula
 def bearing_force(rx, ry, bx, by, gain):
-    """Robot ``i``'s term ``-gain P_{g_ij} g*_ij`` of an edge seen at ``r_ij = (rx, ry)`` with
-    desired bearing ``g*_ij = (bx, by)`` (a unit vector), as ``(x, y)`` (Zhao and Zelazo 2016,
-    eq. 11: ``P_g g* = g* - g (g . g*)``)."""
-    r = np.sqrt(rx * rx + ry * ry)
-    gx = rx / r  # g_ij = e_ij / ||e_ij||
-    gy = ry / r
-    dot = gx * bx + gy * by
-    return -gain * (bx - gx * dot), -gain * (by - gy * dot)  # -P_{g_ij} g*_ij, eq. (11)
+    """:func:`bearing_force_in_space` in the plane (``z = 0``: the same numbers), as ``(x, y)``."""
+    fx, fy, _ = bearing_force_in_space(rx, ry, 0.0, bx, by, 0.0, gain)
+    return fx, fy
 
 
 @formula
@@ -42,10 +56,16 @@ def bearing_error(rx, ry, bx, by):
 
 
 @formula
-def bearing_misalignment(rx, ry, bx, by):
+def bearing_misalignment_in_space(rx, ry, rz, bx, by, bz):
     """``g*_ij^T P_{g_ij} g*_ij = 1 - (g_ij . g*_ij)^2``: the rate term of the Lyapunov function
     ``V = 1/2 ||p - p*||^2``, ``V' = -sum_E ||e*_ij|| g*_ij^T P_{g_ij} g*_ij`` (Zhao and Zelazo
     2016, proof of Theorem 5); 0 where the bearing is the desired or the reversed one."""
-    r = np.sqrt(rx * rx + ry * ry)
-    c = (rx * bx + ry * by) / r
+    r = np.sqrt(rx * rx + ry * ry + rz * rz)
+    c = (rx * bx + ry * by + rz * bz) / r
     return 1.0 - c * c
+
+
+@formula
+def bearing_misalignment(rx, ry, bx, by):
+    """:func:`bearing_misalignment_in_space` in the plane (``z = 0``: the same numbers)."""
+    return bearing_misalignment_in_space(rx, ry, 0.0, bx, by, 0.0)
