@@ -30,6 +30,10 @@ DATA = Path(__file__).with_name("data") / "engine_reference.json"
 
 #: steps of each example run (the full duration when shorter)
 STEPS = 1500
+#: steps of an example of more than :data:`LARGE` robots (a swarm's step costs a thousand
+#: small ones; 200 steps exercise every stage and keep the suite short)
+LARGE_STEPS = 200
+LARGE = 500
 #: examples left out of the test-suite comparison for their size (minutes per run)
 TOO_LARGE = ("lattice-100000.toml", "lattice-100000-angle.toml")
 #: studies compared trial by trial: (example, trials per group, seed)
@@ -56,7 +60,8 @@ def key(path: Path) -> str:
 
 
 def run_example(path: Path, backend: str) -> dict[str, object]:
-    """Final state, status and steps of ``path`` run for at most ``STEPS`` steps."""
+    """Final state, status and steps of ``path`` run for at most ``STEPS`` steps
+    (``LARGE_STEPS`` for a swarm)."""
     import formationlab as fl
     from formationlab.io.scenario import load_scenario
 
@@ -64,7 +69,8 @@ def run_example(path: Path, backend: str) -> dict[str, object]:
         warnings.simplefilter("ignore")
         sc = load_scenario(path)
     dt = float(getattr(sc.integrator, "dt", 1e-3))
-    duration = min(sc.duration, STEPS * dt)
+    steps = LARGE_STEPS if sc.formation.n > LARGE else STEPS
+    duration = min(sc.duration, steps * dt)
     kwargs = dict(
         duration=duration, integrator=sc.integrator, model=sc.model, marching=sc.marching,
         obstacles=sc.obstacles, safety=sc.safety, sensing=sc.sensing, faults=sc.faults,

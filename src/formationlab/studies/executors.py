@@ -3,7 +3,11 @@
 Each executor takes the chunks to run and yields ``(task, trials)`` pairs as
 chunks finish, in whatever order they finish; the caller saves and collects
 them. Worker processes run the numba kernel on one thread each (one process per
-core), set through ``NUMBA_NUM_THREADS`` before numba is loaded.
+core): numba's ``set_num_threads(1)`` in each worker of a pool (the environment variable
+``NUMBA_NUM_THREADS`` would have to be set before numba loads, which unpickling the
+worker's first call already does; numba reads it again whenever it compiles, and refuses a
+value other than the threads it launched), ``NUMBA_NUM_THREADS=1`` in the environment of
+a dask worker, which starts before anything is imported.
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from multiprocessing import get_context
 
+import numba
 import pandas as pd
 
 from ..errors import ParameterError
@@ -23,8 +28,7 @@ __all__ = ["run_in_process", "run_on_dask"]
 
 
 def _worker_init() -> None:  # pragma: no cover - runs in the pool's processes
-    # One process per core: keep each kernel on one thread (read when numba loads).
-    os.environ["NUMBA_NUM_THREADS"] = "1"
+    numba.set_num_threads(1)  # one process per core: each kernel on one thread
 
 
 def run_in_process(
