@@ -18,6 +18,8 @@ rejects is frozen and marked.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -64,28 +66,16 @@ def random_starts(
         return _starts_in_space(formation, count, rng, half_width, collinear, coplanar)
     n = formation.n
     L = float(half_width if half_width is not None else 3.0 * formation.distances.max())
-    gap = 2.0 * formation.contact_matrix.max()
     n_line = round(collinear * count)
-    out = np.empty((count, n, 2))
-    iu, ju = np.triu_indices(n, k=1)
-    for b in range(count):
-        for _ in range(1000):
-            if b < n_line:
-                ang = rng.uniform(0.0, np.pi)
-                s = rng.uniform(-L, L, size=n)
-                q = s[:, None] * np.array([np.cos(ang), np.sin(ang)])
-            else:
-                q = rng.uniform(-L, L, size=(n, 2))
-            r = np.linalg.norm(q[ju] - q[iu], axis=-1)
-            if np.all(r > gap):
-                break
-        else:  # pragma: no cover - only for absurdly crowded formations
-            raise ParameterError(
-                f"could not place {n} robots without overlap in [-{L:g}, {L:g}]^2; "
-                "use a larger half_width"
-            )
-        out[b] = q
-    return out
+
+    def draw(b: int) -> NDArray[np.float64]:
+        if b < n_line:
+            ang = rng.uniform(0.0, np.pi)
+            s = rng.uniform(-L, L, size=n)
+            return s[:, None] * np.array([np.cos(ang), np.sin(ang)])
+        return rng.uniform(-L, L, size=(n, 2))
+
+    return _apart(formation, count, L, 2, draw)
 
 
 def _starts_in_space(
@@ -100,27 +90,43 @@ def _starts_in_space(
     line and one on a plane (through the origin, of directions uniform on the sphere)."""
     n = formation.n
     L = float(half_width if half_width is not None else 3.0 * formation.distances.max())
-    gap = 2.0 * formation.contact_matrix.max()
     n_line = round(collinear * count)
     n_plane = min(round(coplanar * count), count - n_line)
-    out = np.empty((count, n, 3))
+
+    def draw(b: int) -> NDArray[np.float64]:
+        if b < n_line:
+            axis = rng.standard_normal(3)
+            return rng.uniform(-L, L, size=n)[:, None] * (axis / np.linalg.norm(axis))
+        if b < n_line + n_plane:  # an orthonormal pair spanning a random plane
+            frame, _ = np.linalg.qr(rng.standard_normal((3, 2)))
+            return rng.uniform(-L, L, size=(n, 2)) @ frame.T
+        return rng.uniform(-L, L, size=(n, 3))
+
+    return _apart(formation, count, L, 3, draw)
+
+
+def _apart(
+    formation: Formation,
+    count: int,
+    L: float,
+    dim: int,
+    draw: Callable[[int], NDArray[np.float64]],
+) -> NDArray[np.float64]:
+    """``count`` starts ``(count, n, dim)``, start ``b`` drawn by ``draw(b)`` again until no
+    two robots are closer than twice the largest contact distance."""
+    n = formation.n
+    gap = 2.0 * formation.contact_matrix.max()
+    out = np.empty((count, n, dim))
     iu, ju = np.triu_indices(n, k=1)
     for b in range(count):
         for _ in range(1000):
-            if b < n_line:
-                axis = rng.standard_normal(3)
-                q = rng.uniform(-L, L, size=n)[:, None] * (axis / np.linalg.norm(axis))
-            elif b < n_line + n_plane:  # an orthonormal pair spanning a random plane
-                frame, _ = np.linalg.qr(rng.standard_normal((3, 2)))
-                q = rng.uniform(-L, L, size=(n, 2)) @ frame.T
-            else:
-                q = rng.uniform(-L, L, size=(n, 3))
+            q = draw(b)
             r = np.linalg.norm(q[ju] - q[iu], axis=-1)
             if np.all(r > gap):
                 break
         else:  # pragma: no cover - only for absurdly crowded formations
             raise ParameterError(
-                f"could not place {n} robots without overlap in [-{L:g}, {L:g}]^3; "
+                f"could not place {n} robots without overlap in [-{L:g}, {L:g}]^{dim}; "
                 "use a larger half_width"
             )
         out[b] = q

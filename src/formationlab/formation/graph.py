@@ -29,7 +29,8 @@ __all__ = [
     "is_rigid",
 ]
 
-#: Up to this many robots :func:`is_rigid` computes the dense rank; above, the pebble game.
+#: Up to this many robots :func:`is_rigid` computes the dense rank; above, the pebble game in
+#: the plane, and growth by Henneberg steps or the count of motions in space.
 DENSE_RIGIDITY_MAX = 50
 
 

@@ -93,8 +93,7 @@ def _unit_bearings(bearings: ArrayLike, m: int, dim: int = 2) -> NDArray[np.floa
     b = np.array(bearings, dtype=float)
     if b.shape != (m, dim):
         raise FormationError(
-            f"bearings must be one {_bearing_rows(dim)} per edge ({m} edges), got shape "
-            f"{b.shape}",
+            f"bearings must be one {_bearing_rows(dim)} per edge ({m} edges), got shape {b.shape}",
             key="bearings",
         )
     norm = np.sqrt(np.sum(b * b, axis=-1))
@@ -339,9 +338,7 @@ class Formation:
                 "chirality of tetrahedra (chiral_quads, chiral_signs, or a 3-D template)",
                 key="alpha",
             )
-        bearings = (
-            None if self.bearings is None else _unit_bearings(self.bearings, len(edges), dim)
-        )
+        bearings = None if self.bearings is None else _unit_bearings(self.bearings, len(edges), dim)
         half = triples[:, 1] < triples[:, 2]  # the mirrors follow from eq. (3)
         index, halves = _index(edges, n), _index(triples[half], n)
         values = values[half]
