@@ -49,11 +49,16 @@ __version__ = package_version()
 
 
 def __getattr__(name: str) -> object:
-    """``fl.Viewer``, the notebook widget, imported on first use (it needs the ``view`` extra)."""
+    """``fl.Viewer``, the notebook widget, imported on first use (it needs the ``view`` extra);
+    ``fl.robotarium_script``, a scenario as a Robotarium controller (docs/robots.md)."""
     if name == "Viewer":
         from .viewer.widget import Viewer  # anywidget, the view extra: when asked for
 
         return Viewer
+    if name == "robotarium_script":
+        from .io.robotarium import robotarium_script  # start-up time: scenario files, scipy
+
+        return robotarium_script
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -92,6 +97,7 @@ __all__ = [
     "lattice",
     "phi",
     "psi",
+    "robotarium_script",
     "simulate",
     "triangle_orientation",
     "triple_products",

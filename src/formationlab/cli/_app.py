@@ -39,7 +39,7 @@ from typer.core import TyperArgument, TyperCommand, TyperGroup, TyperOption
 from ..errors import FormationlabWarning, UserInputError
 from ._signals import interrupted_status
 
-__all__ = ["app", "command", "describe_os_error", "err_console", "fail", "warn"]
+__all__ = ["app", "command", "describe_os_error", "err_console", "fail", "group", "warn"]
 
 err_console = Console(stderr=True)
 
@@ -112,8 +112,11 @@ def describe_os_error(exc: OSError) -> str:
     return f"cannot use {path}: {reason}"
 
 
-def command(*args: Any, **kwargs: Any) -> Callable[[F], F]:
-    """``app.command`` that turns user errors into a message and an exit status (module doc)."""
+def command(*args: Any, on: typer.Typer | None = None, **kwargs: Any) -> Callable[[F], F]:
+    """``app.command`` that turns user errors into a message and an exit status (module doc).
+
+    ``on``: the group to register on (a sub-group such as ``formationlab export``); default
+    :data:`app`."""
     kwargs.setdefault("cls", _Command)
 
     def deco(fn: F) -> F:
@@ -133,7 +136,7 @@ def command(*args: Any, **kwargs: Any) -> Callable[[F], F]:
             except KeyboardInterrupt:
                 fail("interrupted", code=INTERRUPTED)
 
-        app.command(*args, **kwargs)(wrapper)
+        (app if on is None else on).command(*args, **kwargs)(wrapper)
         return fn
 
     return deco
@@ -174,7 +177,7 @@ class _Command(TyperCommand):
 
 
 class _Group(TyperGroup):
-    """The root command, with the help display of :class:`_Command`."""
+    """The root command and its sub-groups, with the help display of :class:`_Command`."""
 
     def get_params(self, ctx: Any) -> list[Any]:
         return _conventional(super().get_params(ctx))
@@ -188,6 +191,14 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     cls=_Group,
 )
+
+
+def group(name: str, help: str) -> typer.Typer:
+    """A sub-group of commands (``formationlab NAME ...``) added to :data:`app`; register its
+    commands with ``command(..., on=group)``."""
+    sub = typer.Typer(name=name, help=help, no_args_is_help=True, cls=_Group)
+    app.add_typer(sub, name=name)
+    return sub
 
 
 def _print_version(value: bool) -> None:
