@@ -77,10 +77,10 @@ PROJECTION_DISTANCE = 0.05
 #: points 0.05 m ahead and 0.2 m apart keep those 0.2 - 2 (0.05 - 0.025) = 0.15 m apart
 BARRIER_GAIN = 100.0
 SAFETY_RADIUS = 0.2
-#: the unicycles' limits, scaled down together (formationlab's ``limit_unicycle``, the
-#: unicycle model's ``max_speed`` and ``max_turn_rate``): |v| + BASE_LENGTH |omega| / 2 =
-#: 0.1 + 0.09975 keeps both wheels within 0.2 m/s, and omega within the map's cap (pi) and
-#: the Robotarium's (3.6 rad/s), so that no later limit changes a command
+#: the unicycles' limits, v and omega scaled down together (formationlab's
+#: ``limit_unicycle``, the unicycle model's ``max_speed`` and ``max_turn_rate``):
+#: |v| + BASE_LENGTH |omega| / 2 = 0.1 + 0.09975 keeps both wheels within 0.2 m/s, and omega
+#: within the Robotarium's 3.6 rad/s, so that no later limit of rps changes a command
 MAX_SPEED = 0.1
 MAX_TURN_RATE = 1.9
 #: the start's centres stay this far from the walls, m
@@ -323,8 +323,8 @@ def robotarium_plan(
         f"robots: unicycles, the law on points {PROJECTION_DISTANCE} m ahead (near-identity), "
         + ("headings from the scenario" if sc.model.name == "unicycle" else "headings 0"),
         f"integrator: {steps} steps of {TIME_STEP} s (the scenario's {sc.duration:g} s)",
-        f"the barrier certificate (safety radius {SAFETY_RADIUS} m, gain {BARRIER_GAIN:g}, "
-        f"the arena's walls), then |v| <= {MAX_SPEED} m/s, |omega| <= {MAX_TURN_RATE} rad/s",
+        f"|v| <= {MAX_SPEED} m/s, |omega| <= {MAX_TURN_RATE} rad/s, then the barrier "
+        f"certificate (safety radius {SAFETY_RADIUS} m, gain {BARRIER_GAIN:g}, the walls)",
     ]  # fmt: skip
     plan = RobotariumPlan(
         scenario=sc, formation=formation, law=law, sigma=sigma, start_scale=start_scale,
@@ -506,9 +506,11 @@ def twin_simulation(
     explicit Euler at the Robotarium's step, and the centralized barrier filter on the points
     with the certificate's safety radius and gain, for ``steps`` steps (default the plan's).
 
-    The certificate's input limit (``|u_i| <= 0.2``, a direction-preserving scaling) is left
-    out: the unicycle limit scales each command onto a box inside that disc, so the two
-    compose to the unicycle limit alone wherever the certificate changes nothing.
+    The script limits each robot's command before the certificate (whose own input limit,
+    ``|u_i| <= 0.2``, then changes nothing) and slows every robot by one factor where the
+    certificate sped one past its limits; here the filter comes first and the model limits
+    each robot after it. The two are the same arithmetic wherever the certificate changes
+    nothing (``tests/test_robotarium.py``).
     ``certificate=False`` leaves the filter out (the script run without its certificate)."""
     model = get_model(
         "unicycle", mapping="near-identity", offset=PROJECTION_DISTANCE, max_speed=MAX_SPEED,

@@ -150,12 +150,11 @@ def formation_reached(p):
     return bool(ok)
 
 
-def unicycle_limit(dxu):
-    """Scale each robot's (v, omega) down together, by min(1, MAX_SPEED / |v|,
-    MAX_TURN_RATE / |omega|): the path keeps its curvature and the point its direction."""
-    s = np.minimum(1.0, np.minimum(MAX_SPEED / np.maximum(np.abs(dxu[0]), 1e-300),
-                                   MAX_TURN_RATE / np.maximum(np.abs(dxu[1]), 1e-300)))
-    return dxu * s
+def unicycle_factor(dxu):
+    """Each robot's factor min(1, MAX_SPEED / |v|, MAX_TURN_RATE / |omega|) for its (v, omega)
+    (2, N): scaled by it, the path keeps its curvature and the point its direction."""
+    return np.minimum(1.0, np.minimum(MAX_SPEED / np.maximum(np.abs(dxu[0]), 1e-300),
+                                      MAX_TURN_RATE / np.maximum(np.abs(dxu[1]), 1e-300)))
 
 
 def main(save_poses=None):
@@ -168,7 +167,7 @@ def main(save_poses=None):
         barrier_gain=BARRIER_GAIN, safety_radius=SAFETY_RADIUS,
         magnitude_limit=MAX_WHEEL_SPEED)
     # the map's own turn cap clips omega alone (turning the point's velocity); the cap is
-    # unicycle_limit's instead, which scales v and omega together
+    # unicycle_factor's instead, which scales v and omega together
     si_to_uni_dyn, uni_to_si_states = create_si_to_uni_mapping(
         projection_distance=PROJECTION_DISTANCE, angular_velocity_limit=np.inf)
     poses = [np.array(r.get_poses(), dtype=float)]
@@ -181,8 +180,12 @@ def main(save_poses=None):
             reached = True
             break
         dxi = law(p).T                                 # single-integrator velocities, (2, N)
-        dxi = si_barrier(dxi, p.T)                     # |dxi_i| <= 0.2, then the QP
-        dxu = unicycle_limit(si_to_uni_dyn(dxi, x))    # (v, omega) of each robot
+        dxi = dxi * unicycle_factor(si_to_uni_dyn(dxi, x))  # each robot within its limits
+        dxi = si_barrier(dxi, p.T)                     # the certificate's QP
+        dxu = si_to_uni_dyn(dxi, x)                    # (v, omega) of each robot
+        # where the certificate sped a robot up past its limits, every robot slows by the
+        # same factor: the certificate's inequalities hold for any common factor <= 1
+        dxu = dxu * np.min(unicycle_factor(dxu))
         r.set_velocities(np.arange(N), dxu)
         r.step()
         steps += 1
