@@ -5,10 +5,12 @@ research testbed", ICRA 2017; simulator: github.com/robotarium/robotarium_python
 module ``rps``) runs a Python script on up to 50 differential-drive robots in an arena of
 3.2 m x 2 m. :func:`robotarium_script` writes such a script for a scenario: it imports numpy
 and ``rps`` only, holds the scenario's law with every number written as a literal constant
-at its top (:mod:`.robotarium_code` has its text), moves the law's points with the
-Robotarium's own single-integrator barrier certificate (with the arena's walls) and its
-near-identity map to unicycles, keeps each wheel within its speed, and stops when the
-formation is reached or its step budget ends.
+at its top (:mod:`.robotarium_code` has its text), limits each robot's speed and turn rate
+(both wheels within 0.2 m/s), moves the law's points with the Robotarium's own
+single-integrator barrier certificate (with the arena's walls) and its near-identity map to
+unicycles, and stops when the formation is reached or its step budget ends. The script
+cannot import formationlab, so its text writes the laws' formulas a second time;
+``tests/test_robotarium.py`` holds them against the package's laws on random states.
 
 Scaling (:func:`robotarium_plan`). Every length of the law is multiplied by one factor
 ``sigma`` (distances, diameters, the template, Khatib's range ``s0``) and the gains so that
@@ -18,8 +20,8 @@ Scaling (:func:`robotarium_plan`). Every length of the law is multiplied by one 
 which the start and the formation fit in the arena, ``WALL_MARGIN`` from its walls; when it
 would bring two neighbours closer than ``DISTANCE_MARGIN`` times the barrier's safety radius,
 the formation takes the smallest factor that keeps them apart and the start its own factor.
-The start's centroid goes to the arena's centre (the laws keep the centroid: the formation
-ends there).
+The start's bounding box is centred on the arena; the formation ends around the start's
+centroid, which every law keeps.
 
 What the testbed cannot honour is refused by name (a formation in space, more than 50
 robots, double integrators or quadrotors, a unicycle's heading map, marching, obstacles,
@@ -33,6 +35,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import textwrap
 from dataclasses import dataclass
 
 import numpy as np
@@ -438,6 +441,12 @@ def _constants(plan: RobotariumPlan, headless: bool) -> list[str]:
     return out
 
 
+def _wrapped(lines: tuple[str, ...]) -> list[str]:
+    """``lines`` as the script's docstring shows them: indented, within 88 columns."""
+    return [w for line in lines for w in textwrap.wrap(line, 86, initial_indent="  ",
+                                                        subsequent_indent="    ")]  # fmt: skip
+
+
 def robotarium_script(
     scenario: Scenario | RobotariumPlan | str | os.PathLike[str],
     *,
@@ -477,9 +486,8 @@ def robotarium_script(
         "numpy and the Robotarium's rps only. Every number is a constant below.",
         "",
         "Scaled to the arena (3.2 m x 2 m):",
-        *(f"  {n}" for n in plan.notes),
-        *(["", "Not as in the scenario:"] + [f"  {w}" for w in plan.warnings] if plan.warnings
-          else []),
+        *_wrapped(plan.notes),
+        *(["", "Not as in the scenario:", *_wrapped(plan.warnings)] if plan.warnings else []),
         "",
         "Run:  python controller.py [--save-poses FILE.npz]   (the poses of every step)",
         '"""',
