@@ -296,6 +296,15 @@ def test_a_formation_that_cannot_fit_is_refused():
         robotarium_plan(parse_scenario(text))
 
 
+def test_what_the_robotarium_runs_otherwise_is_a_warning():
+    plan = robotarium_plan(parse_scenario(square(robots="max_speed = 0.5")))
+    assert plan.warnings == (
+        "robots.max_speed = 0.5 is replaced by the Robotarium's limits (|v| <= 0.1 m/s, "
+        "|omega| <= 1.9 rad/s)",
+    )
+    assert "robots.max_speed = 0.5 is replaced" in robotarium_script(plan)
+
+
 def test_the_command_writes_the_script_and_says_what_it_scaled(tmp_path):
     _load_commands()
     out = tmp_path / "controller.py"
@@ -314,3 +323,8 @@ def test_the_command_writes_the_script_and_says_what_it_scaled(tmp_path):
     assert bad.exit_code == 2 and "error:" in bad.output and "obstacles (line" in bad.output
     assert not (tmp_path / "x.py").exists()
     assert fl.robotarium_script(EXAMPLES / "square-safety.toml") == text
+    tight = runner.invoke(app, [*args, "--force", "--tolerance", "0.002", "--steps", "99"])
+    assert tight.exit_code == 0 and "MAX_STEPS = 99" in out.read_text()
+    assert "TOLERANCE = 0.002" in out.read_text()
+    neg = runner.invoke(app, [*args, "--force", "--tolerance", "-1"])
+    assert neg.exit_code == 2 and "--tolerance must be" in neg.output

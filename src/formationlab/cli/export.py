@@ -32,8 +32,9 @@ def robotarium(
         typer.Option(help="Step budget (0.033 s each); default the scenario's duration."),
     ] = None,
     tolerance: Annotated[
-        float, typer.Option(help="Largest distance error (m) of a reached formation.")
-    ] = 0.01,
+        float | None,
+        typer.Option(help="Largest distance error (m) of a reached formation [default: 0.01]."),
+    ] = None,
     headless: Annotated[
         bool,
         typer.Option(
@@ -57,10 +58,10 @@ def robotarium(
 
     if steps is not None:
         whole(steps, "--steps")
-    positive(tolerance, "--tolerance")
+    given = {} if tolerance is None else {"tolerance": positive(tolerance, "--tolerance")}
     if out.exists() and not force:
         raise OutputExistsError(f"{out} exists; add --force to replace it")
-    plan = robotarium_plan(load_scenario(scenario), steps=steps, tolerance=tolerance)
+    plan = robotarium_plan(load_scenario(scenario), steps=steps, **given)
     for w in plan.warnings:
         warn(w)
     atomic_write_text(out, robotarium_script(plan, headless=headless))

@@ -259,6 +259,12 @@ def _refuse_parts(sc: Scenario) -> list[str]:
             f"[safety] filter {sc.safety.filter!r} is replaced by the Robotarium's barrier "
             f"certificate (safety radius {SAFETY_RADIUS} m, gain {BARRIER_GAIN:g}, the walls)"
         )
+    for key in ("max_speed", "max_turn_rate"):
+        if getattr(model, key, None) is not None:
+            warnings.append(
+                f"robots.{key} = {getattr(model, key):g} is replaced by the Robotarium's "
+                f"limits (|v| <= {MAX_SPEED} m/s, |omega| <= {MAX_TURN_RATE} rad/s)"
+            )
     offset = getattr(model, "offset", PROJECTION_DISTANCE)
     if offset != PROJECTION_DISTANCE:
         warnings.append(
