@@ -33,7 +33,7 @@ def robotarium(
     ] = None,
     tolerance: Annotated[
         float | None,
-        typer.Option(help="Largest distance error (m) of a reached formation [default: 0.01]."),
+        typer.Option(help="Largest distance error (m) of a reached formation (default 0.01)."),
     ] = None,
     headless: Annotated[
         bool,
@@ -46,10 +46,11 @@ def robotarium(
 ) -> None:
     """Write a standalone Robotarium controller (numpy and rps) for a scenario.
 
-    The formation, the law and the start are scaled to the arena (3.2 m x 2 m); what was
-    scaled, and by how much, is printed and written at the top of the script. The script
-    runs the law on near-identity points through the Robotarium's barrier certificate and
-    stops when the formation is reached or its step budget ends (docs/robots.md).
+    The formation, the law and the start are scaled to the arena (3.2 m x 2 m);
+    what was scaled, and by how much, is printed and written at the top of the
+    script. The script moves near-identity points through the Robotarium's
+    barrier certificate and stops when the formation is reached or its step
+    budget ends (docs/robots.md).
     """
     from ..io.files import atomic_write_text
     from ..io.robotarium import robotarium_plan, robotarium_script
