@@ -112,8 +112,12 @@ def describe_os_error(exc: OSError) -> str:
     return f"cannot use {path}: {reason}"
 
 
-def command(*args: Any, **kwargs: Any) -> Callable[[F], F]:
-    """``app.command`` that turns user errors into a message and an exit status (module doc)."""
+def command(*args: Any, on: typer.Typer | None = None, **kwargs: Any) -> Callable[[F], F]:
+    """``app.command`` that turns user errors into a message and an exit status (module doc).
+
+    ``on`` is the typer application to register on: :data:`app` unless given (a group of
+    sub-commands, e.g. ``formationlab export ...``, passes its own).
+    """
     kwargs.setdefault("cls", _Command)
 
     def deco(fn: F) -> F:
@@ -133,7 +137,7 @@ def command(*args: Any, **kwargs: Any) -> Callable[[F], F]:
             except KeyboardInterrupt:
                 fail("interrupted", code=INTERRUPTED)
 
-        app.command(*args, **kwargs)(wrapper)
+        (app if on is None else on).command(*args, **kwargs)(wrapper)
         return fn
 
     return deco
@@ -174,7 +178,7 @@ class _Command(TyperCommand):
 
 
 class _Group(TyperGroup):
-    """The root command, with the help display of :class:`_Command`."""
+    """The root command and its groups, with the help display of :class:`_Command`."""
 
     def get_params(self, ctx: Any) -> list[Any]:
         return _conventional(super().get_params(ctx))
