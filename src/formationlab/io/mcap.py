@@ -174,10 +174,10 @@ def _surfaces(formation: Any, law: Any, sigma: Any) -> dict[str, Any]:
     return {"sigma": sigma, "triangles": tris, "beta": beta, "theta": float(theta)}
 
 
-def check_extra() -> Any:
-    """``mcap_ros2.writer``, or :class:`~formationlab.errors.MissingExtraError` naming
-    ``formationlab[robots]`` when ``mcap`` or ``mcap-ros2-support`` is not installed."""
-    return require_extra("robots", ("mcap_ros2.writer", "mcap"), "MCAP recordings")
+def check_extra() -> None:
+    """Raise :class:`~formationlab.errors.MissingExtraError` naming ``formationlab[robots]``
+    unless ``mcap`` and ``mcap-ros2-support`` import."""
+    require_extra("robots", ("mcap", "mcap_ros2.writer"), "MCAP recordings")
 
 
 def write_mcap(source: Any, target: str | os.PathLike[str], *, name: str | None = None) -> Path:
@@ -198,7 +198,9 @@ def write_mcap(source: Any, target: str | os.PathLike[str], *, name: str | None 
     MissingExtraError
         Without the ``robots`` extra (``mcap``, ``mcap-ros2-support``).
     """
-    writer_module = check_extra()
+    check_extra()
+    from mcap_ros2.writer import Writer  # the robots extra (checked above)
+
     if isinstance(source, Recording):
         rec = source
     elif hasattr(source, "formation"):
@@ -208,7 +210,7 @@ def write_mcap(source: Any, target: str | os.PathLike[str], *, name: str | None 
     if name is not None:
         rec = dataclasses.replace(rec, name=name)
     with atomic_path(target, suffix=".mcap") as tmp, open(tmp, "wb") as fh:
-        writer = writer_module.Writer(fh)
+        writer = Writer(fh)
         _write(writer, rec)
         writer.finish()
     return Path(target)
