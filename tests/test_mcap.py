@@ -115,6 +115,21 @@ def test_run_record_export_and_api_write_the_same_file(triangle_run: Path) -> No
     assert '"rec.mcap"' in manifest and '"exported.mcap"' in manifest
 
 
+def test_every_kth_state(triangle_run: Path, tmp_path: Path) -> None:
+    ds = load_trajectory(triangle_run / "trajectory.nc")
+    res = invoke("export", "mcap", triangle_run, "--every", 3, "--out", tmp_path / "3.mcap")
+    assert res.exit_code == 0, res.output
+    bag = read_bag(tmp_path / "3.mcap")
+    rows = np.arange(0, ds.sizes["time"], 3)
+    assert [log for log, _ in bag["/formation/lyapunov"]] == np.rint(
+        ds["time"].values[rows] * 1e9
+    ).astype(np.int64).tolist()
+    V = [m.data for _, m in bag["/formation/lyapunov"]]  # type: ignore[attr-defined]
+    np.testing.assert_allclose(V, ds["V"].values[rows], rtol=0, atol=TOL)
+    poses = [positions(m.poses)[:, :2] for _, m in bag["/formation/poses"]]  # type: ignore[attr-defined]
+    np.testing.assert_allclose(poses, ds["q"].values[rows], rtol=0, atol=TOL)
+
+
 def test_the_container_has_the_ros2_profile_channels_and_counts(triangle_run: Path) -> None:
     ds = load_trajectory(triangle_run / "trajectory.nc")
     T = ds.sizes["time"]
