@@ -160,9 +160,8 @@ def _run(
     interrupted = result.status == "interrupted"
     summary, written = _write_data(folder, sc, scenario, result, save_every, quiet)
     try:
-        if record is not None:
-            written = _write_record(folder, sc, scenario, result, summary, save_every, written,
-                                    record, quiet)  # fmt: skip
+        if record is not None:  # (listed in summary.json with the figures)
+            written = [*written, *_write_record(folder, sc.name, result, record, quiet)]
         written = _write_figures(folder, sc, scenario, result, summary, save_every, written, quiet)
     except KeyboardInterrupt:
         remove_stale(folder, earlier, written)
@@ -231,29 +230,17 @@ def _write_data(
     return summary, _write_summary(folder, sc, scenario, summary, save_every, names)
 
 
-def _write_record(
-    folder: Path,
-    sc: Any,
-    scenario: Path,
-    result: Any,
-    summary: dict[str, Any],
-    save_every: int,
-    written: list[str],
-    record: Path,
-    quiet: bool,
-) -> list[str]:
-    """Write the MCAP recording (listed in summary.json when it is in the folder)."""
+def _write_record(folder: Path, name: str, result: Any, record: Path, quiet: bool) -> list[str]:
+    """Write the MCAP recording; returns its name for the manifest when it is in the folder."""
     import time
 
     from ..io.mcap import write_mcap
     from .export import describe_recording
 
     start = time.perf_counter()
-    write_mcap(result, record, name=sc.name)
+    write_mcap(result, record, name=name)
     _note(describe_recording(record, time.perf_counter() - start), quiet)
-    if record.resolve().parent != folder.resolve():
-        return written
-    return _write_summary(folder, sc, scenario, summary, save_every, [*written, record.name])
+    return [record.name] if record.resolve().parent == folder.resolve() else []
 
 
 def _write_figures(
