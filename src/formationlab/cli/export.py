@@ -61,10 +61,12 @@ def describe_recording(path: Path, seconds: float) -> str:
     epilog="Example:  formationlab export mcap runs/sim2 --out sim2.mcap",
 )
 def export_mcap(
-    folder: Annotated[Path, typer.Argument(help="Output folder of `formationlab run`.")],
+    folder: Annotated[
+        Path, typer.Argument(metavar="RUN_DIR", help="Output folder of `formationlab run`.")
+    ],
     out: Annotated[
         Path | None,
-        typer.Option("--out", "-o", help=f"The .mcap file (default: DIR/{RECORDING})."),
+        typer.Option("--out", "-o", help=f"The .mcap file (default: RUN_DIR/{RECORDING})."),
     ] = None,
     every: Annotated[
         int, typer.Option(min=1, help="Record every K-th saved state (default: all).")
@@ -73,13 +75,13 @@ def export_mcap(
 ) -> None:
     """Write a run as an MCAP recording of ROS 2 messages (Foxglove, ros2 bag).
 
-    Reads DIR/trajectory.nc and writes, per saved state, the robots' poses
-    (/formation/poses, /robot_<k>/pose), the graph, the active restrictions and their
-    switching lines as markers (/formation/graph), V (/formation/lyapunov) and the
-    distance errors (/formation/distance_errors), in frame "world", stamped with the
-    simulation time. A run saved at every step records about 1,300 states of three robots
-    a second: --every K keeps every K-th. Needs the robots extra:
-    pip install "formationlab[robots]". See docs/robots.md.
+    Reads RUN_DIR/trajectory.nc and writes, per saved state, the robots' poses
+    (/formation/poses, /robot_<k>/pose), the graph, the active restrictions
+    and their switching lines as markers (/formation/graph), V
+    (/formation/lyapunov) and the distance errors (/formation/distance_errors),
+    in frame "world", stamped with the simulation time. About 1,300 states of
+    three robots are written a second: --every K keeps every K-th. Needs the
+    robots extra: pip install "formationlab\\[robots]". See docs/robots.md.
     """
     from ..io.mcap import write_mcap
 
