@@ -5,7 +5,9 @@
 topics below in frame ``world``, stamped (log, publish and header time) with the
 simulation time from 0 (nanoseconds). It uses the ``mcap`` and ``mcap-ros2-support``
 packages (the ``robots`` extra): MCAP's ``ros2`` profile, ``ros2msg`` schemas
-(:mod:`formationlab.io.ros2_messages`) and CDR messages, chunks compressed with zstd.
+(:mod:`formationlab.io.ros2_messages`) and CDR messages, chunks compressed with zstd
+(references: the MCAP format specification and its ``ros2`` profile, mcap.dev/spec; the
+message types of ROS 2's ``common_interfaces``).
 
 ========================== ================================== =================================
 topic                      type                               what
