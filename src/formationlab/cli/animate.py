@@ -136,6 +136,35 @@ def _progress_line(label: str) -> Iterator[Callable[[int, int], None]]:
     yield lambda done, total: None
 
 
+def run_trajectory(folder: Path) -> Path:
+    """``folder/trajectory.nc``, or an error saying what to give: the ``--out`` folder of
+    ``formationlab run``."""
+    if not folder.is_dir():
+        raise UserInputError(
+            f"{folder} is not a folder; give the --out folder of `formationlab run`"
+        )
+    nc = folder / "trajectory.nc"
+    if not nc.is_file():
+        raise UserInputError(
+            f"{folder} holds no trajectory.nc; run `formationlab run SCENARIO --out {folder}` first"
+        )
+    return nc
+
+
+def open_run(nc: Path) -> Any:
+    """The run's ``trajectory.nc`` opened lazily (close it), checked to be formationlab's."""
+    from ..io.netcdf import open_trajectory
+
+    try:
+        ds = open_trajectory(nc)
+    except (OSError, ValueError) as exc:
+        raise UserInputError(f"cannot read {nc} as netCDF: {exc}") from None
+    if "q" not in ds or "edge_robots" not in ds:
+        ds.close()
+        raise UserInputError(f"{nc} is not a formationlab trajectory (no q or edge_robots)")
+    return ds
+
+
 @command(
     "animate",
     epilog="Example:  formationlab animate runs/sim2 --frames 100 --format gif",
@@ -163,7 +192,6 @@ def animate_cmd(
     self-contained player), with at most --frames frames evenly spaced in time.
     """
     from ..io.animation import FORMATS
-    from ..io.netcdf import open_trajectory
 
     formats = tuple(dict.fromkeys(fmt or FORMATS))
     bad = [f for f in formats if f not in FORMATS]
@@ -172,15 +200,7 @@ def animate_cmd(
             f"unknown animation format {bad[0]!r}; choose from {', '.join(FORMATS)}"
         )
     formats = usable_formats(formats, explicit=bool(fmt))
-    if not folder.is_dir():
-        raise UserInputError(
-            f"{folder} is not a folder; give the --out folder of `formationlab run`"
-        )
-    nc = folder / "trajectory.nc"
-    if not nc.is_file():
-        raise UserInputError(
-            f"{folder} holds no trajectory.nc; run `formationlab run SCENARIO --out {folder}` first"
-        )
+    nc = run_trajectory(folder)
     existing = [
         (folder / ANIMATION_STEM).with_suffix(FORMATS[f]).name
         for f in formats
@@ -190,28 +210,22 @@ def animate_cmd(
         raise OutputExistsError(
             f"{folder} already holds {', '.join(existing)}; pass --force to replace it"
         )
-    try:
-        ds = open_trajectory(nc)
-    except (OSError, ValueError) as exc:
-        raise UserInputError(f"cannot read {nc} as netCDF: {exc}") from None
-    with ds:
-        if "q" not in ds or "edge_robots" not in ds:
-            raise UserInputError(f"{nc} is not a formationlab trajectory (no q or edge_robots)")
+    with open_run(nc) as ds:
         title = str(ds.attrs.get("scenario_name", folder.name))
         done: list[Path] = []
         try:
             write_animation(folder, ds, title, frames, formats, done, progress=True)
         except (KeyboardInterrupt, subprocess.CalledProcessError):  # Ctrl-C, also killing ffmpeg
-            _add_to_manifest(folder, [p.name for p in done])
+            add_to_manifest(folder, [p.name for p in done])
             kept = f"; kept {', '.join(p.name for p in done)}" if done else ""
             fail(f"interrupted{kept}", INTERRUPTED)
         finally:
             for p in done:
                 typer.echo(f"wrote {p}")
-    _add_to_manifest(folder, [p.name for p in done])
+    add_to_manifest(folder, [p.name for p in done])
 
 
-def _add_to_manifest(folder: Path, names: list[str]) -> None:
+def add_to_manifest(folder: Path, names: list[str]) -> None:
     """List ``names`` in the manifest of the run's summary.json (when there is one)."""
     from ..io.files import MANIFEST, atomic_write_json
 

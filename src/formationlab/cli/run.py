@@ -64,6 +64,15 @@ def run(
             "trajectory looks too large for memory or disk).",
         ),
     ] = False,
+    record: Annotated[
+        Path | None,
+        typer.Option(
+            "--record",
+            metavar="FILE.mcap",
+            help="Also write the run as an MCAP recording of ROS 2 messages (Foxglove, "
+            "ros2 bag) to FILE.mcap, in --out unless an absolute path (needs the robots extra).",
+        ),
+    ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress, no report.")] = False,
 ) -> None:
     """Simulate a scenario and write trajectory.nc, summary.json and plots to --out.
@@ -86,6 +95,11 @@ def run(
     for w in sc.warnings:
         warn(w)
     formats = usable_formats(FORMATS_ALL, explicit=False) if animate else ()
+    if record is not None:  # refused before the run, not after it
+        from .export import check_recording
+
+        record = out / record  # (an absolute path stays what it is)
+        check_recording(record, force=force)
     plan = _plan(sc, save_every)
     if plan is not None:
         _note(f"{sc.name}: {plan.describe()}", quiet)
@@ -97,7 +111,7 @@ def run(
         if problem:
             warn(problem.split("; ")[0] + "; running it anyway (--force)")
     _note_glyphs(sc.name, quiet)
-    _run(sc, scenario, out, save_every, formats, frames, force, quiet)
+    _run(sc, scenario, out, save_every, formats, frames, force, quiet, record)
 
 
 def _note_glyphs(name: str, quiet: bool) -> None:
@@ -130,12 +144,13 @@ def _run(
     frames: int,
     force: bool,
     quiet: bool,
+    record: Path | None = None,
 ) -> None:
-    """Simulate, write the results, then the figures, then animate.
+    """Simulate, write the results, then the recording, the figures, then animate.
 
     What took the time is written first: ``trajectory.nc``, the per-edge table and
-    ``summary.json`` before the figures (which a Ctrl-C or a failure may stop), so that
-    nothing that comes after can lose a finished simulation.
+    ``summary.json`` before the recording and the figures (which a Ctrl-C or a failure may
+    stop), so that nothing that comes after can lose a finished simulation.
     """
     from ..io.files import earlier_files, prepare_output_dir, remove_stale
 
@@ -145,6 +160,8 @@ def _run(
     interrupted = result.status == "interrupted"
     summary, written = _write_data(folder, sc, scenario, result, save_every, quiet)
     try:
+        if record is not None:  # (listed in summary.json with the figures)
+            written = [*written, *_write_record(folder, sc.name, result, record, quiet)]
         written = _write_figures(folder, sc, scenario, result, summary, save_every, written, quiet)
     except KeyboardInterrupt:
         remove_stale(folder, earlier, written)
@@ -211,6 +228,19 @@ def _write_data(
         summary["distance_errors_table"] = EDGE_TABLE
         names.insert(2, EDGE_TABLE)
     return summary, _write_summary(folder, sc, scenario, summary, save_every, names)
+
+
+def _write_record(folder: Path, name: str, result: Any, record: Path, quiet: bool) -> list[str]:
+    """Write the MCAP recording; returns its name for the manifest when it is in the folder."""
+    import time
+
+    from ..io.mcap import write_mcap
+    from .export import describe_recording
+
+    start = time.perf_counter()
+    write_mcap(result, record, name=name)
+    _note(describe_recording(record, time.perf_counter() - start), quiet)
+    return [record.name] if record.resolve().parent == folder.resolve() else []
 
 
 def _write_figures(

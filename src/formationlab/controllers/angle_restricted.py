@@ -29,6 +29,7 @@ __all__ = [
     "grad_psi",
     "psi_sum",
     "switching_functions",
+    "switching_lines",
     "triple_steps",
 ]
 
@@ -59,6 +60,38 @@ def switching_functions(
         part = slice(a, a + PSI_PART)
         out[..., part] = switching(beta[part], triangle_products(q, tris[part]), theta)  # eq. (14)
     return out
+
+
+def switching_lines(
+    q: NDArray[np.float64],
+    triangles: NDArray[np.integer],
+    beta: NDArray[np.float64],
+    theta: float,
+    *,
+    extend: float = 0.6,
+) -> NDArray[np.float64]:
+    """Line ``s`` of eq. (26) for each vertex of each surface, as segments;
+    ``(..., n, 2), (s, 3), (s,) -> (..., s, 3, 2, 2)``.
+
+    For the vertex ``a`` of the surface ``beta c_abc + theta = 0`` (``b``, ``c`` the next
+    two in cyclic order), the positions of ``a`` where the surface is met with ``b`` and
+    ``c`` held: ``c_abc = r_bc x (a - b)``, so a line parallel to ``r_bc`` at the signed
+    distance ``h = -theta / (beta |r_bc|)`` from the line through ``b`` and ``c`` (along
+    ``k x r_bc``; eq. 26: ``theta / |r_bc|`` for ``|beta| = 1``). The segment runs from
+    ``extend |r_bc|`` before ``b`` to as far past ``c``: the lines the live viewer draws for
+    the active restrictions. Vertices ``m = 0, 1, 2`` of a surface are ``a``, ``b``, ``c``
+    of its sorted triangle; a segment of coinciding ``b``, ``c`` or ``beta = 0`` is NaN.
+    """
+    q = np.asarray(q, dtype=float)
+    tri = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    turn = np.stack([tri, np.roll(tri, -1, axis=1), np.roll(tri, -2, axis=1)], axis=-1)
+    b, c = q[..., turn[..., 1], :], q[..., turn[..., 2], :]  # (..., s, 3, 2)
+    d = c - b
+    length = np.sqrt(np.sum(d * d, axis=-1, keepdims=True))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h = -theta / (np.asarray(beta, dtype=float)[:, None, None] * length)  # eq. (26)
+        base = b + h * perp(d) / length
+    return np.stack([base - extend * d, base + (1.0 + extend) * d], axis=-2)
 
 
 def triple_steps(formation: Formation, weights: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -8,6 +8,7 @@ from .files import (
     atomic_write_text,
     prepare_output_dir,
 )
+from .mcap import write_mcap
 
 __all__ = [
     "atomic_path",
@@ -16,4 +17,5 @@ __all__ = [
     "atomic_write_text",
     "prepare_output_dir",
     "save_figure",
+    "write_mcap",
 ]
