@@ -100,12 +100,14 @@ class FlightConfig:
 
 @dataclass
 class FlightResult:
-    """What a flight did: why it landed, and every control period's measured positions
-    ``q`` ``(K, n, 3)`` and sent velocities ``v`` ``(K, n, 3)`` at times ``t`` ``(K,)``
-    (seconds since take-off). ``problems``: robots whose landing, stop or close failed."""
+    """What a flight did: why it landed and when (``landed_at``, seconds since take-off), and
+    every control period's measured positions ``q`` ``(K, n, 3)`` and sent velocities ``v``
+    ``(K, n, 3)`` at times ``t`` ``(K,)`` (seconds since take-off) up to the landing.
+    ``problems``: robots whose landing, stop or close failed."""
 
     landing: Landing
     message: str
+    landed_at: float
     t: NDArray[np.float64]
     q: NDArray[np.float64]
     v: NDArray[np.float64]
@@ -223,12 +225,13 @@ class Flight:
                     reason = _Land(Landing.INTERRUPTED, "interrupted (Ctrl-C)")
                 except Exception as exc:  # a link failed while sending
                     reason = _Land(Landing.EXCEPTION, f"{type(exc).__name__}: {exc}", exc)
+                landed_at = self.clock.now() - airborne_at
                 self._land_all(problems)
             finally:
                 for i in started:
                     self._attempt(problems, i, "close", self.drones[i].close)
         return FlightResult(
-            landing=reason.reason, message=reason.message, t=np.array(self._t),
+            landing=reason.reason, message=reason.message, landed_at=landed_at, t=np.array(self._t),
             q=np.array(self._qs).reshape(-1, self.plan.n, 3),
             v=np.array(self._vs).reshape(-1, self.plan.n, 3),
             problems=tuple(problems), signal=self._signal, exception=reason.exc,
