@@ -58,7 +58,8 @@ positions = [[-0.8, -0.6, 0.0], [0.8, -0.5, 0.1], [0.0, 0.9, 0.0], [0.1, 0.0, 0.
 diameters = 0.2
 [formation]
 edges = "complete"
-template = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, 0.8660254038, 0.0], [0.5, 0.2886751346, 0.8164965809]]
+template = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, 0.8660254038, 0.0],
+            [0.5, 0.2886751346, 0.8164965809]]
 orientation = "template"
 [controller]
 law = "chirality-restricted"
@@ -421,6 +422,7 @@ def test_the_cflib_drone_sends_the_packets_cflib_defines(crazyflie):
     assert struct.unpack("<BI", d2) == (0, 0)
     assert p3 == CRTPPort.SETPOINT_HL
     assert struct.unpack("<BBff?f", d3) == (HL.COMMAND_LAND_2, 0, 0.0, 0.0, False, 2.5)
+    assert p4 == CRTPPort.SETPOINT_HL
     assert struct.unpack("<BB", d4) == (HL.COMMAND_STOP, 0)
 
 
@@ -441,3 +443,18 @@ def test_the_cflib_drone_reads_positions_and_lost_links_through_cflib(crazyflie)
     assert lost == ["Too many packets lost"]
     drone.close()
     assert crazyflie.closed == 1
+
+
+def test_a_link_that_fails_while_flying_lands_every_drone():
+    _, fleet, f = flight()
+    velocity = fleet.drones[2].velocity
+
+    def failing(v) -> None:
+        if fleet.t > 3.0:
+            raise OSError("USB error")
+        velocity(v)
+
+    fleet.drones[2].velocity = failing  # type: ignore[method-assign]
+    result = f.run()
+    assert result.landing is Landing.EXCEPTION and "USB error" in result.message
+    assert_all_landed(fleet)

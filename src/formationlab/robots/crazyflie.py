@@ -210,13 +210,13 @@ class Flight:
         self._vs: list[NDArray[np.float64]] = []
         started: list[int] = []
         problems: list[str] = []
-        with self._signals():
-            try:
-                self._prepare(started)
-                airborne_at = self.clock.now()
-                for d, h in zip(self.drones, self.heights, strict=True):
-                    d.take_off(float(h), self.config.take_off_time)
+        try:
+            self._prepare(started)  # (Ctrl-C here stops it: nothing is flying)
+            airborne_at = self.clock.now()
+            with self._signals():
                 try:
+                    for d, h in zip(self.drones, self.heights, strict=True):
+                        d.take_off(float(h), self.config.take_off_time)
                     self._fly(airborne_at)
                     raise AssertionError("a flight ends by landing")  # pragma: no cover
                 except _Land as land:
@@ -227,9 +227,9 @@ class Flight:
                     reason = _Land(Landing.EXCEPTION, f"{type(exc).__name__}: {exc}", exc)
                 landed_at = self.clock.now() - airborne_at
                 self._land_all(problems)
-            finally:
-                for i in started:
-                    self._attempt(problems, i, "close", self.drones[i].close)
+        finally:
+            for i in started:
+                self._attempt(problems, i, "close", self.drones[i].close)
         return FlightResult(
             landing=reason.reason, message=reason.message, landed_at=landed_at, t=np.array(self._t),
             q=np.array(self._qs).reshape(-1, self.plan.n, 3),
@@ -255,7 +255,7 @@ class Flight:
             missing = np.flatnonzero(~np.isfinite(stamp))
             if not missing.size:
                 break
-            if self.clock.now() >= end or self._signal is not None:
+            if self.clock.now() >= end:
                 who = ", ".join(self._who(i) for i in missing)
                 raise FlightError(
                     f"no position from {who} in {self.config.wait_positions:g} s: is its "
@@ -380,8 +380,9 @@ class Flight:
 
     @contextmanager
     def _signals(self) -> Iterator[None]:
-        """SIGINT and SIGTERM only note themselves during a flight (the loop lands), in the
-        main thread; elsewhere a KeyboardInterrupt lands the same way."""
+        """SIGINT and SIGTERM only note themselves while the drones fly (the loop lands, and a
+        second signal does not stop the landing), in the main thread; elsewhere a
+        KeyboardInterrupt lands the same way. Before take-off they stop the command as usual."""
         if threading.current_thread() is not threading.main_thread():
             yield
             return
