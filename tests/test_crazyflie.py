@@ -14,6 +14,7 @@ import struct
 
 import numpy as np
 import pytest
+from _scenarios import triangle
 
 from formationlab.errors import ParameterError, ScenarioError
 from formationlab.outcomes.analysis import distance_errors
@@ -30,26 +31,14 @@ from formationlab.robots.fence import guard
 from formationlab.robots.plan import FlightPlan, FlightWarning
 from formationlab.scenario import parse_scenario
 
-TRIANGLE = """\
-name = "flight-triangle"
-[robots]
-positions = [[-1.2, -1.0], [1.2, -1.0], [0.0, 1.2]]
-diameters = 0.2
-[formation]
-edges = "complete"
-distances = 1.0
-orientation = "table"
-alpha = [[1, 2, 3, -1.0], [3, 1, 2, -1.0], [2, 1, 3, 1.0]]
-[controller]
-law = "angle-restricted"
-k_c = 2.0
-k_a = 3.0
-theta = 0.5
-[simulation]
-integrator = "euler"
-dt = 1e-3
-duration = 30.0
-"""
+SIMULATION_1 = "[[1, 2, 3, -1.0], [3, 1, 2, -1.0], [2, 1, 3, 1.0]]"
+#: the paper's triangle with simulation 1's alpha table (the start turns the desired way, no
+#: restriction active), from a start that fits a 4 m room
+TRIANGLE = (
+    triangle("flight-triangle", "30.0")
+    .replace("[[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]", "[[-1.2, -1.0], [1.2, -1.0], [0.0, 1.2]]")
+    .replace("[[1, 2, 3, 1.0], [3, 1, 2, 1.0], [2, 1, 3, -1.0]]", SIMULATION_1)
+)
 
 TETRAHEDRON = """\
 name = "flight-tetrahedron"
