@@ -86,3 +86,16 @@ def test_the_exit_status_says_how_the_flight_ended(monkeypatch, landing, signal,
     assert r.exit_code == code, r.output
     assert f"landed: {landing.value}" in r.output
     assert "warning: robot 1: stop failed: x" in r.output
+
+
+def test_a_link_cflib_cannot_open_stops_the_command_before_take_off():
+    import socket
+
+    with socket.socket() as s:  # a port with nothing listening: cflib's TCP link is refused
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    uris = ",".join([f"tcp://127.0.0.1:{port}"] * 3)
+    r = invoke(EXAMPLE, "--uris", uris, "--fence", "-4,4,-4,4,0,2")
+    assert r.exit_code == 2
+    assert "error: cannot open the links to tcp://127.0.0.1" in r.output
+    assert "Connection refused" in r.output

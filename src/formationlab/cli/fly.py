@@ -49,14 +49,15 @@ def fly(
         typer.Option(help="Write every control period's positions and setpoints (CSV)."),
     ] = None,
 ) -> None:
-    """Take off, fly the scenario's law on the positions the drones report, and land.
+    r"""Take off, fly the scenario's law on the positions the drones report, land.
 
-    Every drone lands when the formation is reached (after hovering in it), when the
-    duration is over, on Ctrl-C or SIGTERM, when the law fails, a link is lost, a position
-    goes stale or a drone leaves the fence. Needs `pip install formationlab[robots]` for
-    Crazyflies. Exit status: 0 after reaching the formation or the duration, 1 after any
-    other landing, 2 on bad input or a flight that could not start, 130/143 when
-    interrupted. Not flown on real drones by its authors: see docs/robots.md first.
+    Every drone lands when the formation is reached (after hovering in it),
+    when the duration is over, on Ctrl-C or SIGTERM, when the law fails, a
+    link is lost, a position goes stale or a drone leaves the fence.
+    Crazyflies need `pip install "formationlab\[robots]"` (cflib). Exit
+    status: 0 after reaching the formation or the duration, 1 after any other
+    landing, 2 on bad input or a flight that could not start, 130 or 143 when
+    interrupted. Not flown on real drones by its authors: read docs/robots.md.
     """
     from ..io.scenario import load_scenario
     from ..robots import Fence, FlightConfig, Landing

@@ -102,7 +102,9 @@ def connect(uris: Sequence[str], *, cache: str | None = None) -> tuple[Any, list
     try:
         swarm.open_links()
     except Exception as exc:
-        raise FlightError(f"cannot open the links to {', '.join(uris)}: {exc}") from exc
+        first = exc.__cause__ or exc  # (Swarm raises a summary from the first thread's error)
+        reason = str(first).strip().splitlines()[-1] if str(first).strip() else type(first).__name__
+        raise FlightError(f"cannot open the links to {', '.join(uris)}: {reason}") from exc
     found: dict[str, Any] = {}
     swarm.parallel_safe(lambda scf: found.__setitem__(scf.cf.link_uri, scf))
     return swarm, [CflibDrone(found[u]) for u in uris]
