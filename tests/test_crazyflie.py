@@ -447,3 +447,20 @@ def test_a_link_that_fails_while_flying_lands_every_drone():
     result = f.run()
     assert result.landing is Landing.EXCEPTION and "USB error" in result.message
     assert_all_landed(fleet)
+
+
+def test_the_setpoints_are_the_simulators_field_at_the_measured_positions():
+    from formationlab.models.limits import limit_speed
+    from formationlab.scenario import closed_loop
+
+    scenario, _, f = flight(config=FlightConfig(duration=3.0))
+    result = f.run()
+    system = closed_loop(scenario)  # the scenario's own closed loop, as `run` builds it
+    flying = np.flatnonzero(result.t >= CONFIG.take_off_time)
+    assert flying.size >= 50
+    for k in flying:
+        q = result.q[k]
+        u = system.rhs(q[:, :2], result.t[k] - CONFIG.take_off_time)
+        climb = CONFIG.climb_gain * (CONFIG.height - q[:, 2])
+        expected = limit_speed(np.column_stack([u, climb]), CONFIG.max_speed)
+        np.testing.assert_allclose(result.v[k], expected, rtol=0, atol=1e-12)
