@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import csv
+import logging
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated
 
@@ -11,6 +14,30 @@ import typer
 from ._app import command, err_console, fail, warn
 
 __all__: list[str] = []
+
+
+class _OneLine(logging.Handler):
+    """cflib's log records as one ``cflib:`` line each, without the tracebacks it writes into
+    some of its messages."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        line = (record.getMessage().strip().splitlines() or [""])[0]
+        err_console.print(f"cflib: {line}", highlight=False, markup=False)
+
+
+@contextmanager
+def _cflib_lines() -> Iterator[None]:
+    """While the command runs, cflib's warnings and errors print as one line each (cflib logs
+    a failed link with its traceback; the command's own ``error:`` line says what failed)."""
+    logger = logging.getLogger("cflib")
+    handler, propagate = _OneLine(logging.WARNING), logger.propagate
+    logger.addHandler(handler)
+    logger.propagate = False
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.propagate = propagate
 
 
 @command(
@@ -70,7 +97,8 @@ def fly(
         rate=rate, height=height, max_speed=max_speed, fence=Fence.parse(fence),
         duration=duration, tolerance=tolerance,
     )  # fmt: skip
-    result = fly_scenario(sc, [u.strip() for u in uris.split(",") if u.strip()], config=config)
+    with _cflib_lines():
+        result = fly_scenario(sc, [u.strip() for u in uris.split(",") if u.strip()], config=config)
     if log is not None:
         with open(log, "w", newline="") as f:
             out = csv.writer(f)
