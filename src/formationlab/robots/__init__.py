@@ -3,6 +3,7 @@
 * :mod:`.crazyflie`: :class:`Flight` and :func:`fly`, the runner: take-off, the law on the
   reported positions at a fixed rate, the speed limit and the geofence, and landing on
   every way a flight can end (:class:`Landing`);
+* :mod:`.config`: :class:`FlightConfig`, :class:`FlightResult`, :class:`Landing`;
 * :mod:`.plan`: what a scenario asks of the drones, and what a flight refuses by name;
 * :mod:`.fence`: the geofence;
 * :mod:`.link`: the seam between the runner and a link (:class:`~.link.Drone`, the clock);
