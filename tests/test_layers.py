@@ -45,7 +45,7 @@ LAYERS: list[list[str]] = [
     ["agents"],
     ["scenario"],
     ["studies", "equilibria"],
-    ["envs", "plotting", "io"],
+    ["envs", "plotting", "io", "robots"],
     ["viewer"],
     ["cli"],
     ["__main__"],
