@@ -23,6 +23,13 @@ def _triangle():
     return fl, f, q0
 
 
+def _many(x0):
+    """``x0`` repeated to more trials than one chunk holds: a batch on numba's threads."""
+    from formationlab.studies.batch import MIN_CHUNK
+
+    return np.concatenate([x0] * (MIN_CHUNK // len(x0) + 1))
+
+
 def part0() -> None:
     """The batch kernel of obstacles and safety filters (the longest compilation)."""
     fl, f, q0 = _triangle()
@@ -32,7 +39,7 @@ def part0() -> None:
     disc = (Circle(center=[5.0, 5.0], radius=0.5),)
     for kind in ("barrier-decentralized", "barrier"):
         cfg = SafetyFilter(filter=kind, distance=0.25)
-        run_batch(f, fl.get_law("distance"), q0, dt=1e-2, duration=0.05, safety=cfg,
+        run_batch(f, fl.get_law("distance"), _many(q0), dt=1e-2, duration=0.05, safety=cfg,
                   obstacles=disc)  # fmt: skip
 
 
@@ -49,14 +56,23 @@ def part1() -> None:
     from formationlab.studies.batch import run_batch
 
     law = fl.get_law("angle-restricted")
-    run_batch(f, law, q0, dt=1e-2, duration=0.05)
+    run_batch(f, law, _many(q0), dt=1e-2, duration=0.05)
     for model in (Unicycle(), Unicycle(mapping="heading"), DoubleIntegrator()):
         x0 = np.stack([model.initial_state(q) for q in q0])
-        run_batch(f, law, x0, dt=1e-2, duration=0.05, model=model)
-    seeds = [(1, t) for t in range(len(q0))]
-    run_batch(f, law, q0, dt=1e-2, duration=0.05, sensing=Sensing(noise=0.01), seeds=seeds)
+        run_batch(f, law, _many(x0), dt=1e-2, duration=0.05, model=model)
+    many = _many(q0)
+    seeds = [(1, t) for t in range(len(many))]
+    run_batch(f, law, many, dt=1e-2, duration=0.05, sensing=Sensing(noise=0.01), seeds=seeds)
     for name in ("distance", "angle-restricted"):
         fl.simulate(f, fl.get_law(name), q0[0], duration=0.05)
+    # a formation larger than PAIRS_UP_TO: the lists layout of single runs
+    from formationlab.engine.layout import PAIRS_UP_TO
+    from formationlab.formation.graphs import delaunay_edges
+    from formationlab.formation.templates import lattice
+
+    tpl = lattice("triangular", PAIRS_UP_TO + 8)
+    big = fl.Formation.from_template(tpl, edges=delaunay_edges(tpl), one_based=False)
+    fl.simulate(big, law, tpl, duration=0.05)
     simulate_batch(f, law, q0, duration=0.05)  # compiled single runs as one batch
     for kind in ("barrier-decentralized", "barrier"):
         cfg = SafetyFilter(filter=kind, distance=0.25)

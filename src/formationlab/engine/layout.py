@@ -37,10 +37,18 @@ from numpy.typing import NDArray
 from ..controllers.terms import KernelTerms
 from ..errors import ParameterError
 
-__all__ = ["REORDER_FROM", "RunLayout", "robot_order", "run_layout"]
+__all__ = ["PAIRS_UP_TO", "REORDER_FROM", "RunLayout", "robot_order", "run_layout"]
 
 _I32 = np.int32
 _LIMIT = 2**31 - 1
+
+#: A single run of at most this many robots takes the pairs layout of batches (every pair,
+#: :class:`~formationlab.controllers.terms.KernelTerms`), larger ones the lists layout of
+#: this module: measured with ``benchmarks/bench_layouts.py`` (a triangular lattice under
+#: the distance law), the pairs layout is the faster below about 30 robots (9x for the
+#: paper's triangle) and the lists layout above; and the loop a single run of a small
+#: formation compiles is then the one of batches.
+PAIRS_UP_TO = 32
 
 #: From this many robots the run numbers them by :func:`robot_order` (below, the lists fit
 #: the caches in any order).

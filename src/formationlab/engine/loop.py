@@ -143,8 +143,9 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
     (``lists``: its :class:`~formationlab.engine.layout.RunLayout`, the
     :class:`~.lists.ListStage` and the passes' chunks on numba's threads, or None for one
     thread; ``law`` None, and the chunk one trial of any model, without sensing). ``sv``:
-    the saving stage (:class:`~.saving.Saving`), or None when only how each trial ended is
-    kept (``out.x``, ``out.v``; with saving, the saved rows hold the last state).
+    the saving stage (:class:`~.saving.Saving`); when it saves nothing
+    (:func:`~.saving.no_saving`) only how each trial ended is kept (``out.x``, ``out.v``;
+    with saving, the saved rows hold the last state).
     """
     n = st.x.shape[1]
     kk = st.x.shape[2]
@@ -153,6 +154,7 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
     turns = hand or model.kind == HEADING  # the state has a heading
     # f = u: the single integrator's rates are its commands (no copy)
     same = model.kind == SINGLE and model.max_speed == np.inf and sn is None
+    saves = sv.every > 0  # the run keeps its path (else how each trial ended)
     ids = st.ids[c]
     mc = st.mc[c]
     ns = st.ns[c]
@@ -329,12 +331,12 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
                         qc[i, d, b] = x[i, d, b]
             kc = k
         # trials that end here end at x (a rejected step is not taken), with the rates f
-        for b in range(nact if sv is not None or ended > 0 else 0):
-            if sv is not None and (code[b] >= 0 or k % sv.every == 0):
+        for b in range(nact if saves or ended > 0 else 0):
+            if saves and (code[b] >= 0 or k % sv.every == 0):
                 save(sv, x, f, b, ids[b], k)
             if code[b] >= 0:
                 g = ids[b]
-                if sv is None:  # (with saving, the last saved row is this state)
+                if not saves:  # (with saving, the last saved row is this state)
                     for i in range(n):
                         for d in range(kk):
                             out.x[g, i, d] = x[i, d, b]
@@ -395,8 +397,8 @@ def _pause(st, c, nact, step, kc, status):
 
 
 @njit(cache=True, error_model="numpy", nogil=True, parallel=True)
-def run_chunks(law, model, mt, obs, flt, sn, ss, st, out, run):
+def run_chunks(law, model, mt, obs, flt, sn, ss, st, out, run, sv):
     """Every running chunk until it ends, pauses or reaches ``run.k_end``, in parallel."""
     for c in prange(st.x.shape[0]):
         if st.meta[c, 4] == RUNNING and st.meta[c, 1] < run.k_end:
-            step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, None, None)
+            step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, None, sv)

@@ -5,6 +5,11 @@ A run that keeps its path (``simulate``, the paper's scans) saves, trial by tria
 at (the last step, or the last accepted state before a rejected step), in the robots' own
 numbers (``perm``: the robot each number of the run is, or empty when they are the same).
 The stepping driver (:func:`formationlab.integrators.drive`) saves the same rows.
+
+A batch that keeps only how each trial ended (a study) has the saving :func:`no_saving`
+(``every`` 0, no rows): the loop then writes each trial's last state and rates to its
+outputs. Both are one type for the compiler, so a single run and a batch of the same
+layout share one compiled loop (compiled once).
 """
 
 from __future__ import annotations
@@ -15,13 +20,13 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["Saving", "saved_rows", "saving"]
+__all__ = ["Saving", "no_saving", "saved_rows", "saving"]
 
 
 class Saving(NamedTuple):
     """Room for the saved rows of ``B`` trials (:func:`saving`)."""
 
-    every: int  #: save every this many steps
+    every: int  #: save every this many steps (0: none saved, :func:`no_saving`)
     k: NDArray[np.int64]  #: (B, rows) the step of each saved row
     x: NDArray[np.float64]  #: (B, rows, n, k) its state
     v: NDArray[np.float64]  #: (B, rows, n, k) the rates it was left with
@@ -44,6 +49,14 @@ def saving(B: int, n: int, k: int, n_steps: int, every: int, perm: NDArray | Non
         every=int(every), k=np.zeros((B, rows), np.int64), x=np.zeros((B, rows, n, k)),
         v=np.zeros((B, rows, n, k)), rows=np.zeros(B, np.int64),
         perm=np.zeros(0, np.int32) if perm is None else np.ascontiguousarray(perm, np.int32),
+    )  # fmt: skip
+
+
+def no_saving() -> Saving:
+    """The saving of a run that keeps only how each trial ended (module docstring)."""
+    return Saving(
+        every=0, k=np.zeros((0, 0), np.int64), x=np.zeros((0, 0, 0, 0)),
+        v=np.zeros((0, 0, 0, 0)), rows=np.zeros(0, np.int64), perm=np.zeros(0, np.int32),
     )  # fmt: skip
 
 

@@ -3,7 +3,9 @@
 :func:`run_trials` lays the trials out in chunks (``(n, k, C)``, the trials innermost),
 builds each stage's numbers (the law's :class:`~formationlab.controllers.terms.KernelTerms`,
 the robot model's :class:`~formationlab.models.terms.ModelTerms`, the obstacles' and the
-filter's terms), runs the chunks in parallel until every trial has ended, and answers the
+filter's terms), runs the chunks in parallel (a single chunk on the calling thread, so that a
+small batch does not compile the threads' version of the loop) until every trial has ended,
+and answers the
 rare pauses of a centralized filter whose QP rounding defeats (Clarabel, through
 :func:`formationlab.safety.barrier_filter`, between calls). With sensing, it draws each
 block's noise and losses between calls (:class:`~formationlab.sensing.Channel`), and runs
@@ -31,7 +33,8 @@ from ..safety.obstacle_terms import obstacle_terms
 from ..safety.stage import CENTRALIZED, NONE, filter_terms
 from ..sensing import BLOCK, Channel, Faults, Seed, Sensing
 from ..sensing.stage import sensing_arrays, trial_bytes
-from .loop import DONE, RUNNING, ChunkState, RunNumbers, TrialOutputs, run_chunks
+from .loop import DONE, RUNNING, ChunkState, RunNumbers, TrialOutputs, run_chunks, step_chunk
+from .saving import no_saving
 
 __all__ = [
     "GROUP_BYTES",
@@ -168,6 +171,7 @@ def _run_group(
         x[g, :, :, : sel.size] = np.moveaxis(q0[sel], 0, -1)
     flt = stage[1]
     still = march_terms(None)  # (a batch does not march)
+    kept = no_saving()  # (how each trial ended)
     st = chunk_state(
         x, B=B, mc=out.mc, turns=robots.kind in (HEADING, NEAR_IDENTITY),
         centralized=flt is not None and flt.kind == CENTRALIZED,
@@ -189,7 +193,11 @@ def _run_group(
                 sn.drop_block[live] = channel.block("drop", trials[live])
         run = numbers._replace(k_end=min(k_end, numbers.k_end))
         while True:
-            run_chunks(terms, robots, still, *stage, sn, ss, st, out, run)  # (the pairs layout)
+            if G > 1:  # (the pairs layout) the chunks on numba's threads
+                run_chunks(terms, robots, still, *stage, sn, ss, st, out, run, kept)
+            elif st.meta[0, 4] == RUNNING and st.meta[0, 1] < run.k_end:  # one chunk: the
+                # loop itself (the threads' version is compiled only where it is used)
+                step_chunk(0, terms, robots, still, *stage, sn, ss, st, out, run, None, kept)
             wait_g, wait_b = np.nonzero(st.need)  # chunks paused, and their slots needing a QP
             if wait_g.size == 0:
                 break

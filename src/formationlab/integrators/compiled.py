@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from ..controllers.terms import KernelTerms
 from ..dynamics import System
-from ..engine.layout import REORDER_FROM, RunLayout, robot_order, run_layout
+from ..engine.layout import PAIRS_UP_TO, REORDER_FROM, RunLayout, robot_order, run_layout
 from ..engine.lists import grow, list_stage
 from ..engine.loop import DONE, GROW, PAUSED, RUNNING, RunNumbers, step_chunk
 from ..engine.saving import saving
@@ -108,9 +108,10 @@ def run_compiled(
     :data:`PARALLEL_FROM` robots the faster of the two as measured on the second and
     third segments (the same numbers either way).
     """
-    keep = isinstance(terms, RunLayout) or (system is not None and _measuring(system))
-    layout = terms if keep else run_layout(terms)  # type: ignore[arg-type]
     n = q0.shape[0]
+    pairs = not isinstance(terms, RunLayout) and terms.pair_i.size > 0  # (pairs=False: none)
+    keep = not pairs or n <= PAIRS_UP_TO or _measuring(system)
+    layout = terms if keep else run_layout(terms)  # type: ignore[arg-type]
     threads = numba.get_num_threads()
     # None: one thread, or (large formations) the faster of one thread and the threads
     # as measured on the second and third segments (the first builds the close list)
@@ -163,10 +164,11 @@ class SingleRun:
     one chunk of one trial with its saving stage: the state between segments of steps
     (:meth:`advance`).
 
-    The law's field comes from its lists (``layout`` a :class:`RunLayout`: any size), or,
-    when the robots sense each other or a fault stops one (``layout`` the law's
-    :class:`KernelTerms` of every pair, :func:`compiled_terms`), from each robot's own
-    measurements on the pairs layout, as in batches; the noise and losses of each block of
+    The law's field comes from its lists (``layout`` a :class:`RunLayout`: any size), or
+    from its pairs (``layout`` the law's :class:`KernelTerms` of every pair, the layout of
+    batches: :func:`compiled_terms` chooses it for formations of at most
+    :data:`PAIRS_UP_TO` robots, and whenever the robots sense each other or a fault stops
+    one, when each robot commands from its own measurements); the noise and losses of each block of
     :data:`~formationlab.sensing.BLOCK` steps are drawn here, between calls, from the
     sensing's seed (the driver's draws). ``system`` (default: single integrators and the
     law alone) gives the robot model, the marching (a reference that is a function of time
@@ -179,7 +181,7 @@ class SingleRun:
     ) -> None:  # fmt: skip
         n, k = x0.shape
         x = np.array(x0, dtype=float, order="C")  # the run's own (writable) copy
-        self.pairs = system is not None and _measuring(system)
+        self.pairs = isinstance(layout, KernelTerms)
         perm = np.zeros(0, np.int32) if self.pairs else layout.perm  # type: ignore[union-attr]
         x = x[perm] if perm.size else x  # in the layout's numbers
         self.layout = layout
@@ -202,9 +204,8 @@ class SingleRun:
             x[None, :, :, None], stop_rule=False, turns=kind in (HEADING, NEAR_IDENTITY),
             centralized=self.stage[1] is not None and self.stage[1].kind == CENTRALIZED,
         )  # fmt: skip
-        if self.pairs:  # the start's clearance (the lists layout's loop finds it)
-            assert system is not None
-            self.st.mc[0, 0] = float(system.clearance(x0))
+        if self.pairs:  # the start's clearance, robots and obstacles (the lists layout's
+            self.st.mc[0, 0] = _start_clearance(layout, x0, system)  # loop finds it)
         elif self.obstacles:  # the start's clearance to the obstacles (the robots' in the loop)
             assert system is not None
             self.st.mc[0, 0] = np.min(system.obstacle_clearances(x0), initial=np.inf)
@@ -212,12 +213,12 @@ class SingleRun:
         self.sense: tuple[Any, ...] = (None, None)
         self.channel = None
         self.blocks = -1  # the last block of steps whose noise and losses are drawn
-        if self.pairs:
+        self.ls = None
+        if _measuring(system):
             assert system is not None
             self.channel, stop_at, headed = sensing_channel(system, None, 1, float(dt))
             self.sense = sensing_arrays(self.channel, np.zeros(1, np.intp), stop_at, headed)
-            self.ls = None
-        else:
+        elif not self.pairs:
             extra = 2.0 * self.model.offset if kind == NEAR_IDENTITY else 0.0
             self.ls = list_stage(layout, n, max(1, chunks), extra)
         self.sv = saving(1, n, k, n_steps, save_every, perm)
@@ -363,7 +364,7 @@ def compiled_terms(system: System, integrator: object) -> RunLayout | KernelTerm
     except ParameterError:  # (a model of the user's own)
         return None
     f = system.formation
-    if _measuring(system):
+    if _measuring(system) or f.n <= PAIRS_UP_TO:
         try:
             return system.law.compiled_terms(f).writable()
         except ParameterError:
@@ -377,10 +378,22 @@ def compiled_terms(system: System, integrator: object) -> RunLayout | KernelTerm
     return run_layout(terms, reorder=order)  # emptied as it is laid out
 
 
-def _measuring(system: System) -> bool:
+def _measuring(system: System | None) -> bool:
     """Whether the robots of ``system`` command from their measurements or a fault stops one
     (the sensing stage, on the pairs layout)."""
+    if system is None:
+        return False
     return system.sensed or (system.faults is not None and system.faults.any)
+
+
+def _start_clearance(terms: KernelTerms, x0: NDArray[np.float64], system: System | None) -> float:
+    """Least clearance of the start ``x0`` ``(n, k)``: of its pairs (``r_ij - a_ij``) and,
+    with ``system``, of its robots to the obstacles."""
+    if system is not None:
+        return float(system.clearance(x0))
+    q = x0[:, :2]
+    r = np.linalg.norm(q[terms.pair_j] - q[terms.pair_i], axis=-1)
+    return float(np.min(r - terms.pair_contact, initial=np.inf))
 
 
 def run_euler_compiled(

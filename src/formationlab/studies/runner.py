@@ -55,7 +55,7 @@ from ..safety import describe_obstacle
 from ..sensing import Faults, Sensing, delay_steps
 from ..validation import positive, steps_within, whole
 from ..validation import seed as check_seed
-from .batch import batch_backend, run_batch
+from .batch import MIN_CHUNK, batch_backend, run_batch
 from .chunks import ChunkTask, plan_chunks, run_chunk
 from .config import GaussianInitial, StudyConfig, parse_study
 from .executors import run_in_process, run_on_dask
@@ -461,13 +461,17 @@ def run_study(
 
 def _warm_kernels(tasks: list[ChunkTask], notify: Callable[[str], None] | None) -> float:
     """Compile (or load from numba's cache) each version of the loop the tasks use (with or
-    without sensing, safety, per robot model), on one trial of two steps, so that the
+    without sensing, safety, per robot model, on numba's threads or not), on a batch of two
+    steps, so that the
     study's throughput does not count it; returns the time taken."""
-    first: dict[tuple[Any, ...], ChunkTask] = {}  # one trial per version of the loop
+    first: dict[tuple[Any, ...], ChunkTask] = {}  # one batch per version of the loop
     for t in tasks:
         if t.backend == "numba":
             safe = bool(t.obstacles) or (t.safety is not None and t.safety.enabled)
-            first.setdefault((t.group.sensed, safe, type(t.model)), t)
+            # a chunk of more than MIN_CHUNK trials runs on the threads' version of the loop
+            # (engine.trials), a smaller one on the loop itself
+            threads = t.size > MIN_CHUNK
+            first.setdefault((t.group.sensed, safe, type(t.model), threads), t)
     if not first:
         return 0.0
     if notify is not None and not _kernel_cached(run_chunks):
@@ -475,15 +479,16 @@ def _warm_kernels(tasks: list[ChunkTask], notify: Callable[[str], None] | None) 
     start = time.perf_counter()
     for t in first.values():
         f, g = t.group.formation, t.group
+        trials = np.arange(min(t.size, MIN_CHUNK + 1))
         q0 = trial_initial_states(
-            f, t.initial, t.seed, np.arange(1), center=t.center, obstacles=t.obstacles
+            f, t.initial, t.seed, trials, center=t.center, obstacles=t.obstacles
         )
-        x0 = model_initial_states(f, t.model, q0, t.seed, np.arange(1))
+        x0 = model_initial_states(f, t.model, q0, t.seed, trials)
         run_batch(
             f, g.law, x0, dt=t.dt, duration=2 * t.dt, tolerances=t.tolerances,
             model=t.model, obstacles=t.obstacles, safety=t.safety,
             sensing=g.sensing if g.sensed else None, faults=g.faults if g.sensed else None,
-            seeds=[(t.seed, 0)] if g.sensed else None,
+            seeds=[(t.seed, int(i)) for i in trials] if g.sensed else None,
         )  # fmt: skip
     return time.perf_counter() - start
 
