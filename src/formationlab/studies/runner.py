@@ -47,7 +47,7 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from ..controllers import LAWS, Law
-from ..engine.loop import run_chunks
+from ..engine.loop import run_chunks, step_chunk
 from ..errors import ParameterError
 from ..formation.spec import Formation
 from ..models import RobotModel, SingleIntegrator
@@ -474,7 +474,9 @@ def _warm_kernels(tasks: list[ChunkTask], notify: Callable[[str], None] | None) 
             first.setdefault((t.group.sensed, safe, type(t.model), threads), t)
     if not first:
         return 0.0
-    if notify is not None and not _kernel_cached(run_chunks):
+    # (the loop itself, or its threads' version for chunks of more than MIN_CHUNK trials)
+    used = {run_chunks if threads else step_chunk for (*_, threads) in first}
+    if notify is not None and not all(_kernel_cached(k) for k in used):
         notify("compiling kernels (once; later studies load them from the cache) ...")
     start = time.perf_counter()
     for t in first.values():
