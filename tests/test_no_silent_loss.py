@@ -6,7 +6,9 @@ synchronise on what they print, not on the clock.
 
 from __future__ import annotations
 
+import fcntl
 import json
+import os
 import resource
 import signal
 import subprocess
@@ -141,3 +143,43 @@ def test_a_full_disk_is_one_error_line(tmp_path: Path) -> None:
     assert (out / "trajectory.nc").read_bytes() == b"an earlier run's"
     assert sorted(p.name for p in out.iterdir()) == ["scenario.toml", "trajectory.nc"]
     assert not list(tmp_path.glob("core*")) and not list(out.glob("core*"))
+
+
+@pytest.mark.parametrize("command", ["run", "study", "study --resume", "equilibria", "paper",
+                                     "animate"])  # fmt: skip
+def test_every_writing_command_is_refused_a_claimed_folder(command: str, tmp_path: Path) -> None:
+    scenario = tmp_path / "s.toml"
+    study = '[study]\ntrials = 4\nchunk_size = 4\ninitial = { kind = "box", half_width = 3.0 }\n'
+    scenario.write_text(triangle("claimed", "0.05", study))
+    out = tmp_path / "out"
+    if command == "animate":
+        assert invoke("run", scenario, "--out", out, "-q").exit_code == 0
+    else:
+        out.mkdir()
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    # another process's claim: the lock file locked through a descriptor of its own (a lock
+    # of another open file conflicts within one process as between two)
+    holder = {"pid": 4242, "host": "elsewhere", "started": "2026-01-01T00:00:00+0000"}
+    (out / LOCK_NAME).write_text(json.dumps(holder))
+    fd = os.open(out / LOCK_NAME, os.O_RDWR)
+    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    try:
+        args = {
+            "run": ("run", scenario, "--out", out, "--force"),
+            "study": ("study", scenario, "--out", out, "--force"),
+            "study --resume": ("study", scenario, "--out", out, "--resume"),
+            "equilibria": ("equilibria", scenario, "--out", out, "--starts", 2, "--force"),
+            "paper": ("paper", "--out", out, "--force"),
+            "animate": ("animate", out, "--force", "--format", "html"),
+        }[command]
+        res = invoke(*args)
+    finally:
+        os.close(fd)
+    assert res.exit_code == 2, res.output
+    (line,) = error_lines(res.stderr)
+    assert line == (
+        f"error: {out} is being written by process 4242 on elsewhere (since "
+        "2026-01-01T00:00:00+0000); wait for it to end, or choose another --out"
+    )
+    after = {p.name: p.read_bytes() for p in out.iterdir() if p.name != LOCK_NAME}
+    assert after == before  # nothing written, nothing removed
