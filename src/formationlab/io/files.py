@@ -142,7 +142,7 @@ def _umask() -> int:
     return mask
 
 
-def atomic_write_bytes(target: str | os.PathLike[str], data: bytes) -> Path:
+def atomic_write_bytes(target: str | os.PathLike[str], data: bytes | memoryview) -> Path:
     """Write ``data`` to ``target`` atomically; returns the path."""
     with atomic_path(target) as tmp:
         tmp.write_bytes(data)

@@ -59,7 +59,7 @@ import numpy as np
 
 from ..outcomes.analysis import distance_errors
 from ..resources import package_version
-from .files import atomic_path, to_jsonable
+from .files import atomic_write_bytes, to_jsonable
 
 __all__ = [
     "CHUNK_BYTES",
@@ -254,8 +254,8 @@ def write_trajectory(
             for a in range(0, rows, step):
                 part = slice(a, min(rows, a + step))
                 var[part] = values[part] if isinstance(values, np.ndarray) else values(part)
-    with atomic_path(target, suffix=".nc") as tmp, open(tmp, "wb") as fh, image.getbuffer() as b:
-        fh.write(b)
+    with image.getbuffer() as data:
+        atomic_write_bytes(target, data)
     return Path(target)
 
 
