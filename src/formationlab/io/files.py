@@ -205,7 +205,8 @@ def prepare_output_dir(
     """Create ``out`` or check that it holds no earlier results, and claim it.
 
     The folder is claimed for this process (:func:`~formationlab.io.claim.claim_folder`)
-    until the command ends: a second command writing into it meanwhile is refused
+    until the command ends (:func:`~formationlab.io.claim.release_claims`; at the latest
+    when the process exits): a second command writing into it meanwhile is refused
     (:class:`~formationlab.errors.FolderBusyError`), whatever ``force``. A folder that
     exists and is not empty is refused unless ``force``; then the temporary files a
     killed writer left are removed (:func:`remove_temporaries`), files are replaced one by
