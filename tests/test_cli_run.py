@@ -318,11 +318,13 @@ def test_a_failed_write_leaves_the_previous_file_intact(
     target = tmp_path / "trajectory.nc"
     target.write_bytes(b"previous results")
 
-    def broken(self, path, *args, **kwargs):
-        Path(path).write_bytes(b"half a file")
+    write_bytes = Path.write_bytes
+
+    def broken(self, data):  # (the netCDF is composed in memory, then written as bytes)
+        write_bytes(self, bytes(data)[:100])
         raise OSError("disk full")
 
-    monkeypatch.setattr(xr.Dataset, "to_netcdf", broken)
+    monkeypatch.setattr(Path, "write_bytes", broken)
     with pytest.raises(OSError, match=f"cannot write trajectory.nc in {tmp_path}: disk full"):
         write_trajectory(res, target)
     assert target.read_bytes() == b"previous results"

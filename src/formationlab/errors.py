@@ -18,6 +18,7 @@ from __future__ import annotations
 from typing import Any
 
 __all__ = [
+    "FolderBusyError",
     "FormationError",
     "FormationlabError",
     "FormationlabWarning",
@@ -132,3 +133,8 @@ class OutputError(UserInputError, OSError):
     Also an ``OSError``, so that code catching the writer's own errors still catches it;
     the message names the folder, the reason and what to do.
     """
+
+
+class FolderBusyError(OutputError):
+    """Another process is writing into the output folder (it holds the folder's claim,
+    :mod:`formationlab.io.claim`)."""

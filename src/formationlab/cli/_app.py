@@ -26,6 +26,7 @@ from __future__ import annotations
 import functools
 import os
 import subprocess
+import sys
 import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -135,11 +136,21 @@ def command(*args: Any, on: typer.Typer | None = None, **kwargs: Any) -> Callabl
                 fail(f"{os.path.basename(str(exc.cmd[0]))} failed (exit status {exc.returncode})")
             except KeyboardInterrupt:
                 fail("interrupted", code=INTERRUPTED)
+            finally:
+                _release_claims()
 
         (app if on is None else on).command(*args, **kwargs)(wrapper)
         return fn
 
     return deco
+
+
+def _release_claims() -> None:
+    """End the claims of the output folders the command wrote (:mod:`formationlab.io.claim`;
+    loaded only by a command that claimed one)."""
+    claim = sys.modules.get("formationlab.io.claim")
+    if claim is not None:
+        claim.release_claims()
 
 
 class _Flag(TyperOption):

@@ -81,10 +81,10 @@ class RunPlan:
 
     @property
     def memory(self) -> float:
-        """Estimated peak memory of the saved trajectory and its post-processing, bytes."""
-        return self.saved * self.memory_per_state + min(self.saved, self.post_states) * (
-            self.post_per_state
-        )
+        """Estimated peak memory of the saved trajectory and its post-processing, or the
+        file ``trajectory.nc`` composed in memory before it is written, bytes."""
+        post = min(self.saved, self.post_states) * self.post_per_state
+        return self.saved * self.memory_per_state + max(post, self.output)
 
     @property
     def output(self) -> float:

@@ -201,6 +201,9 @@ def animate_cmd(
         )
     formats = usable_formats(formats, explicit=bool(fmt))
     nc = run_trajectory(folder)
+    from ..io.claim import claim_folder
+
+    claim_folder(folder)  # (no other command writes into the run's folder meanwhile)
     existing = [
         (folder / ANIMATION_STEM).with_suffix(FORMATS[f]).name
         for f in formats

@@ -152,13 +152,24 @@ def _run(
     ``summary.json`` before the recording and the figures (which a Ctrl-C or a failure may
     stop), so that nothing that comes after can lose a finished simulation.
     """
+    from ..integrators.compiled import _signals_between_segments as held_signals
     from ..io.files import earlier_files, prepare_output_dir, remove_stale
 
     folder = prepare_output_dir(out, force=force)
     earlier = earlier_files(folder, EARLIER_PATTERNS) if force else []
     result = _simulate(sc, save_every, quiet)
     interrupted = result.status == "interrupted"
-    summary, written = _write_data(folder, sc, scenario, result, save_every, quiet)
+    written: list[str] = []
+    try:  # the finished simulation is written whole: Ctrl-C (SIGTERM) waits for it
+        with held_signals():
+            summary, written = _write_data(folder, sc, scenario, result, save_every, quiet)
+    except KeyboardInterrupt:
+        remove_stale(folder, earlier, written)
+        fail(
+            f"interrupted while writing the results; they were written whole first: {folder} "
+            f"holds {', '.join(written)} (no figures)",
+            INTERRUPTED,
+        )
     try:
         if record is not None:  # (listed in summary.json with the figures)
             written = [*written, *_write_record(folder, sc.name, result, record, quiet)]
@@ -215,7 +226,11 @@ def _write_data(
     large = result.q.size / 2 > _LARGE
     atomic_write_text(folder / "scenario.toml", sc.text)
     if large:
-        _note(f"writing trajectory.nc ({len(result.t):,} saved states) ...", quiet)
+        _note(
+            f"writing trajectory.nc ({len(result.t):,} saved states; Ctrl-C now stops once "
+            "it is written) ...",
+            quiet,
+        )
     write_trajectory(
         result,
         folder / "trajectory.nc",

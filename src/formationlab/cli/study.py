@@ -139,6 +139,9 @@ def study(
     if resume:
         if not out.is_dir():
             fail(f"nothing to resume: {out} does not exist; run without --resume")
+        from ..io.claim import claim_folder
+
+        claim_folder(out)  # (one writer at a time, as prepare_output_dir claims a new study's)
         kept = store.check_resumable()
         say(f"resuming: {kept} finished chunks kept in {store.folder}")
     else:

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import OutputError, OutputExistsError
+from .claim import LOCK_NAME, claim_folder, release_claim
 
 __all__ = [
     "atomic_path",
@@ -32,6 +33,7 @@ __all__ = [
     "output_error",
     "prepare_output_dir",
     "remove_stale",
+    "remove_temporaries",
     "to_jsonable",
 ]
 
@@ -42,6 +44,8 @@ _FIXES = {
     errno.EROFS: "the file system is read-only; choose another folder",
     errno.ENOSPC: "free some space or choose a folder on another disk",
     errno.EDQUOT: "your disk quota is used up; free some space or choose another folder",
+    errno.EFBIG: "the file is larger than this system lets a file be (a file-size limit); "
+    "choose another folder, or store fewer states with --save-every",
 }
 
 
@@ -108,13 +112,37 @@ def _temporary_name(target: Path, suffix: str) -> Path:
     return target.with_name(f".{target.name}.{secrets.token_hex(4)}{suffix}")
 
 
+#: the names :func:`_temporary_name` chooses: ``.NAME.`` eight hex digits, the suffix
+_TEMPORARY = re.compile(r"^\.(?P<name>.+)\.[0-9a-f]{8}(?P<suffix>\.[^./]+)?$")
+
+
+def remove_temporaries(folder: str | os.PathLike[str]) -> list[str]:
+    """Remove the temporary files (:func:`atomic_path`'s) that a killed writer left in
+    ``folder``; returns their names.
+
+    Only for a folder this process has claimed (:func:`~formationlab.io.claim.claim_folder`):
+    no other writer is then using them.
+    """
+    folder = Path(folder)
+    removed = []
+    for p in sorted(folder.iterdir()):
+        m = _TEMPORARY.match(p.name)
+        if m and p.is_file() and (m["suffix"] or "") in ("", Path(m["name"]).suffix):
+            try:
+                p.unlink()
+            except OSError as exc:
+                raise output_error(exc, folder, f"remove the temporary file {p.name} from") from exc
+            removed.append(p.name)
+    return removed
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
 
 
-def atomic_write_bytes(target: str | os.PathLike[str], data: bytes) -> Path:
+def atomic_write_bytes(target: str | os.PathLike[str], data: bytes | memoryview) -> Path:
     """Write ``data`` to ``target`` atomically; returns the path."""
     with atomic_path(target) as tmp:
         tmp.write_bytes(data)
@@ -174,15 +202,21 @@ def prepare_output_dir(
     markers: tuple[str, ...] = ("summary.json",),
     describe: Callable[[Path], str] | None = None,
 ) -> Path:
-    """Create ``out`` or check that it holds no earlier results.
+    """Create ``out`` or check that it holds no earlier results, and claim it.
 
-    A folder that exists and is not empty is refused unless ``force``; then
-    files are replaced one by one, atomically, and the command removes what
-    the earlier run wrote and this one does not (:func:`earlier_files`,
-    :func:`remove_stale`) once its own results are written.
+    The folder is claimed for this process (:func:`~formationlab.io.claim.claim_folder`)
+    until the command ends (:func:`~formationlab.io.claim.release_claims`; at the latest
+    when the process exits): a second command writing into it meanwhile is refused
+    (:class:`~formationlab.errors.FolderBusyError`), whatever ``force``. A folder that
+    exists and is not empty is refused unless ``force``; then the temporary files a
+    killed writer left are removed (:func:`remove_temporaries`), files are replaced one by
+    one, atomically, and the command removes what the earlier run wrote and this one does
+    not (:func:`earlier_files`, :func:`remove_stale`) once its own results are written.
 
     Raises
     ------
+    FolderBusyError
+        When another process is writing into ``out``.
     OutputExistsError
         When ``out`` holds files and ``force`` is false, or is a file.
     OutputError
@@ -191,17 +225,24 @@ def prepare_output_dir(
     path = Path(out)
     if path.exists() and not path.is_dir():
         raise OutputExistsError(f"output path {path} is a file, not a folder; choose another --out")
-    if path.is_dir() and any(path.iterdir()) and not force:
+    created = not path.exists()
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        claim_folder(path)
+    except OutputError:
+        raise
+    except OSError as exc:
+        raise output_error(exc, path, "create the folder" if created else "claim") from exc
+    if not force and any(p.name != LOCK_NAME for p in path.iterdir()):
+        release_claim(path)
         found = [m for m in markers if (path / m).exists()]
         what = f" (it holds {', '.join(found)})" if found else ""
         raise OutputExistsError(
             f"output folder {path} is not empty{what}; choose another --out, or pass --force "
             "to replace its files"
         )
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise output_error(exc, path, "create the folder") from exc
+    if force:
+        remove_temporaries(path)
     return path
 
 

@@ -49,6 +49,7 @@ their tables). ``state`` = the model's ``state_names`` (``"x", "y", "theta"``).
 
 from __future__ import annotations
 
+import io
 import json
 import os
 from pathlib import Path
@@ -58,7 +59,7 @@ import numpy as np
 
 from ..outcomes.analysis import distance_errors
 from ..resources import package_version
-from .files import atomic_path, to_jsonable
+from .files import atomic_write_bytes, to_jsonable
 
 __all__ = [
     "CHUNK_BYTES",
@@ -223,7 +224,13 @@ def write_trajectory(
     The coordinates and the small variables go through xarray; the time series (``q``,
     ``u``, ``distance_error``, ``sigma``, ...) are then added to the same file chunk by
     chunk from the run's own arrays, the distance errors computed a slice of saved states
-    at a time: no copy of the trajectory is made, so memory stays what the run holds.
+    at a time: no copy of the trajectory is made.
+
+    The file is composed in memory (its compressed bytes, at most the data's size) and then
+    written with plain file output: HDF5 never writes to the disk itself, since an HDF5 file
+    whose write failed (a full disk, a file-size limit) cannot be closed safely (HDF5 2.0
+    with h5py 3.16 crashes when the file's objects are freed). A full disk is then the one
+    error of :func:`~formationlab.io.files.atomic_path`, and no partial file is left.
     """
     import h5netcdf
     import xarray as xr
@@ -231,22 +238,24 @@ def write_trajectory(
     coords, data, series, glob = _layout(result, attrs)
     ds: Any = xr.Dataset(data_vars=data, coords=coords, attrs=glob)
     rows = len(result.t)
-    with atomic_path(target, suffix=".nc") as tmp:
-        ds.to_netcdf(tmp, engine=ENGINE, invalid_netcdf=False, encoding=encoding(ds))
-        with h5netcdf.File(tmp, "a") as nc:
-            for name, (dims, values, meta) in series.items():
-                shape = (rows, *(nc.dimensions[d].size for d in dims[1:]))
-                dtype = np.dtype(values.dtype if isinstance(values, np.ndarray) else float)
-                chunks = _chunks(shape, dtype.itemsize)
-                var = nc.create_variable(
-                    name, dims, dtype, chunks=chunks, compression="gzip",
-                    compression_opts=COMPRESSION, shuffle=True,
-                )  # fmt: skip
-                var.attrs.update(meta)
-                step = chunks[0] * max(1, CHUNK_BYTES * 16 // (chunks[0] * _bytes(shape, dtype)))
-                for a in range(0, rows, step):
-                    part = slice(a, min(rows, a + step))
-                    var[part] = values[part] if isinstance(values, np.ndarray) else values(part)
+    image = io.BytesIO()
+    ds.to_netcdf(image, engine=ENGINE, invalid_netcdf=False, encoding=encoding(ds))
+    with h5netcdf.File(image, "a") as nc:
+        for name, (dims, values, meta) in series.items():
+            shape = (rows, *(nc.dimensions[d].size for d in dims[1:]))
+            dtype = np.dtype(values.dtype if isinstance(values, np.ndarray) else float)
+            chunks = _chunks(shape, dtype.itemsize)
+            var = nc.create_variable(
+                name, dims, dtype, chunks=chunks, compression="gzip",
+                compression_opts=COMPRESSION, shuffle=True,
+            )  # fmt: skip
+            var.attrs.update(meta)
+            step = chunks[0] * max(1, CHUNK_BYTES * 16 // (chunks[0] * _bytes(shape, dtype)))
+            for a in range(0, rows, step):
+                part = slice(a, min(rows, a + step))
+                var[part] = values[part] if isinstance(values, np.ndarray) else values(part)
+    with image.getbuffer() as data:
+        atomic_write_bytes(target, data)
     return Path(target)
 
 
