@@ -152,7 +152,7 @@ def _run(
     ``summary.json`` before the recording and the figures (which a Ctrl-C or a failure may
     stop), so that nothing that comes after can lose a finished simulation.
     """
-    from ..integrators.compiled import _signals_between_segments as held_signals
+    from ..engine.signals import held_signals
     from ..io.files import earlier_files, prepare_output_dir, remove_stale
 
     folder = prepare_output_dir(out, force=force)

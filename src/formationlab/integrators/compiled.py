@@ -23,12 +23,8 @@ against, to rounding.
 
 from __future__ import annotations
 
-import signal
-import sys
-import threading
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from typing import Any
 
 import numba
@@ -41,6 +37,7 @@ from ..engine.layout import PAIRS_UP_TO, REORDER_FROM, RunLayout, robot_order, r
 from ..engine.lists import grow, list_stage
 from ..engine.loop import DONE, GROW, PAUSED, RUNNING, RunNumbers, step_chunk
 from ..engine.saving import saving
+from ..engine.signals import held_signals
 from ..engine.trials import chunk_state, safety_stage, sensing_channel, trial_outputs
 from ..errors import ParameterError
 from ..marching.terms import march_terms, with_references
@@ -102,7 +99,7 @@ def run_compiled(
     The loop runs in compiled segments of about a quarter of a second, between which
     ``progress`` is called with the simulated time and Ctrl-C (or SIGTERM, if its handler
     raises KeyboardInterrupt) is seen: a signal that comes during a segment is held until
-    the segment ends (:func:`_signals_between_segments`). With ``interruptible`` the run
+    the segment ends (:func:`held_signals`). With ``interruptible`` the run
     so far is returned with status ``"interrupted"``.
     ``parallel``: on numba's threads or on one; by default one thread, and from
     :data:`PARALLEL_FROM` robots the faster of the two as measured on the second and
@@ -129,7 +126,7 @@ def run_compiled(
     segments = 0
     per_step: dict[bool, float] = {}  # seconds per step of the probed segments, by threads
     start = time.perf_counter()
-    with _signals_between_segments() as deliver:
+    with held_signals() as deliver:
         try:
             while True:
                 k_end = min(n_steps, k0 + chunk)
@@ -307,41 +304,6 @@ class SingleRun:
         """The saved steps, states and rates (in the robots' own numbers)."""
         rows = int(self.sv.rows[0])
         return self.sv.k[0, :rows], self.sv.x[0, :rows], self.sv.v[0, :rows]
-
-
-@contextmanager
-def _signals_between_segments() -> Iterator[Callable[[], None]]:
-    """Hold SIGINT and SIGTERM while a compiled segment runs; ``deliver()`` them between.
-
-    A signal that arrives inside numba code runs its Python handler as the segment hands its
-    results back: Ctrl-C's KeyboardInterrupt raised there became a ``SystemError`` ("returned
-    a result with an exception set") and the run was lost. Inside the block the handlers
-    only note the signal, and ``deliver()`` calls the handler that was in place (for
-    Ctrl-C, Python's: KeyboardInterrupt). Only in the main thread (where signals are
-    handled) and for handlers that are Python functions; restored on leaving (a signal
-    held then is raised again, unless the block ended with an exception).
-    """
-    held: list[tuple[int, Any]] = []
-    previous: dict[int, Callable[[int, Any], Any]] = {}
-    if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            handler = signal.getsignal(sig)
-            if callable(handler):
-                previous[sig] = handler
-                signal.signal(sig, lambda s, frame: held.append((s, frame)))
-
-    def deliver() -> None:
-        while held:  # delivered here and now: from the caller's frame
-            sig, _ = held.pop(0)
-            previous[sig](sig, sys._getframe(1))
-
-    try:
-        yield deliver
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-    for sig, _ in held:  # one that came after the last delivery: as if it came now
-        signal.raise_signal(sig)
 
 
 def compiled_terms(system: System, integrator: object) -> RunLayout | KernelTerms | None:
