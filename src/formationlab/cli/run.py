@@ -266,11 +266,14 @@ def _write_summary(
 
 
 def _verdict(s: dict[str, Any]) -> str:
-    """The one-line verdict of a run's summary: the outcome, and whether the robots stopped.
+    """The one-line verdict of a run's summary: the outcome, whether and when the robots
+    stopped, and how long the run lasted.
 
     ``outcome`` judges the final shape (analysis.classify); the robots may still
     move within the distance tolerance, which the line says in the same breath
-    instead of a contradictory "not converged".
+    instead of a contradictory "not converged". ``converged at t = ...`` is when they
+    stopped (``converged_time``), ``ran to t = ...`` the run's last saved time
+    (``final_time``, the end of ``trajectory.nc``).
     """
     tol = s["tolerances"]
     rigid = s.get("rigid_motion")
@@ -282,16 +285,21 @@ def _verdict(s: dict[str, Any]) -> str:
     line = f"outcome {s['outcome']}{moving}, max |r_ij - d_ij| = {s['max_distance_error']:.3g}"
     if "max_bearing_error" in s:  # a formation judged by its bearings
         line = f"outcome {s['outcome']}{moving}, max |g_ij - g*_ij| = {s['max_bearing_error']:.3g}"
+    lasted = f"; ran to t = {s['final_time']:.4g} s"
     if s["converged_time"] is not None:
-        return line + f", stopped at t = {s['converged_time']:.3g} s"
+        return line + f", converged at t = {s['converged_time']:.3g} s" + lasted
     speed = min(v for v in (s["final_speed"], s["net_speed"]) if v is not None)
     if s["outcome"] in ("desired", "mirror"):
         within = tol["bearing" if "max_bearing_error" in s else "distance"]
-        return line + (
-            f" (within the tolerance {within:g}), still moving at the end "
-            f"({speed:.2g} m/s > {tol['speed']:g})"
+        return (
+            line
+            + (
+                f" (within the tolerance {within:g}), still moving at the end "
+                f"({speed:.2g} m/s > {tol['speed']:g})"
+            )
+            + lasted
         )
-    return line + f", still moving at the end ({speed:.2g} m/s > {tol['speed']:g})"
+    return line + f", still moving at the end ({speed:.2g} m/s > {tol['speed']:g})" + lasted
 
 
 def _sensing_words(sc: Any) -> str:

@@ -17,7 +17,7 @@ STUDY_PATTERNS = ("trials.parquet", "summary.json", "scenario.toml", "*.png")
 
 @command("study")
 def study(
-    scenario: Annotated[Path, typer.Argument(help="Scenario file (TOML) with a \\[study] table.")],
+    scenario: Annotated[Path, typer.Argument(help="Scenario file (TOML) with a [study] table.")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Folder for the results.")],
     trials: Annotated[
         int | None,
@@ -66,7 +66,7 @@ def study(
         typer.Option(
             "--filter",
             help='Safety filter of every trial: "none", "barrier" or "barrier-decentralized" '
-            "(overrides safety.filter; the other \\[safety] keys apply).",
+            "(overrides safety.filter; the other [safety] keys apply).",
         ),
     ] = None,
     sweep: Annotated[
@@ -74,7 +74,7 @@ def study(
         typer.Option(
             "--sweep",
             help="KEY=V1,V2,... : sweep KEY over these values instead of the file's "
-            "\\[study.sweep] (repeat for a product, e.g. --sweep noise=0,0.01,0.02).",
+            "[study.sweep] (repeat for a product, e.g. --sweep noise=0,0.01,0.02).",
         ),
     ] = None,
     resume: Annotated[
