@@ -30,7 +30,7 @@ import subprocess
 import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import Any, NoReturn, TypeVar
+from typing import Annotated, Any, NoReturn, TypeVar
 
 import typer
 from rich.console import Console
@@ -40,11 +40,30 @@ from typer.core import TyperArgument, TyperCommand, TyperGroup, TyperOption
 from ..errors import FormationlabWarning, UserInputError
 from ._signals import interrupted_status
 
-__all__ = ["app", "command", "describe_os_error", "err_console", "fail", "warn"]
+__all__ = [
+    "FigureFormatOption",
+    "app",
+    "command",
+    "describe_os_error",
+    "err_console",
+    "fail",
+    "warn",
+]
 
 err_console = Console(stderr=True)
 
 F = TypeVar("F", bound=Callable[..., Any])
+
+#: the ``--format`` option of the commands that write figures (read with
+#: :func:`formationlab.io.figures.figure_formats`)
+FigureFormatOption = Annotated[
+    str,
+    typer.Option(
+        "--format",
+        help="Figure formats, a comma-separated list of png, pdf and svg (pdf and svg: "
+        "vector figures for LaTeX), e.g. png,pdf.",
+    ),
+]
 
 #: exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells report it); 143
 #: (128 + SIGTERM) when a SIGTERM stopped it

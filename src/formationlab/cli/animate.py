@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from ..errors import OutputExistsError, ParameterError, UserInputError
 from ._app import INTERRUPTED, command, err_console, fail, warn
+from ._progress import progress_bar, shows_progress
 
 __all__: list[str] = []
 
@@ -64,7 +65,7 @@ def write_animation(
     if hasattr(result_or_ds, "formation"):
         r = result_or_ds
         faults = None if r.faults is None else r.faults.describe()
-        rows = used_indices(r.t, frames, r.formation.n)
+        rows = used_indices(r.t, frames, r.formation.n, r.q)
         t, q, edges, diam = r.t[rows], r.q[rows], r.formation.edges, r.formation.diameters
         headings = None if r.headings is None else r.headings[rows]
         points = None if r.points is r.q else r.points[rows]
@@ -77,7 +78,7 @@ def write_animation(
     else:
         ds = result_or_ds
         t_all = ds["time"].values
-        rows = used_indices(t_all, frames, ds.sizes["robot"])
+        rows = used_indices(t_all, frames, ds.sizes["robot"], ds["q"])  # lazily: the rows it reads
         part = ds.isel(time=rows)
         t, q = t_all[rows], part["q"].values
         edges, diam = ds["edge_robots"].values - 1, ds["diameter"].values
@@ -116,17 +117,13 @@ def _pairs_at(pairs: NDArray[np.int64], rows: NDArray[np.int64]) -> NDArray[np.i
 @contextmanager
 def _progress_bar(label: str) -> Iterator[Callable[[int, int], None]]:
     """A transient progress bar of the frames of one file; yields ``update(done, total)``."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
-
-    columns = (TextColumn(f"writing {label}"), BarColumn(), MofNCompleteColumn())
-    with Progress(*columns, console=err_console, transient=True) as bar:
-        task = bar.add_task(label, total=None)
-        yield lambda done, total: bar.update(task, completed=done, total=total)
+    with progress_bar(f"writing {label}") as update:
+        yield update
 
 
 def _frames_progress() -> Callable[[str], Any]:
     """A bar per file on a terminal, a line per file in a log."""
-    return _progress_bar if err_console.is_terminal else _progress_line
+    return _progress_bar if shows_progress(False) else _progress_line
 
 
 @contextmanager
@@ -152,6 +149,7 @@ def animate_cmd(
     force: Annotated[
         bool, typer.Option("--force", help="Replace an existing animation in the folder.")
     ] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress.")] = False,
 ) -> None:
     """Animate a finished run: robots as discs of their diameters and the graph's edges.
 
@@ -160,7 +158,8 @@ def animate_cmd(
 
     Reads DIR/trajectory.nc and writes DIR/animation.gif (pillow),
     DIR/animation.mp4 (ffmpeg from imageio-ffmpeg) and DIR/animation.html (a
-    self-contained player), with at most --frames frames evenly spaced in time.
+    self-contained player), with at most --frames frames, spaced half by time and
+    half by the robots' motion (the transient gets most of them).
     """
     from ..io.animation import FORMATS
     from ..io.netcdf import open_trajectory
@@ -200,7 +199,7 @@ def animate_cmd(
         title = str(ds.attrs.get("scenario_name", folder.name))
         done: list[Path] = []
         try:
-            write_animation(folder, ds, title, frames, formats, done, progress=True)
+            write_animation(folder, ds, title, frames, formats, done, progress=not quiet)
         except (KeyboardInterrupt, subprocess.CalledProcessError):  # Ctrl-C, also killing ffmpeg
             _add_to_manifest(folder, [p.name for p in done])
             kept = f"; kept {', '.join(p.name for p in done)}" if done else ""
