@@ -299,27 +299,36 @@ def plot_lyapunov(
     """The law's Lyapunov function over time (eq. 9 or eq. 15), dimensionless (the
     potentials of eq. 5 are).
 
-    ``log``: a log axis where V stays positive; where it reaches zero or below (eq. 15's
-    restriction term can be negative), a symmetric log axis (linear within 1e-2 of 0),
-    which the axis label says.
+    ``log``: a log axis where V stays positive (down to :data:`_LOG_DEPTH` times its
+    largest value: a converged V's round-off, 0 or -1e-16, is not a value to show); where
+    it goes below zero beyond round-off (eq. 15's restriction term can be negative), a
+    symmetric log axis, linear within 0.01 of 0, which the axis label says.
     """
     ax = _axes(ax)
     artists = _shade_active(ax, result)
-    v = result.V
+    v = np.asarray(result.V, dtype=float)
     label = "$V_n$ (eq. 15)" if result.sigma.shape[-1] else "$V$ (eq. 9)"
     artists += ax.plot(result.t, v, color="k", label=label)
-    scale = ""
-    if log and np.all(np.asarray(v)[np.isfinite(v)] > 0):
+    ylabel = "V (dimensionless)"
+    finite = v[np.isfinite(v)]
+    top = float(np.max(np.abs(finite), initial=0.0))
+    if log and top > 0 and finite.min() >= -_LOG_DEPTH * top:
         ax.set_yscale("log")
-        scale = ", log scale"
+        shown = finite[finite > _LOG_DEPTH * top]
+        ax.set_ylim(max(float(shown.min(initial=top)), _LOG_DEPTH * top) / 2, 2 * top)
+        ylabel = "V (dimensionless, log scale)"
     elif log:
         ax.set_yscale("symlog", linthresh=1e-2)
-        scale = ", symlog scale: linear within 0.01 of 0 (V <= 0 at some time)"
+        ylabel = "V (dimensionless);\nsymlog: linear within ±0.01"
     ax.set_xlabel("time [s]")
-    ax.set_ylabel(f"Lyapunov function{scale} (dimensionless)")
+    ax.set_ylabel(ylabel)
     ax.set_title(title or "Lyapunov function")
     _legend(ax)
     return artists
+
+
+#: the smallest V, relative to its largest, that a log axis of V shows
+_LOG_DEPTH = 1e-12
 
 
 def plot_distance_errors(
