@@ -265,3 +265,17 @@ def test_progress_shows_on_a_terminal_only_and_not_when_quiet(
             "reproducing: simulation 1" in text and "writing animation.gif" in text
         ) is not quiet
         assert (text == "") is quiet
+
+
+def test_the_html_animation_plays_when_opened(tmp_path: Path) -> None:
+    from formationlab.io.animation import save_animation
+
+    t, q = _settling(T=41)
+    anim = animate_run(t, q, edges=np.array([[0, 1], [1, 2], [0, 2]]), diameters=np.full(3, 0.2),
+                       max_frames=4)  # fmt: skip
+    (page,) = save_animation(anim, tmp_path / "animation", formats=["html"])
+    text = page.read_text()
+    player = re.search(r"\b(anim[0-9a-f]+) = new Animation\(", text)
+    assert player is not None
+    onload = text.index("window.addEventListener('load'")
+    assert text.index(f"{player.group(1)}.play_animation();", onload) > onload

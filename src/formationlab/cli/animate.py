@@ -158,7 +158,7 @@ def animate_cmd(
 
     Reads DIR/trajectory.nc and writes DIR/animation.gif (pillow),
     DIR/animation.mp4 (ffmpeg from imageio-ffmpeg) and DIR/animation.html (a
-    self-contained player), with at most --frames frames, spaced half by time and
+    self-contained player that plays when opened), with at most --frames frames, spaced half by time and
     half by the robots' motion (the transient gets most of them).
     """
     from ..io.animation import FORMATS
