@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 from _scenarios import triangle
-from matplotlib.colors import to_rgba
+from matplotlib.colors import to_hex, to_rgba
 from matplotlib.figure import Figure
 from rich.console import Console
 from typer.testing import CliRunner, Result
@@ -279,3 +279,24 @@ def test_the_html_animation_plays_when_opened(tmp_path: Path) -> None:
     assert player is not None
     onload = text.index("window.addEventListener('load'")
     assert text.index(f"{player.group(1)}.play_animation();", onload) > onload
+
+
+def test_the_html_page_of_a_run_in_the_plane_holds_its_states_not_images(tmp_path: Path) -> None:
+    from formationlab.cli.animate import write_animation
+
+    scenario = tmp_path / "s.toml"
+    scenario.write_text(SCENARIO)
+    sc = parse_scenario(SCENARIO)
+    res = fl.simulate(sc.formation, sc.law, sc.q0, duration=1.0, integrator=sc.integrator)
+    (page,) = write_animation(tmp_path, res, "fig-triangle", 40, ("html",))
+    text = page.read_text()
+    assert "data:image" not in text and len(text) < 200_000  # 1,001 states of 3 robots
+    data = json.loads(re.search(r"<script id='states'[^>]*>(.*?)</script>", text, re.S)[1])
+    rows = used_indices(res.t, 40, 3, res.q)
+    np.testing.assert_allclose(data["t"], res.t[rows], atol=1e-6)
+    np.testing.assert_allclose(data["q"], res.q[rows], atol=0.6e-4)  # rounded to 0.1 mm
+    frames = frame_indices(res.t[rows], 40, res.q[rows])
+    assert data["frames"] == frames.tolist() and len(frames) <= 40
+    assert data["edges"] == res.formation.edges.tolist()
+    assert data["colors"] == [to_hex(c) for c in robot_colors(3)]
+    assert "draw(0); play();" in text  # it starts playing when opened

@@ -57,8 +57,11 @@ def write_animation(
     states, :func:`formationlab.plotting.animation.used_indices`), so memory is bounded
     by the frames, not by the run. ``progress`` shows a bar per file on a terminal.
     """
-    from ..io.animation import save_animation
-    from ..plotting.animation import animate_run, used_indices
+    from ..io.animation import FORMATS, save_animation
+    from ..io.files import atomic_write_text
+    from ..plotting.animation import animate_run, frame_indices, used_indices
+    from ..plotting.html_player import player_page
+    from ..plotting.many import LABEL_LIMIT
 
     safety: dict[str, Any] = {}
     faults: dict[str, Any] | None = None
@@ -93,15 +96,32 @@ def write_animation(
                     ds["active_pair"].values.reshape(-1, 3) - [0, 1, 1], rows
                 ),
             }
-    anim = animate_run(
-        t, q, edges=edges, diameters=diam, max_frames=frames, title=title,
-        headings=headings, points=points, **safety,
-        stops=[(s["robot"] - 1, s["at"]) for s in (faults or {}).get("stop", [])],
-    )  # fmt: skip
-    return save_animation(
-        anim, folder / ANIMATION_STEM, formats=formats, written=done,
-        progress=_frames_progress() if progress else None,
-    )  # fmt: skip
+    stops = [(s["robot"] - 1, s["at"]) for s in (faults or {}).get("stop", [])]
+    # a run in the plane of discs and edges only: its HTML page draws the states itself
+    page = "html" in formats and q.shape[-1] == 2 and q.shape[1] <= LABEL_LIMIT
+    same = points is None or np.array_equal(points, q)  # the law's points are the robots'
+    page = page and headings is None and same and not safety and not stops
+    drawn = tuple(f for f in formats if not (page and f == "html"))
+    written = done if done is not None else []
+    if drawn:
+        anim = animate_run(
+            t, q, edges=edges, diameters=diam, max_frames=frames, title=title,
+            headings=headings, points=points, **safety, stops=stops,
+        )  # fmt: skip
+        save_animation(
+            anim, folder / ANIMATION_STEM, formats=drawn, written=written,
+            progress=_frames_progress() if progress else None,
+        )  # fmt: skip
+    if page:
+        target = (folder / ANIMATION_STEM).with_suffix(FORMATS["html"])
+        if progress and not shows_progress(False):
+            _note_writing(target.name)
+        text = player_page(
+            t, q, frame_indices(t, frames, q), edges=edges, diameters=diam, title=title
+        )
+        atomic_write_text(target, text)
+        written.append(target)
+    return list(written)
 
 
 def _pairs_at(pairs: NDArray[np.int64], rows: NDArray[np.int64]) -> NDArray[np.int64]:
@@ -129,8 +149,12 @@ def _frames_progress() -> Callable[[str], Any]:
 @contextmanager
 def _progress_line(label: str) -> Iterator[Callable[[int, int], None]]:
     """In a log (not a terminal): one line as the frames of a file start being drawn."""
-    err_console.print(f"writing {label} ...", markup=False, highlight=False)
+    _note_writing(label)
     yield lambda done, total: None
+
+
+def _note_writing(label: str) -> None:
+    err_console.print(f"writing {label} ...", markup=False, highlight=False)
 
 
 @command(
@@ -158,8 +182,10 @@ def animate_cmd(
 
     Reads DIR/trajectory.nc and writes DIR/animation.gif (pillow),
     DIR/animation.mp4 (ffmpeg from imageio-ffmpeg) and DIR/animation.html (a
-    self-contained player that plays when opened), with at most --frames frames, spaced half by time and
-    half by the robots' motion (the transient gets most of them).
+    self-contained player that plays when opened; for a run in the plane of up to 12
+    robots without obstacles, filter, headings or stops, a page that draws the states
+    itself, a few hundred kB), with at most --frames frames, spaced half by time and half
+    by the robots' motion (the transient gets most of them).
     """
     from ..io.animation import FORMATS
     from ..io.netcdf import open_trajectory
