@@ -71,7 +71,8 @@ INTERRUPTED = 130
 
 
 def fail(message: str, code: int = 2) -> NoReturn:
-    """Print ``error: message`` on standard error and exit with ``code``.
+    """Print ``error: message`` on standard error and exit with ``code`` (an interrupt's
+    message alone, below).
 
     :data:`INTERRUPTED` becomes ``128 +`` the signal that stopped the command (143 for
     SIGTERM, :func:`._signals.interrupted_status`), and its message (``interrupted ...``,
