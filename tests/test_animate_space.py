@@ -23,7 +23,7 @@ from typer.testing import CliRunner, Result
 import formationlab.io.animation as io_animation
 from formationlab.cli import _load_commands, app
 from formationlab.cli.animate import write_animation
-from formationlab.plotting.animation import animate_run
+from formationlab.plotting.animation import animate_run, frame_indices
 from formationlab.plotting.animation_space import AZIMUTH_STEP
 
 _load_commands()
@@ -136,9 +136,9 @@ def test_each_frame_draws_the_trajectory_at_its_time(
         np.testing.assert_allclose(graph[0], ends, rtol=0, atol=1e-12)
         assert [text for text, _ in frame["labels"]] == [" 1", " 2", " 3", " 4"]
         np.testing.assert_allclose([xyz for _, xyz in frame["labels"]], q[row], atol=1e-12)
-    # frames evenly spaced in time (to a saved interval), from the first state to the last
+    # the frames spaced by time and motion (frame_indices), from the first state to the last
     assert rows[0] == 0 and rows[-1] == len(t) - 1
-    np.testing.assert_allclose(t[rows], np.linspace(t[0], t[-1], 5), atol=0.02 + 1e-12)
+    np.testing.assert_array_equal(rows, frame_indices(t, 5, q))
     # the robots move between frames: a frame drawn at another time would not match
     assert np.abs(np.diff(q[rows], axis=0)).max(axis=(1, 2)).min() > 1e-2
     np.testing.assert_allclose(np.diff([f["azim"] for f in seen]), AZIMUTH_STEP, rtol=1e-12)
@@ -179,7 +179,9 @@ def test_a_stopped_robot_turns_grey(space_run: Path) -> None:
     ax = anim._fig.axes[0]
     (points,) = [c for c in ax.collections if isinstance(c, PathCollection)]
     grey = (0.55, 0.55, 0.55)
-    for k, stopped in enumerate([False, False, False, True, True]):  # frames at 0, 0.1, ... s
+    at = t[frame_indices(t, 5, q)]  # the frames' times (spaced by time and motion)
+    assert 0 < (at >= 0.25).sum() < 5  # frames before the stop and after it
+    for k, stopped in enumerate(at >= 0.25):
         anim._func(k)
         face = PathCollection.get_facecolor(points)[:, :3]  # by robot, not by depth
         assert np.allclose(face[2], grey) == stopped
@@ -214,14 +216,15 @@ def test_a_run_in_the_plane_is_still_drawn_in_the_plane() -> None:
 @pytest.mark.parametrize("n", [30, 2100])
 def test_many_robots_in_space_are_points_without_numbers(rng, n) -> None:
     # beyond 12 robots no numbers; beyond 2,000 one colour and the lines one broken line
-    t = np.linspace(0.0, 1.0, 5)  # the middle frame is the middle state, t = 0.5 s
+    t = np.linspace(0.0, 1.0, 5)
     q = rng.normal(size=(1, n, 3)) * 5 + np.cumsum(rng.normal(size=(5, n, 3)) * 0.1, axis=0)
     edges = np.stack([np.arange(n), (np.arange(n) + 1) % n], axis=1)
     anim = animate_run(t, q, edges=edges, diameters=np.full(n, 0.2), max_frames=3)
     ax = drawn_by_hand(anim)._fig.axes[0]
     anim._func(1)
     (points,) = [c for c in ax.collections if isinstance(c, PathCollection)]
-    row = 2
+    row = frame_indices(t, 3, q)[1]
+    assert 0 < row < 4
     np.testing.assert_allclose(np.column_stack(points._offsets3d), q[row], atol=1e-12)
     assert len(ax.texts) == 0
     colours = np.unique(PathCollection.get_facecolor(points), axis=0)

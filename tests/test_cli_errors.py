@@ -268,6 +268,46 @@ def test_help_shows_conventional_usage_and_flags_without_a_type(command: str) ->
         assert usage[-1] == "[OPTIONS]"
 
 
+def _help_words(command: str) -> list[str]:
+    """Every word of a command's own help: its docstring and its parameters' help."""
+    import typer.main
+
+    group = typer.main.get_command(app)
+    cmd = group.commands[command]  # type: ignore[attr-defined]
+    texts = [cmd.help or "", *(getattr(p, "help", None) or "" for p in cmd.params)]
+    return " ".join(texts).split()
+
+
+@pytest.mark.parametrize("command", [*ALL_COMMANDS, "view"])
+def test_help_at_80_columns_keeps_brackets_and_whole_words(command: str) -> None:
+    res = invoke(command, "--help", env={"COLUMNS": "80"})
+    assert res.exit_code == 0, res.output
+    lines = res.output.splitlines()
+    assert max(len(ln) for ln in lines) <= 80, res.output
+    assert "…" not in res.output
+    shown = res.output.split()
+    # each word of the help is shown whole, brackets and hyphens kept ("[study]",
+    # "formationlab[view]", "barrier-decentralized", "--from-study")
+    missing = [w for w in _help_words(command) if w not in shown]
+    assert not missing, (missing, res.output)
+
+
+def test_the_bracketed_words_that_rich_swallowed_are_shown() -> None:
+    view = invoke("view", "--help", env={"COLUMNS": "80"}).output
+    assert "formationlab[view]`." in view.split()
+    validate = invoke("validate", "--help", env={"COLUMNS": "80"}).output
+    assert "([study] and [equilibria] too)." in " ".join(validate.split())
+    study = invoke("study", "--help", env={"COLUMNS": "80"}).output
+    assert '"barrier-decentralized"' in study.split() and "[safety]" in study.split()
+
+
+def test_the_root_help_summarises_each_command_in_whole_words() -> None:
+    res = invoke("--help", env={"COLUMNS": "80"})
+    words = " ".join(res.output.split())
+    assert "..." not in res.output.split("Commands:")[1]
+    assert "figures 4-12, summary.json." in words  # the whole first line, wrapped
+
+
 def test_root_help_has_no_bool_types() -> None:
     res = invoke("--help", env={"COLUMNS": "100"})
     assert res.exit_code == 0 and "--version" in res.output and "<bool>" not in res.output

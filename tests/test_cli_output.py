@@ -177,6 +177,7 @@ def summary(outcome: str, converged: float | None, speed: float, error: float) -
     return {
         "outcome": outcome,
         "converged_time": converged,
+        "final_time": 20.0,
         "final_speed": speed,
         "net_speed": speed,
         "max_distance_error": error,
@@ -189,18 +190,18 @@ def test_a_desired_shape_still_moving_is_said_in_one_breath() -> None:
     line = _verdict(summary("desired", None, 0.0012, 0.00981))
     assert line == (
         "outcome desired, max |r_ij - d_ij| = 0.00981 (within the tolerance 0.01), "
-        "still moving at the end (0.0012 m/s > 0.001)"
+        "still moving at the end (0.0012 m/s > 0.001); ran to t = 20 s"
     )
     assert "not converged" not in line
 
 
 def test_the_other_verdicts() -> None:
     assert _verdict(summary("desired", 2.25, 0.0, 1e-14)) == (
-        "outcome desired, max |r_ij - d_ij| = 1e-14, stopped at t = 2.25 s"
+        "outcome desired, max |r_ij - d_ij| = 1e-14, converged at t = 2.25 s; ran to t = 20 s"
     )
     assert _verdict(summary("not-converged", None, 1.4, 0.364)) == (
         "outcome not-converged, max |r_ij - d_ij| = 0.364, still moving at the end "
-        "(1.4 m/s > 0.001)"
+        "(1.4 m/s > 0.001); ran to t = 20 s"
     )
 
 
@@ -210,3 +211,7 @@ def test_run_prints_the_verdict(tmp_path: Path) -> None:
     res = invoke("run", path, "--out", tmp_path / "o")
     s = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert res.stdout.strip() == f"short: {_verdict(s)}; wrote {tmp_path / 'o'}/"
+    # when the robots stopped and how long the run lasted (trajectory.nc's end), both said
+    assert f"ran to t = {s['final_time']:.4g} s" in res.stdout and s["final_time"] == 1.0
+    if s["converged_time"] is not None:
+        assert f"converged at t = {s['converged_time']:.3g} s" in res.stdout

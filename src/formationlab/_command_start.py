@@ -3,7 +3,7 @@
 The console script imports the package (numpy, scipy, numba, the kernels: about a second)
 before the command line's handling of Ctrl-C is in place, and a Ctrl-C then printed a
 KeyboardInterrupt traceback. When the program is that script (``sys.argv[0]`` is a file
-named ``formationlab``), SIGINT and SIGTERM end it with ``error: interrupted`` and status
+named ``formationlab``), SIGINT and SIGTERM end it with ``interrupted`` and status
 130 or 143 until :func:`formationlab.cli.main` installs its own handlers. Imported as a
 library, nothing changes.
 """
@@ -20,7 +20,7 @@ __all__: list[str] = []
 
 
 def _stop(signum: int, frame: FrameType | None) -> None:
-    print("error: interrupted", file=sys.stderr)
+    print("interrupted", file=sys.stderr)
     raise SystemExit(128 + signum)
 
 

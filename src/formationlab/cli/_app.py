@@ -16,8 +16,8 @@ a file or folder that cannot be read or       2       the path and the reason ("
 written (any ``OSError``: permission, disk            denied", "no space left on device",
 full, a path under a regular file)                    "not a directory", ...)
 an optional part that is not installed        2       the extra to install
-Ctrl-C (SIGTERM)                              130     ``interrupted`` (and what was kept)
-                                              (143)
+Ctrl-C (SIGTERM)                              130     ``interrupted`` (and what was kept), not
+                                              (143)   an ``error:``
 ============================================  ======  =========================================
 """
 
@@ -25,12 +25,13 @@ from __future__ import annotations
 
 import functools
 import os
+import re
 import subprocess
 import sys
 import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import Any, NoReturn, TypeVar
+from typing import Annotated, Any, NoReturn, TypeVar
 
 import typer
 from rich.console import Console
@@ -40,11 +41,31 @@ from typer.core import TyperArgument, TyperCommand, TyperGroup, TyperOption
 from ..errors import FormationlabWarning, UserInputError
 from ._signals import interrupted_status
 
-__all__ = ["app", "command", "describe_os_error", "err_console", "fail", "group", "warn"]
+__all__ = [
+    "FigureFormatOption",
+    "app",
+    "command",
+    "describe_os_error",
+    "err_console",
+    "fail",
+    "group",
+    "warn",
+]
 
 err_console = Console(stderr=True)
 
 F = TypeVar("F", bound=Callable[..., Any])
+
+#: the ``--format`` option of the commands that write figures (read with
+#: :func:`formationlab.io.figures.figure_formats`)
+FigureFormatOption = Annotated[
+    str,
+    typer.Option(
+        "--format",
+        help="Figure formats, a comma-separated list of png, pdf and svg (pdf and svg: "
+        "vector figures for LaTeX), e.g. png,pdf.",
+    ),
+]
 
 #: exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells report it); 143
 #: (128 + SIGTERM) when a SIGTERM stopped it
@@ -52,14 +73,17 @@ INTERRUPTED = 130
 
 
 def fail(message: str, code: int = 2) -> NoReturn:
-    """Print ``error: message`` on standard error and exit with ``code``.
+    """Print ``error: message`` on standard error and exit with ``code`` (an interrupt's
+    message alone, below).
 
     :data:`INTERRUPTED` becomes ``128 +`` the signal that stopped the command (143 for
-    SIGTERM, :func:`._signals.interrupted_status`).
+    SIGTERM, :func:`._signals.interrupted_status`), and its message (``interrupted ...``,
+    with what was kept) is printed as it is: a deliberate stop is not an error.
     """
-    if code == INTERRUPTED:
-        code = interrupted_status()
     # escape: messages quote user input such as "[x, y]", which is not rich markup
+    if code == INTERRUPTED:
+        err_console.print(f"[bold yellow]{escape(message)}[/]", highlight=False, soft_wrap=True)
+        raise typer.Exit(interrupted_status())
     err_console.print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True)
     raise typer.Exit(code)
 
@@ -180,15 +204,57 @@ def _conventional(params: list[Any]) -> list[Any]:
     return params
 
 
+#: a hyphen inside a word ("--from-study", "barrier-decentralized") and the character that
+#: stands in for it while click wraps the help (U+2011, a hyphen that does not break)
+_INNER_HYPHEN = re.compile(r"(?<=\w)-(?=\w)")
+_KEPT_HYPHEN = "\u2011"
+
+
+def _unbroken(text: str) -> str:
+    return _INNER_HYPHEN.sub(_KEPT_HYPHEN, text)
+
+
+#: the context and help formatter of typer's commands (click's own, or the copy of click
+#: that recent typer versions carry)
+_BaseContext: Any = TyperCommand.context_class
+
+
+class _HelpFormatter(_BaseContext.formatter_class):  # type: ignore[name-defined]
+    """click's help layout, wrapped at spaces only: a hyphenated word stays on one line."""
+
+    def write_text(self, text: str) -> None:
+        super().write_text(_unbroken(text))
+
+    def write_dl(self, rows: Any, *args: Any, **kwargs: Any) -> None:
+        super().write_dl([(term, _unbroken(text)) for term, text in rows], *args, **kwargs)
+
+    def getvalue(self) -> str:
+        return super().getvalue().replace(_KEPT_HYPHEN, "-")
+
+
+class _Context(_BaseContext):  # type: ignore[misc,valid-type]
+    formatter_class = _HelpFormatter
+
+
 class _Command(TyperCommand):
-    """typer's command with conventional help: ``SCENARIO`` in usage, no ``<bool>`` on flags."""
+    """typer's command with conventional help: ``SCENARIO`` in usage, no ``<bool>`` on flags.
+
+    Its summary in the root help is its whole first line (wrapped, never cut off).
+    """
+
+    context_class = _Context
 
     def get_params(self, ctx: Any) -> list[Any]:
         return _conventional(super().get_params(ctx))
 
+    def get_short_help_str(self, limit: int = 45) -> str:
+        return (self.short_help or (self.help or "").strip().split("\n\n")[0]).replace("\n", " ")
+
 
 class _Group(TyperGroup):
     """The root command and its sub-groups, with the help display of :class:`_Command`."""
+
+    context_class = _Context
 
     def get_params(self, ctx: Any) -> list[Any]:
         return _conventional(super().get_params(ctx))
@@ -200,6 +266,10 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    # help as click writes it, not through rich: rich reads "[view]" in "formationlab[view]"
+    # as markup and drops it, and cuts words in its narrow option tables ("barrier-decentral…");
+    # click keeps the text as written and wraps it at whole words to the terminal's width
+    rich_markup_mode=None,
     cls=_Group,
 )
 

@@ -65,5 +65,5 @@ def interrupted_status() -> int:
 
 def exit_interrupted() -> NoReturn:
     """End the command before its error handling is in place: one line, no traceback."""
-    print("error: interrupted", file=sys.stderr)
+    print("interrupted", file=sys.stderr)
     raise SystemExit(interrupted_status())

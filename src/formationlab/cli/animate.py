@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from ..errors import OutputExistsError, ParameterError, UserInputError
 from ._app import INTERRUPTED, command, err_console, fail, warn
+from ._progress import progress_bar, shows_progress
 
 __all__: list[str] = []
 
@@ -56,15 +57,18 @@ def write_animation(
     states, :func:`formationlab.plotting.animation.used_indices`), so memory is bounded
     by the frames, not by the run. ``progress`` shows a bar per file on a terminal.
     """
-    from ..io.animation import save_animation
-    from ..plotting.animation import animate_run, used_indices
+    from ..io.animation import FORMATS, save_animation
+    from ..io.files import atomic_write_text
+    from ..plotting.animation import animate_run, frame_indices, used_indices
+    from ..plotting.html_player import player_page
+    from ..plotting.many import LABEL_LIMIT
 
     safety: dict[str, Any] = {}
     faults: dict[str, Any] | None = None
     if hasattr(result_or_ds, "formation"):
         r = result_or_ds
         faults = None if r.faults is None else r.faults.describe()
-        rows = used_indices(r.t, frames, r.formation.n)
+        rows = used_indices(r.t, frames, r.formation.n, r.q)
         t, q, edges, diam = r.t[rows], r.q[rows], r.formation.edges, r.formation.diameters
         headings = None if r.headings is None else r.headings[rows]
         points = None if r.points is r.q else r.points[rows]
@@ -77,7 +81,7 @@ def write_animation(
     else:
         ds = result_or_ds
         t_all = ds["time"].values
-        rows = used_indices(t_all, frames, ds.sizes["robot"])
+        rows = used_indices(t_all, frames, ds.sizes["robot"], ds["q"])  # lazily: the rows it reads
         part = ds.isel(time=rows)
         t, q = t_all[rows], part["q"].values
         edges, diam = ds["edge_robots"].values - 1, ds["diameter"].values
@@ -92,15 +96,32 @@ def write_animation(
                     ds["active_pair"].values.reshape(-1, 3) - [0, 1, 1], rows
                 ),
             }
-    anim = animate_run(
-        t, q, edges=edges, diameters=diam, max_frames=frames, title=title,
-        headings=headings, points=points, **safety,
-        stops=[(s["robot"] - 1, s["at"]) for s in (faults or {}).get("stop", [])],
-    )  # fmt: skip
-    return save_animation(
-        anim, folder / ANIMATION_STEM, formats=formats, written=done,
-        progress=_frames_progress() if progress else None,
-    )  # fmt: skip
+    stops = [(s["robot"] - 1, s["at"]) for s in (faults or {}).get("stop", [])]
+    # a run in the plane of discs and edges only: its HTML page draws the states itself
+    page = "html" in formats and q.shape[-1] == 2 and q.shape[1] <= LABEL_LIMIT
+    same = points is None or np.array_equal(points, q)  # the law's points are the robots'
+    page = page and headings is None and same and not safety and not stops
+    drawn = tuple(f for f in formats if not (page and f == "html"))
+    written = done if done is not None else []
+    if drawn:
+        anim = animate_run(
+            t, q, edges=edges, diameters=diam, max_frames=frames, title=title,
+            headings=headings, points=points, **safety, stops=stops,
+        )  # fmt: skip
+        save_animation(
+            anim, folder / ANIMATION_STEM, formats=drawn, written=written,
+            progress=_frames_progress() if progress else None,
+        )  # fmt: skip
+    if page:
+        target = (folder / ANIMATION_STEM).with_suffix(FORMATS["html"])
+        if progress and not shows_progress(False):
+            _note_writing(target.name)
+        text = player_page(
+            t, q, frame_indices(t, frames, q), edges=edges, diameters=diam, title=title
+        )
+        atomic_write_text(target, text)
+        written.append(target)
+    return list(written)
 
 
 def _pairs_at(pairs: NDArray[np.int64], rows: NDArray[np.int64]) -> NDArray[np.int64]:
@@ -116,23 +137,19 @@ def _pairs_at(pairs: NDArray[np.int64], rows: NDArray[np.int64]) -> NDArray[np.i
 @contextmanager
 def _progress_bar(label: str) -> Iterator[Callable[[int, int], None]]:
     """A transient progress bar of the frames of one file; yields ``update(done, total)``."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
-
-    columns = (TextColumn(f"writing {label}"), BarColumn(), MofNCompleteColumn())
-    with Progress(*columns, console=err_console, transient=True) as bar:
-        task = bar.add_task(label, total=None)
-        yield lambda done, total: bar.update(task, completed=done, total=total)
+    with progress_bar(f"writing {label}") as update:
+        yield update
 
 
 def _frames_progress() -> Callable[[str], Any]:
     """A bar per file on a terminal, a line per file in a log."""
-    return _progress_bar if err_console.is_terminal else _progress_line
+    return _progress_bar if shows_progress(False) else _progress_line
 
 
 @contextmanager
 def _progress_line(label: str) -> Iterator[Callable[[int, int], None]]:
     """In a log (not a terminal): one line as the frames of a file start being drawn."""
-    err_console.print(f"writing {label} ...", markup=False, highlight=False)
+    _note_writing(label)
     yield lambda done, total: None
 
 
@@ -165,6 +182,10 @@ def open_run(nc: Path) -> Any:
     return ds
 
 
+def _note_writing(label: str) -> None:
+    err_console.print(f"writing {label} ...", markup=False, highlight=False)
+
+
 @command(
     "animate",
     epilog="Example:  formationlab animate runs/sim2 --frames 100 --format gif",
@@ -181,6 +202,7 @@ def animate_cmd(
     force: Annotated[
         bool, typer.Option("--force", help="Replace an existing animation in the folder.")
     ] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress.")] = False,
 ) -> None:
     """Animate a finished run: robots as discs of their diameters and the graph's edges.
 
@@ -189,7 +211,10 @@ def animate_cmd(
 
     Reads DIR/trajectory.nc and writes DIR/animation.gif (pillow),
     DIR/animation.mp4 (ffmpeg from imageio-ffmpeg) and DIR/animation.html (a
-    self-contained player), with at most --frames frames evenly spaced in time.
+    self-contained player that plays when opened; for a run in the plane of up to 12
+    robots without obstacles, filter, headings or stops, a page that draws the states
+    itself, a few hundred kB), with at most --frames frames, spaced half by time and half
+    by the robots' motion (the transient gets most of them).
     """
     from ..io.animation import FORMATS
 
@@ -217,7 +242,7 @@ def animate_cmd(
         title = str(ds.attrs.get("scenario_name", folder.name))
         done: list[Path] = []
         try:
-            write_animation(folder, ds, title, frames, formats, done, progress=True)
+            write_animation(folder, ds, title, frames, formats, done, progress=not quiet)
         except (KeyboardInterrupt, subprocess.CalledProcessError):  # Ctrl-C, also killing ffmpeg
             add_to_manifest(folder, [p.name for p in done])
             kept = f"; kept {', '.join(p.name for p in done)}" if done else ""

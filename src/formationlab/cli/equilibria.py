@@ -7,7 +7,8 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from ._app import command, warn
+from ._app import FigureFormatOption, command, warn
+from ._progress import stage_bar
 
 if TYPE_CHECKING:
     import numpy as np
@@ -64,7 +65,8 @@ def equilibria(
     force: Annotated[
         bool, typer.Option("--force", help="Replace the files of an earlier run in --out.")
     ] = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No report.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress, no report.")] = False,
+    figure_format: FigureFormatOption = "png",
 ) -> None:
     """Find, refine and classify the equilibria a scenario's law can end in.
 
@@ -77,17 +79,19 @@ def equilibria(
     of unstable directions), degenerate, or filippov (on a switching surface).
     --law compares another law on the same formation. Writes
     DIR/equilibria.json and DIR/gallery.png (desired shape first); with
-    --follow also DIR/continuation.json and DIR/continuation.png.
+    --follow also DIR/continuation.json and DIR/continuation.png (figures in
+    the --format list: pdf and svg for LaTeX).
     """
     import dataclasses
 
     from ..equilibria.report import equilibria_scenario, find_equilibria, parse_equilibria
     from ..io.equilibria import read_study_end_states, write_equilibria
-    from ..io.figures import save_figure
+    from ..io.figures import figure_formats, save_figures
     from ..io.files import atomic_write_json, prepare_output_dir
     from ..io.scenario import load_scenario
     from ..plotting.equilibria import continuation_figure, gallery_figure
 
+    formats = figure_formats(figure_format)
     sc = load_scenario(scenario)
     for w in sc.warnings:
         warn(w if w.startswith(sc.source) else f"{sc.source}: {w}")
@@ -115,22 +119,27 @@ def equilibria(
         numbers = {k: v for k, v in dataclasses.asdict(law_).items() if isinstance(v, int | float)}
         return read_study_end_states(from_study, sc.n, law_.name, numbers, dim=sc.formation.dim)
 
-    report = find_equilibria(
-        sc,
-        config,
-        end_states=study_ends if from_study is not None else None,
-        end_states_source=str(from_study) if from_study is not None else None,
-    )
-    cat, name = report.catalogue, report.scenario.name
-    files = ["equilibria.json", "gallery.png"]
-    title = f"{name}: equilibria of the {cat.law.name} law"
-    save_figure(gallery_figure(cat, title=title), folder / "gallery.png")
-    continuation = report.continuation()
-    if continuation is not None:
-        atomic_write_json(folder / "continuation.json", continuation)
-        figure = continuation_figure(report.branches, labels=report.labels)
-        save_figure(figure, folder / "continuation.png")
-        files += ["continuation.json", "continuation.png"]
+    # find_equilibria's stages (three, four with --follow), then the figures
+    stages = 4 + (config.follow_spec is not None)
+    with stage_bar("equilibria", stages, quiet=quiet) as now:
+        report = find_equilibria(
+            sc,
+            config,
+            end_states=study_ends if from_study is not None else None,
+            end_states_source=str(from_study) if from_study is not None else None,
+            progress=now,
+        )
+        now("figures")
+        cat, name = report.catalogue, report.scenario.name
+        title = f"{name}: equilibria of the {cat.law.name} law"
+        gallery = save_figures(gallery_figure(cat, title=title), folder / "gallery", formats)
+        files = ["equilibria.json", *(p.name for p in gallery)]
+        continuation = report.continuation()
+        if continuation is not None:
+            atomic_write_json(folder / "continuation.json", continuation)
+            figure = continuation_figure(report.branches, labels=report.labels)
+            drawn = save_figures(figure, folder / "continuation", formats)
+            files += ["continuation.json", *(p.name for p in drawn)]
     write_equilibria({**report.to_dict(), "files": files}, folder / "equilibria.json")
     if not quiet:
         for line in report.lines():

@@ -134,7 +134,7 @@ def export_mcap(
     (/formation/lyapunov) and the distance errors (/formation/distance_errors),
     in frame "world", stamped with the simulation time. About 1,300 states of
     three robots are written a second: --every K keeps every K-th. Needs the
-    robots extra: pip install "formationlab\\[robots]". See docs/robots.md.
+    robots extra: pip install "formationlab[robots]". See docs/robots.md.
     """
     from ..io.mcap import write_mcap
 

@@ -7,7 +7,8 @@ from typing import Annotated
 
 import typer
 
-from ._app import command, err_console
+from ._app import FigureFormatOption, command, err_console
+from ._progress import stage_bar
 
 
 @command("paper")
@@ -32,6 +33,8 @@ def paper(
             help="Added to robot 1's x in simulation 2 to leave the symmetric subspace (0: exact)."
         ),
     ] = 1e-6,
+    figure_format: FigureFormatOption = "png",
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress, no report.")] = False,
 ) -> None:
     """Reproduce the paper's section 4: both simulations, figures 4-12, summary.json.
 
@@ -39,15 +42,16 @@ def paper(
 
         formationlab paper --out paper-out
 
-    Writes OUT/fig04_trajectories.png ... OUT/fig12_lyapunov.png, two extra figures
-    of the unperturbed simulation 2, and OUT/summary.json with the outcome, final
-    positions, distance errors and orientation of each run (docs/paper.md).
+    Writes OUT/fig04_trajectories.png ... OUT/fig12_lyapunov.png (or .pdf, .svg: --format),
+    two extra figures of the unperturbed simulation 2, and OUT/summary.json with the
+    outcome, final positions, distance errors and orientation of each run (docs/paper.md).
     """
-    from ..io import atomic_write_json, prepare_output_dir, save_figure
+    from ..io import atomic_write_json, figure_formats, prepare_output_dir, save_figures
     from ..io.files import MANIFEST, earlier_files, remove_stale
     from ..plotting.paper import paper_figures
     from ..studies.paper import PaperSetup, reproduce
 
+    formats = figure_formats(figure_format)
     setup = PaperSetup(
         diameter=diameter,
         duration=duration,
@@ -56,16 +60,22 @@ def paper(
         perturbation=perturbation,
     )
     folder = prepare_output_dir(out, force=force)
-    earlier = earlier_files(folder, ("summary.json", "*.png")) if force else []
-    with err_console.status("reproducing section 4") as status:
-        rep = reproduce(setup, progress=lambda msg: status.update(f"running {msg}"))
-    figures = [
-        save_figure(fig, folder / f"{stem}.png").name for stem, fig in paper_figures(rep).items()
-    ]
+    earlier = earlier_files(folder, ("summary.json", "*.png", "*.pdf", "*.svg")) if force else []
+    # the three runs, the two scans (studies.paper.reproduce) and the figures
+    with stage_bar("reproducing section 4", 6, quiet=quiet) as now:
+        rep = reproduce(setup, progress=now)
+        now("figures")
+        figures = [
+            path.name
+            for stem, fig in paper_figures(rep).items()
+            for path in save_figures(fig, folder / stem, formats)
+        ]
     summary = rep.summary()
     manifest = [*figures, "summary.json"]
     atomic_write_json(folder / "summary.json", {**summary, MANIFEST: manifest})
     remove_stale(folder, earlier, manifest)
+    if quiet:
+        return
     for key in ("simulation_1", "simulation_2", "simulation_2_unperturbed"):
         s = summary[key]
         err_console.print(

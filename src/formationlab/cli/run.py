@@ -12,8 +12,9 @@ import typer
 from rich.markup import escape
 
 from ..errors import ParameterError, UserInputError
-from ._app import INTERRUPTED, command, err_console, fail, warn
+from ._app import INTERRUPTED, FigureFormatOption, command, err_console, fail, warn
 from ._plan import RunPlan, check_plan, plan_run
+from ._progress import progress_bar, shows_progress
 from .animate import ANIMATION_STEM, FORMATS_ALL, usable_formats, write_animation
 
 __all__: list[str] = []
@@ -22,7 +23,9 @@ __all__: list[str] = []
 #: marks a finished run).
 RUN_FILES = ("scenario.toml", "trajectory.nc", "summary.json")
 #: files of an earlier run (without a manifest) that ``run --force`` replaces
-EARLIER_PATTERNS = (*RUN_FILES, "distance_errors.parquet", "*.png", f"{ANIMATION_STEM}.*")
+EARLIER_PATTERNS = (
+    *RUN_FILES, "distance_errors.parquet", "*.png", "*.pdf", "*.svg", f"{ANIMATION_STEM}.*",
+)  # fmt: skip
 
 
 def _say(message: str, quiet: bool) -> None:
@@ -74,23 +77,25 @@ def run(
         ),
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress, no report.")] = False,
+    figure_format: FigureFormatOption = "png",
 ) -> None:
     """Simulate a scenario and write trajectory.nc, summary.json and plots to --out.
 
-    The trajectory (positions q, controls u, Lyapunov function V, switching
-    functions sigma) goes to DIR/trajectory.nc (netCDF, open it with
-    xarray.open_dataset), the outcome and final distance errors to
-    DIR/summary.json, and PNG plots of trajectories, controls, V and distance
-    errors beside them. Before it starts, the run prints its step count and
-    the memory and disk it will need, and refuses (unless --force) a run that
-    would not fit: store fewer steps with --save-every. Ctrl-C stops the run
-    and writes the trajectory so far, with status "interrupted". Exit status:
-    0 when the run finished, 1 when the integrator stopped early (results up
-    to then are written), 2 on bad input or a folder that cannot be written,
-    130 when interrupted (results up to then are written).
+    The trajectory (positions q, controls u, Lyapunov function V, switching functions sigma)
+    goes to DIR/trajectory.nc (netCDF, open it with xarray.open_dataset), the outcome and
+    final distance errors to DIR/summary.json, and plots of trajectories, controls, V and
+    distance errors beside them (PNG, or the --format list: pdf and svg for LaTeX). Before
+    it starts, the run prints its step count and the memory and disk it will need, and
+    refuses (unless --force) a run that would not fit: store fewer steps with --save-every.
+    Ctrl-C stops the run and writes the trajectory so far, with status "interrupted". Exit
+    status: 0 when the run finished, 1 when the integrator stopped early (results up to then
+    are written), 2 on bad input or a folder that cannot be written, 130 when interrupted
+    (results up to then are written).
     """
+    from ..io.figures import figure_formats
     from ..io.scenario import load_scenario
 
+    pictures = figure_formats(figure_format)
     sc = load_scenario(scenario)
     for w in sc.warnings:
         warn(w)
@@ -111,7 +116,7 @@ def run(
         if problem:
             warn(problem.split("; ")[0] + "; running it anyway (--force)")
     _note_glyphs(sc.name, quiet)
-    _run(sc, scenario, out, save_every, formats, frames, force, quiet, record)
+    _run(sc, scenario, out, save_every, formats, frames, force, quiet, record, pictures)
 
 
 def _note_glyphs(name: str, quiet: bool) -> None:
@@ -145,8 +150,10 @@ def _run(
     force: bool,
     quiet: bool,
     record: Path | None = None,
+    pictures: tuple[str, ...] = ("png",),
 ) -> None:
-    """Simulate, write the results, then the recording, the figures, then animate.
+    """Simulate, write the results, then the recording, the figures (in the formats
+    ``pictures``), then animate.
 
     What took the time is written first: ``trajectory.nc``, the per-edge table and
     ``summary.json`` before the recording and the figures (which a Ctrl-C or a failure may
@@ -173,7 +180,9 @@ def _run(
     try:
         if record is not None:  # (listed in summary.json with the figures)
             written = [*written, *_write_record(folder, sc.name, result, record, quiet)]
-        written = _write_figures(folder, sc, scenario, result, summary, save_every, written, quiet)
+        written = _write_figures(
+            folder, sc, scenario, result, summary, save_every, written, quiet, pictures
+        )
     except KeyboardInterrupt:
         remove_stale(folder, earlier, written)
         _say(f"{sc.name}: {_verdict(summary)}; wrote {folder}/", quiet)
@@ -267,16 +276,19 @@ def _write_figures(
     save_every: int,
     written: list[str],
     quiet: bool,
+    formats: tuple[str, ...] = ("png",),
 ) -> list[str]:
-    """Draw and save the run's figures, then list them in summary.json; returns the names."""
-    from ..io.figures import save_figure
+    """Draw and save the run's figures in ``formats``, then list them in summary.json;
+    returns the names."""
+    from ..io.figures import save_figures
     from ..plotting.runs import run_figures
 
     if result.q.size / 2 > _LARGE:
         _note("drawing the figures ...", quiet)
     pictures = [
-        save_figure(fig, folder / f"{name}.png").name
+        path.name
         for name, fig in run_figures(result, prefix=sc.name).items()
+        for path in save_figures(fig, folder / name, formats)
     ]
     return _write_summary(folder, sc, scenario, summary, save_every, [*written, *pictures])
 
@@ -311,11 +323,14 @@ def _write_summary(
 
 
 def _verdict(s: dict[str, Any]) -> str:
-    """The one-line verdict of a run's summary: the outcome, and whether the robots stopped.
+    """The one-line verdict of a run's summary: the outcome, whether and when the robots
+    stopped, and how long the run lasted.
 
     ``outcome`` judges the final shape (analysis.classify); the robots may still
     move within the distance tolerance, which the line says in the same breath
-    instead of a contradictory "not converged".
+    instead of a contradictory "not converged". ``converged at t = ...`` is when they
+    stopped (``converged_time``), ``ran to t = ...`` the run's last saved time
+    (``final_time``, the end of ``trajectory.nc``).
     """
     tol = s["tolerances"]
     rigid = s.get("rigid_motion")
@@ -327,16 +342,21 @@ def _verdict(s: dict[str, Any]) -> str:
     line = f"outcome {s['outcome']}{moving}, max |r_ij - d_ij| = {s['max_distance_error']:.3g}"
     if "max_bearing_error" in s:  # a formation judged by its bearings
         line = f"outcome {s['outcome']}{moving}, max |g_ij - g*_ij| = {s['max_bearing_error']:.3g}"
+    lasted = f"; ran to t = {s['final_time']:.4g} s"
     if s["converged_time"] is not None:
-        return line + f", stopped at t = {s['converged_time']:.3g} s"
+        return line + f", converged at t = {s['converged_time']:.3g} s" + lasted
     speed = min(v for v in (s["final_speed"], s["net_speed"]) if v is not None)
     if s["outcome"] in ("desired", "mirror"):
         within = tol["bearing" if "max_bearing_error" in s else "distance"]
-        return line + (
-            f" (within the tolerance {within:g}), still moving at the end "
-            f"({speed:.2g} m/s > {tol['speed']:g})"
+        return (
+            line
+            + (
+                f" (within the tolerance {within:g}), still moving at the end "
+                f"({speed:.2g} m/s > {tol['speed']:g})"
+            )
+            + lasted
         )
-    return line + f", still moving at the end ({speed:.2g} m/s > {tol['speed']:g})"
+    return line + f", still moving at the end ({speed:.2g} m/s > {tol['speed']:g})" + lasted
 
 
 def _sensing_words(sc: Any) -> str:
@@ -367,7 +387,7 @@ def _simulate(sc: Any, save_every: int, quiet: bool) -> Any:
     from ..scenario import run_scenario
 
     steps = sc.duration / getattr(sc.integrator, "dt", 1e-3)
-    show = not quiet and err_console.is_terminal and steps * sc.n**2 > 2e5
+    show = shows_progress(quiet) and steps * sc.n**2 > 2e5
     kwargs = {
         "save_every": save_every,
         "interruptible": True,  # Ctrl-C: keep the states so far (status "interrupted")
@@ -388,17 +408,9 @@ def _simulate(sc: Any, save_every: int, quiet: bool) -> Any:
         if not quiet and steps * sc.n**2 > 2e5:  # a log, not a terminal: one line once running
             kwargs["progress"] = _running_note(sc.name)
         return run_scenario(sc, **kwargs)
-    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
-
-    columns = (
-        TextColumn("simulating {task.description}"),
-        BarColumn(),
-        TextColumn("t = {task.completed:.2f} / {task.total:g} s"),
-        TimeRemainingColumn(),
-    )
-    with Progress(*columns, console=err_console, transient=True) as bar:
-        task = bar.add_task(sc.name, total=sc.duration)
-        return run_scenario(sc, progress=lambda t: bar.update(task, completed=t), **kwargs)
+    count = "t = {done:.2f} / {total:g} s"
+    with progress_bar(f"simulating {sc.name}", total=sc.duration, count=count) as update:
+        return run_scenario(sc, progress=update, **kwargs)
 
 
 def _running_note(name: str) -> Callable[[float], None]:

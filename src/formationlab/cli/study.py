@@ -9,15 +9,16 @@ from typing import Annotated, Any
 
 import typer
 
-from ._app import command, err_console, fail, warn
+from ._app import FigureFormatOption, command, err_console, fail, warn
+from ._progress import progress_bar
 
 #: files of an earlier study that ``study --force`` removes
-STUDY_PATTERNS = ("trials.parquet", "summary.json", "scenario.toml", "*.png")
+STUDY_PATTERNS = ("trials.parquet", "summary.json", "scenario.toml", "*.png", "*.pdf", "*.svg")
 
 
 @command("study")
 def study(
-    scenario: Annotated[Path, typer.Argument(help="Scenario file (TOML) with a \\[study] table.")],
+    scenario: Annotated[Path, typer.Argument(help="Scenario file (TOML) with a [study] table.")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Folder for the results.")],
     trials: Annotated[
         int | None,
@@ -66,7 +67,7 @@ def study(
         typer.Option(
             "--filter",
             help='Safety filter of every trial: "none", "barrier" or "barrier-decentralized" '
-            "(overrides safety.filter; the other \\[safety] keys apply).",
+            "(overrides safety.filter; the other [safety] keys apply).",
         ),
     ] = None,
     sweep: Annotated[
@@ -74,7 +75,7 @@ def study(
         typer.Option(
             "--sweep",
             help="KEY=V1,V2,... : sweep KEY over these values instead of the file's "
-            "\\[study.sweep] (repeat for a product, e.g. --sweep noise=0,0.01,0.02).",
+            "[study.sweep] (repeat for a product, e.g. --sweep noise=0,0.01,0.02).",
         ),
     ] = None,
     resume: Annotated[
@@ -86,6 +87,7 @@ def study(
     quiet: Annotated[
         bool, typer.Option("--quiet", "-q", help="No progress, notes or table (warnings stay).")
     ] = False,
+    figure_format: FigureFormatOption = "png",
 ) -> None:
     """Run many random starts of a scenario's laws and count the outcomes.
 
@@ -94,12 +96,13 @@ def study(
         formationlab study examples/study-triangle.toml --trials 2000 --seed 1 --out out/tri
 
     Writes OUT/trials.parquet (one row per trial), OUT/summary.json (outcome counts,
-    fractions and 95% Wilson intervals per law and sweep point; with study.settle
-    enabled, also after settling not-converged trials with implicit Euler), figures
-    (fractions*.png, desired*.png, shapes_<law>.png) and OUT/chunks/ (finished chunks,
-    for --resume). The same --seed gives the same trials whatever --workers,
+    fractions and 95% Wilson intervals per law and sweep point; with study.settle enabled,
+    also after settling not-converged trials with implicit Euler), figures (fractions*.png,
+    desired*.png, shapes_<law>.png; or .pdf, .svg: --format) and OUT/chunks/ (finished
+    chunks, for --resume). The same --seed gives the same trials whatever --workers,
     --scheduler or the chunk size.
     """
+    from ..io.figures import figure_formats
     from ..io.scenario import load_scenario
     from ..io.trials import ChunkFolder
     from ..studies import parse_study
@@ -109,6 +112,7 @@ def study(
         if not quiet:
             err_console.print(message, highlight=False)
 
+    formats = figure_formats(figure_format)
     sc = load_scenario(scenario)
     for w in sc.warnings:
         warn(w if w.startswith(sc.source) else f"{sc.source}: {w}")
@@ -171,7 +175,7 @@ def study(
         notify=say,
         quiet=quiet,
     )
-    _write_outputs(out, sc, result, identity, quiet)
+    _write_outputs(out, sc, result, identity, quiet, formats)
 
 
 def _sweep_option(given: list[str]) -> dict[str, list[float]]:
@@ -226,36 +230,26 @@ def _with_filter(sc: Any, name: str) -> Any:
 
 
 def _run_with_progress(run: Any, *args: Any, store: Any, quiet: bool = False, **kwargs: Any) -> Any:
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
-
-    with Progress(
-        "[progress.description]{task.description}",
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeRemainingColumn(),
-        console=err_console,
-        disable=quiet,
-    ) as bar:
-        task = bar.add_task("trials", total=None)
-
-        def progress(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total)
-
-        try:
-            return run(*args, store=store, progress=progress, **kwargs)
-        except KeyboardInterrupt:
-            bar.stop()
-            fail(
-                f"interrupted; {store.finished()} finished chunks are kept in {store.folder}: "
-                "run the same command with --resume to finish",
-                code=130,
-            )
+    try:
+        with progress_bar("trials", quiet=quiet) as update:
+            return run(*args, store=store, progress=update, **kwargs)
+    except KeyboardInterrupt:
+        fail(
+            f"interrupted; {store.finished()} finished chunks are kept in {store.folder}: "
+            "run the same command with --resume to finish",
+            code=130,
+        )
 
 
 def _write_outputs(
-    out: Path, sc: Any, result: Any, identity: dict[str, Any], quiet: bool = False
+    out: Path,
+    sc: Any,
+    result: Any,
+    identity: dict[str, Any],
+    quiet: bool = False,
+    formats: tuple[str, ...] = ("png",),
 ) -> None:
-    from ..io import atomic_write_json, atomic_write_text, save_figure
+    from ..io import atomic_write_json, atomic_write_text, save_figures
     from ..io.files import MANIFEST
     from ..io.trials import write_trials
     from ..plotting.studies import study_figures
@@ -264,8 +258,9 @@ def _write_outputs(
     write_trials(result.trials, out / "trials.parquet")
     atomic_write_text(out / "scenario.toml", sc.text)
     figures = [
-        save_figure(fig, out / f"{stem}.png", dpi=100).name
+        path.name
         for stem, fig in study_figures(result.summary, result.trials, sc.formation.edges).items()
+        for path in save_figures(fig, out / stem, formats, dpi=100)
     ]
     summary = {
         "scenario": sc.name,

@@ -284,6 +284,7 @@ def find_equilibria(
     *,
     end_states: EndStates | None = None,
     end_states_source: str | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> EquilibriaReport:
     """Find, refine, classify and (optionally) follow the equilibria of a scenario's law.
 
@@ -298,6 +299,10 @@ def find_equilibria(
         states of a study's trials of ``law``, used instead of random starts.
     end_states_source : str, optional
         Where ``end_states`` read from (recorded in ``source``).
+    progress : callable, optional
+        ``progress(stage)``, called as each of its stages starts (three, four with a
+        ``follow`` gain): the scenario's run, the random starts (or the study's end
+        states), the refinement and classification, following the equilibria.
 
     Returns
     -------
@@ -308,6 +313,8 @@ def find_equilibria(
     law, spec = sc.law, config.follow_spec
     formation = law.formation_for(sc.formation)  # as the law is judged (bearings kept or not)
     safety = {"obstacles": sc.obstacles, "safety": sc.safety}
+    say = progress or (lambda _stage: None)
+    say("the scenario's run")
     own = simulate(
         sc.formation, law, sc.q0, duration=sc.duration, integrator=sc.integrator, **safety
     )
@@ -317,6 +324,7 @@ def find_equilibria(
     cands = [own.q[-1][None]]
     outs = [np.array([own.outcome()])]
     source: dict[str, Any] = {"scenario_run": 1}
+    say("the random starts" if end_states is None else "the study's end states")
     if end_states is not None:
         q, o = end_states(law)
         cands.append(q)
@@ -349,6 +357,7 @@ def find_equilibria(
         }
         if sc.formation.dim == 3:
             source["random_starts"]["coplanar"] = config.coplanar
+    say(f"refining and classifying {sum(len(c) for c in cands):,} candidates")
     cat = catalogue(
         formation, law, np.concatenate(cands), outcomes=np.concatenate(outs), system=system
     )
@@ -356,6 +365,7 @@ def find_equilibria(
     if spec is None:
         return report
     name, lo, hi = spec
+    say(f"following the equilibria in {name}")
     branches, labels, ids = [], [], []
     for k, eq in enumerate(cat.equilibria):
         if eq.desired:

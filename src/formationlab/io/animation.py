@@ -1,4 +1,4 @@
-"""Saving animations: GIF (pillow), MP4 (ffmpeg), HTML player.
+"""Saving animations: GIF (pillow), MP4 (ffmpeg), HTML player (that plays on opening).
 
 MP4 needs an ffmpeg executable: the one of ``imageio-ffmpeg`` (the ``video``
 extra: ``pip install formationlab[video]``) or one on the ``PATH``;
@@ -174,12 +174,23 @@ _CSS = (
     + "".join(f'.fa-{name}:before {{ content: "{glyph}"; }}\n' for name, glyph in _ICONS.items())
 )
 _CDN = re.compile(r"<link[^>]*font-awesome[^>]*>", re.DOTALL)
+#: the name of the player object in matplotlib's page (``anim<hex id> = new Animation(``)
+_PLAYER = re.compile(r"\b(anim[0-9a-f]+) = new Animation\(")
+#: plays the animation once the page has loaded (the player is made at the first timeout)
+_AUTOPLAY = (
+    "<script>\nwindow.addEventListener('load', function () {{\n"
+    "  setTimeout(function () {{ {name}.play_animation(); }}, 50);\n}});\n</script>\n"
+)
 
 
 def _page(player: str, title: str) -> str:
-    """A self-contained HTML page around matplotlib's player (no network needed)."""
+    """A self-contained HTML page around matplotlib's player (no network needed) that
+    starts playing when it is opened."""
     player = _CDN.sub(lambda _: f"<style>\n{_CSS}</style>", player)
+    found = _PLAYER.search(player)
+    autoplay = _AUTOPLAY.format(name=found.group(1)) if found else ""
     return (
         "<!DOCTYPE html>\n<html>\n<head>\n<meta charset='utf-8'>\n"
-        f"<title>{html.escape(title)}</title>\n</head>\n<body>\n{player}\n</body>\n</html>\n"
+        f"<title>{html.escape(title)}</title>\n</head>\n<body>\n{player}\n{autoplay}"
+        "</body>\n</html>\n"
     )

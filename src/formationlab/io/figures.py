@@ -1,4 +1,5 @@
-"""Saving matplotlib figures atomically."""
+"""Saving matplotlib figures atomically, in the formats asked for (PNG, and PDF or SVG for
+vector output in LaTeX)."""
 
 from __future__ import annotations
 
@@ -7,9 +8,38 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ..errors import ParameterError
 from .files import atomic_path
 
-__all__ = ["save_figure"]
+__all__ = ["FIGURE_FORMATS", "figure_formats", "save_figure", "save_figures"]
+
+#: the formats a command writes its figures in (``--format``)
+FIGURE_FORMATS = ("png", "pdf", "svg")
+
+
+def figure_formats(text: str) -> tuple[str, ...]:
+    """The formats of a comma-separated list such as ``"png,pdf,svg"`` (in order, each once).
+
+    Raises :class:`~formationlab.errors.ParameterError` naming an unknown format.
+    """
+    formats = tuple(dict.fromkeys(f.strip().lower() for f in text.split(",") if f.strip()))
+    bad = [f for f in formats if f not in FIGURE_FORMATS]
+    if bad or not formats:
+        problem = f"unknown figure format {', '.join(map(repr, bad))}" if bad else "no format"
+        raise ParameterError(
+            f"{problem}: choose from {', '.join(FIGURE_FORMATS)} "
+            "(a comma-separated list, e.g. --format png,pdf)"
+        )
+    return formats
+
+
+def save_figures(
+    fig: Any, stem: str | os.PathLike[str], formats: tuple[str, ...] = ("png",), *, dpi: int = 120
+) -> list[Path]:
+    """Save ``fig`` as ``stem.<format>`` for each of ``formats`` (:func:`save_figure`);
+    returns the paths written."""
+    stem = Path(stem)
+    return [save_figure(fig, stem.with_name(f"{stem.name}.{f}"), dpi=dpi) for f in formats]
 
 
 def save_figure(fig: Any, target: str | os.PathLike[str], *, dpi: int = 120) -> Path:

@@ -1,8 +1,9 @@
 """Animation of a run: robots as discs of their diameters, the graph's edges, fading trails.
 
 :func:`animate_run` builds a :class:`matplotlib.animation.FuncAnimation` from
-positions ``(T, n, 2)``; the frames are a thinned, evenly spaced subset of the
-saved times (at most ``max_frames``), so the cost and size of the GIF, MP4 and
+positions ``(T, n, 2)``; the frames are a thinned subset of the saved times (at most
+``max_frames``), spaced half by time and half by the robots' motion so that the transient
+is seen (:func:`.frames.frame_indices`), so the cost and size of the GIF, MP4 and
 HTML player stay bounded whatever the run's length (:mod:`.frames`). Positions
 ``(T, n, 3)``, a run in space, are drawn on 3-D axes by :mod:`.animation_space`.
 Saving is done by :mod:`formationlab.io.animation`.
@@ -132,8 +133,8 @@ def animate_run(
     ax.set_xlim(lo[0] - pad, hi[0] + pad)
     ax.set_ylim(lo[1] - pad, hi[1] + pad)
     ax.set_aspect("equal")
-    ax.set_xlabel("x")
-    ax.set_ylabel("y")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
     if len(obstacles):
         draw_obstacles(ax, obstacles)
     on = None if active is None else np.asarray(active, bool)
@@ -184,8 +185,9 @@ def animate_run(
         return [graph.artist, constrained, *drawn, *extra]
 
     return play(
-        fig, t, draw, max_frames=max_frames, n=n, trail=trail, clock=clock, title=title, fps=fps
-    )
+        fig, t, draw, q=q, max_frames=max_frames, n=n, trail=trail, clock=clock, title=title,
+        fps=fps,
+    )  # fmt: skip
 
 
 def _planar_only(

@@ -113,8 +113,9 @@ def animate_space(
         return [graph.artist, *drawn]
 
     return play(
-        fig, t, draw, max_frames=max_frames, n=n, trail=trail, clock=clock, title=title, fps=fps
-    )
+        fig, t, draw, q=q, max_frames=max_frames, n=n, trail=trail, clock=clock, title=title,
+        fps=fps,
+    )  # fmt: skip
 
 
 def _cube(ax: Any, q: NDArray[np.float64], margin: float) -> float:

@@ -14,6 +14,7 @@ import numpy as np
 from matplotlib.patches import Circle
 
 from .fonts import displayable, font_context
+from .units import with_unit
 
 __all__ = [
     "arrow_seconds",
@@ -203,10 +204,10 @@ def continuation_figure(branches: Sequence[Any], *, labels: Sequence[str] | None
         grow = [e.growth_rate for e in branch.equilibria]
         (line,) = ax1.plot(branch.values, size, marker=".", label=lab)
         ax2.plot(branch.values, grow, marker=".", color=line.get_color(), label=lab)
-    ax1.set_xlabel(branches[0].parameter if branches else "parameter")
-    ax1.set_ylabel("RMS distance to centroid")
-    ax2.set_xlabel(branches[0].parameter if branches else "parameter")
-    ax2.set_ylabel("largest Re(eigenvalue), 1/s")
+    ax1.set_xlabel(with_unit(branches[0].parameter) if branches else "parameter")
+    ax1.set_ylabel("RMS distance to centroid [m]")
+    ax2.set_xlabel(with_unit(branches[0].parameter) if branches else "parameter")
+    ax2.set_ylabel("largest Re(eigenvalue) [1/s]")
     ax2.axhline(0.0, color="k", lw=0.6)
     ax1.legend(fontsize=7)
     fig.tight_layout()

@@ -24,6 +24,7 @@ __all__ = [
     "TRAIL_VERTICES",
     "Scene",
     "frame_indices",
+    "motion_measure",
     "path_indices",
     "play",
     "stop_times",
@@ -38,14 +39,47 @@ TRAIL_VERTICES = 200_000
 Scene = Callable[[int, int, NDArray[np.int64]], list[Any]]
 
 
-def frame_indices(t: ArrayLike, max_frames: int) -> NDArray[np.int64]:
-    """Indices into ``t`` (shape ``(T,)``) of at most ``max_frames`` frames evenly spaced in time.
+def frame_indices(
+    t: ArrayLike, max_frames: int, q: ArrayLike | None = None, n: int | None = None
+) -> NDArray[np.int64]:
+    """Indices into ``t`` (shape ``(T,)``) of at most ``max_frames`` frames.
 
-    The first and the last saved states are always included.
+    Without ``q``, evenly spaced in time. With the positions ``q`` ``(T, n, d)`` (an array,
+    or anything that loads only the rows it is indexed with, such as a lazily opened
+    :class:`xarray.DataArray`), spaced evenly in a measure that is half the time and half
+    the motion (:func:`motion_measure`): a transient of 1 s in a run of 15 s gets about
+    half the frames instead of one fifteenth, and the still end is not skipped. The first
+    and the last saved states are always included.
     """
     if max_frames < 2:
         raise ValueError(f"an animation needs at least 2 frames, got max_frames={max_frames}")
-    return even_indices(t, max_frames)
+    if q is None:
+        return even_indices(t, max_frames)
+    t = np.asarray(t, dtype=float)
+    if len(t) <= max_frames:
+        return np.arange(len(t))
+    coarse = path_indices(t, max_frames, q.shape[1] if n is None else n)  # type: ignore[union-attr]
+    at, level = t[coarse], motion_measure(t[coarse], np.asarray(q[coarse]))  # type: ignore[index]
+    # the times where the measure reaches evenly spaced levels, then the nearest saved state
+    # at or after each (as even_indices): the same frames from any rows that hold them
+    times = np.interp(np.linspace(0.0, 1.0, max_frames), level, at)
+    idx = np.searchsorted(t, times, side="left").clip(0, len(t) - 1)
+    return np.unique(np.concatenate([[0], idx, [len(t) - 1]]))
+
+
+def motion_measure(t: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Half the elapsed time plus half the motion, from 0 at ``t[0]`` to 1 at ``t[-1]``;
+    ``(T,)`` for the times ``t`` ``(T,)`` and positions ``q`` ``(T, n, d)``.
+
+    The motion is the path length of the robots together (the sum over robots of
+    ``|q_i(t_k+1) - q_i(t_k)|``, accumulated); strictly increasing, since time is.
+    """
+    span = float(t[-1] - t[0])
+    elapsed = (t - t[0]) / span if span > 0 else np.linspace(0.0, 1.0, len(t))
+    steps = np.linalg.norm(np.diff(q, axis=0), axis=-1).sum(axis=-1)
+    arc = np.concatenate([[0.0], np.cumsum(np.nan_to_num(steps))])
+    moved = arc / arc[-1] if arc[-1] > 0 else elapsed
+    return 0.5 * elapsed + 0.5 * moved
 
 
 def path_indices(t: ArrayLike, max_frames: int, n: int) -> NDArray[np.int64]:
@@ -55,13 +89,17 @@ def path_indices(t: ArrayLike, max_frames: int, n: int) -> NDArray[np.int64]:
     return even_indices(t, most)
 
 
-def used_indices(t: ArrayLike, max_frames: int, n: int) -> NDArray[np.int64]:
+def used_indices(
+    t: ArrayLike, max_frames: int, n: int, q: ArrayLike | None = None
+) -> NDArray[np.int64]:
     """The saved states an animation of ``n`` robots reads: its frames and its trails' states.
 
     An animation of ``t[rows]``, ``q[rows]`` draws what it draws of ``t``, ``q`` (the
-    frames and the trails pick the same states), so a reader loads only these.
+    frames and the trails pick the same states: the frames are spaced by the motion
+    through the trails' states, :func:`frame_indices`), so a reader loads only these.
+    ``q`` ``(T, n, d)`` spaces the frames by the motion, as :func:`frame_indices`.
     """
-    return np.union1d(frame_indices(t, max_frames), path_indices(t, max_frames, n))
+    return np.union1d(frame_indices(t, max_frames, q, n), path_indices(t, max_frames, n))
 
 
 def stop_times(n: int, stops: Sequence[tuple[int, float]]) -> NDArray[np.float64]:
@@ -80,6 +118,7 @@ def play(
     t: NDArray[np.float64],
     scene: Scene,
     *,
+    q: NDArray[np.float64] | None = None,
     max_frames: int,
     n: int,
     trail: float | None,
@@ -89,13 +128,14 @@ def play(
 ) -> FuncAnimation:
     """The animation of ``scene`` over the frames of the saved times ``t`` ``(T,)``.
 
-    Each frame picks its saved state (:func:`frame_indices`) and the states of the trails
+    Each frame picks its saved state (:func:`frame_indices`, spaced by the motion of the
+    positions ``q`` ``(T, n, d)`` when given) and the states of the trails
     behind it (:func:`path_indices`, the last ``trail`` seconds, or all when None), lets
     ``scene`` draw them and writes the time into ``clock``. The figure is laid out once,
     at the first frame (the limits are fixed): the constrained layout measures every tick
     label each time, about half the cost of a frame.
     """
-    frames = frame_indices(t, max_frames)
+    frames = frame_indices(t, max_frames, q, n)
     # trails are drawn through at most ~2000 states (fewer for many robots: the cost of a
     # frame stays bounded), so long runs stay cheap to render
     path = path_indices(t, max_frames, n)

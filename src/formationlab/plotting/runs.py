@@ -18,7 +18,7 @@ from matplotlib.patches import Circle
 from numpy.typing import NDArray
 
 from ..outcomes.analysis import bearing_errors, distance_errors
-from .colors import ROBOT_MAP, robot_colors
+from .colors import ROBOT_MAP, edge_colors, line_styles, robot_colors
 from .fonts import displayable, font_context
 from .many import (
     COLLECTION_LIMIT,
@@ -168,8 +168,8 @@ def plot_trajectories(
                             textcoords="offset points", fontsize="small")
             )  # fmt: skip
     ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("x")
-    ax.set_ylabel("y")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
     model = getattr(result, "model", None)
     on = "" if model is None or model.name == "single-integrator" else f", {model.name}"
     robots = f", {f.n:,} robots" if many else ""
@@ -273,7 +273,7 @@ def plot_controls(
     """
     ax = _axes(ax)
     n = result.formation.n
-    colors = robot_colors(n)
+    colors, styles = robot_colors(n), line_styles(n)
     name = "xyz"[axis]
     artists = _shade_active(ax, result)
     if n > LINE_LIMIT:
@@ -282,10 +282,11 @@ def plot_controls(
     else:
         for i in range(n):
             artists += ax.plot(
-                result.t, result.u[:, i, axis], color=colors[i], label=f"$u_{{{i + 1}{name}}}$"
-            )
+                result.t, result.u[:, i, axis], color=colors[i], ls=styles[i],
+                label=f"$u_{{{i + 1}{name}}}$",
+            )  # fmt: skip
     ax.set_xlabel("time [s]")
-    ax.set_ylabel(f"velocity in {name}")
+    ax.set_ylabel(f"velocity in {name} [m/s]")
     ax.set_title(title or f"control actions in {name}")
     if n <= LABEL_LIMIT or n > LINE_LIMIT:
         _legend(ax)
@@ -295,19 +296,39 @@ def plot_controls(
 def plot_lyapunov(
     result: Any, ax: Axes | None = None, *, log: bool = False, title: str | None = None
 ) -> list[Any]:
-    """The law's Lyapunov function over time (eq. 9 or eq. 15)."""
+    """The law's Lyapunov function over time (eq. 9 or eq. 15), dimensionless (the
+    potentials of eq. 5 are).
+
+    ``log``: a log axis where V stays positive (down to :data:`_LOG_DEPTH` times its
+    largest value: a converged V's round-off, 0 or -1e-16, is not a value to show); where
+    it goes below zero beyond round-off (eq. 15's restriction term can be negative), a
+    symmetric log axis, linear within 0.01 of 0, which the axis label says.
+    """
     ax = _axes(ax)
     artists = _shade_active(ax, result)
-    v = result.V
+    v = np.asarray(result.V, dtype=float)
     label = "$V_n$ (eq. 15)" if result.sigma.shape[-1] else "$V$ (eq. 9)"
     artists += ax.plot(result.t, v, color="k", label=label)
-    if log:
+    ylabel = "V (dimensionless)"
+    finite = v[np.isfinite(v)]
+    top = float(np.max(np.abs(finite), initial=0.0))
+    if log and top > 0 and finite.min() >= -_LOG_DEPTH * top:
+        ax.set_yscale("log")
+        shown = finite[finite > _LOG_DEPTH * top]
+        ax.set_ylim(max(float(shown.min(initial=top)), _LOG_DEPTH * top) / 2, 2 * top)
+        ylabel = "V (dimensionless, log scale)"
+    elif log:
         ax.set_yscale("symlog", linthresh=1e-2)
+        ylabel = "V (dimensionless);\nsymlog: linear within ±0.01"
     ax.set_xlabel("time [s]")
-    ax.set_ylabel("Lyapunov function")
+    ax.set_ylabel(ylabel)
     ax.set_title(title or "Lyapunov function")
     _legend(ax)
     return artists
+
+
+#: the smallest V, relative to its largest, that a log axis of V shows
+_LOG_DEPTH = 1e-12
 
 
 def plot_distance_errors(
@@ -323,7 +344,7 @@ def plot_distance_errors(
     return _per_edge(
         result, _axes(ax), lambda rows: distance_errors(f, p[rows]),
         lambda: result.distance_errors, lambda lab: f"$r_{{{lab}}} - d$",
-        "distance error", title or "inter-robot distance errors",
+        "distance error [m]", title or "inter-robot distance errors",
     )  # fmt: skip
 
 
@@ -340,7 +361,7 @@ def plot_bearing_errors(
     return _per_edge(
         result, _axes(ax), lambda rows: bearing_errors(f, p[rows]),
         lambda: bearing_errors(f, p), lambda lab: f"$|g_{{{lab}}} - g^*|$",
-        "bearing error (about rad)", title or "bearing errors",
+        "bearing error (dimensionless, about rad)", title or "bearing errors",
     )  # fmt: skip
 
 
@@ -357,8 +378,12 @@ def _per_edge(
         artists += draw_bands(ax, result.t, of_rows, width=m, of="edges", color="C3")
     else:
         err = every()
+        colors, styles = edge_colors(m), line_styles(m)
         for e, lab in enumerate(result.edge_labels):
-            artists += ax.plot(result.t, err[:, e], label=label(lab.replace("-", "")))
+            artists += ax.plot(
+                result.t, err[:, e], color=colors[e], ls=styles[e],
+                label=label(lab.replace("-", "")),
+            )  # fmt: skip
     ax.axhline(0.0, color="0.5", lw=0.6)
     ax.set_xlabel("time [s]")
     ax.set_ylabel(ylabel)

@@ -122,7 +122,7 @@ def plot_filter_activity(
         artists += ax.plot(t[on], np.full(on.sum(), i + 1), "|", color=colors[i], ms=8)
     ax.set_yticks(range(1, n + 1) if n <= 12 else np.linspace(1, n, 6).round())
     ax.set_ylim(0.5, n + 0.5)
-    ax.set_ylabel("robot")
+    ax.set_ylabel("robot number")
     kind = "none" if rec.filter is None else rec.filter.filter
     ax.set_title(f"active safety constraints (filter {kind})")
     if ax_distance is None:
@@ -135,6 +135,6 @@ def plot_filter_activity(
         artists += ax2.plot(t, rec.obstacle_clearance, color="tab:blue", label="obstacle clearance")
         artists.append(ax2.axhline(0.0, color="0.5", lw=0.6))
     ax2.set_xlabel("time [s]")
-    ax2.set_ylabel("distance")
+    ax2.set_ylabel("distance [m]")
     ax2.legend(loc="best", fontsize="small")
     return artists

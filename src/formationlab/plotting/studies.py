@@ -16,6 +16,8 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
+from .units import with_unit
+
 if TYPE_CHECKING:  # pandas only names the type of a study's table (importing it costs ~1 s)
     import pandas as pd
 
@@ -110,9 +112,9 @@ def plot_fractions(
             )
         )
     ax.set_ylim(-0.02, 1.02)
-    ax.set_ylabel("fraction of trials")
+    ax.set_ylabel("fraction of trials (dimensionless)")
     if parameter is not None:
-        ax.set_xlabel(parameter)
+        ax.set_xlabel(with_unit(parameter))
         if not flat:
             _log_if_wide(ax, [g["parameters"][parameter] for g in groups])
     if title:
@@ -200,7 +202,8 @@ def desired_figure(
             color=color,
         )
     ax.set_ylim(-0.02, 1.02)
-    return _finish(fig, ax, swept, parameter or "", "fraction desired", title)
+    xlabel = with_unit(parameter) if parameter else ""
+    return _finish(fig, ax, swept, xlabel, "fraction desired (dimensionless)", title)
 
 
 def _finish(
@@ -298,7 +301,7 @@ def shapes_figure(
                 q = q @ basis.T
             plot_shape(q, edges, diameters[int(row["group"])], ax, color=OUTCOME_COLORS[o])
             extra = "".join(f" {p}={row[p]:g}" for p in params if np.isfinite(row[p]))
-            err = f"\n|e|max={row['max_distance_error']:.2g}"
+            err = f"\n|e|max={row['max_distance_error']:.2g} m"
             if np.isfinite(row.get("max_bearing_error", np.nan)):  # judged by its bearings
                 err = f"\n|g-g*|max={row['max_bearing_error']:.2g}"
             if o in ("drifting", "rotating") and "drift_vx" in row:
@@ -313,9 +316,9 @@ def shapes_figure(
                     color=OUTCOME_COLORS[o],
                     scale=min(1.0, 0.4 * extent / speed),
                 )
-                err += f" |v|={np.hypot(*v):.2f}"
+                err += f" |v|={np.hypot(*v):.2f} m/s"
                 if o == "rotating":
-                    err += f" w={row['drift_omega']:.2f}"
+                    err += f" w={row['drift_omega']:.2f} rad/s"
             ax.set_title(f"#{int(row['trial'])}{extra}{err}", fontsize=7)
             if c == 0:
                 ax.set_ylabel(o, fontsize=8, color=OUTCOME_COLORS[o])
@@ -401,8 +404,9 @@ def shape_error_figure(
     if not drawn:
         plt.close(fig)
         return None
-    ax.set_yscale("symlog", linthresh=1e-3)
-    return _finish(fig, ax, swept, parameter, r"final max $|r_{ij} - d_{ij}|$ (m)", title)
+    ax.set_yscale("symlog", linthresh=1e-3)  # the error can be 0: linear below 1e-3
+    ylabel = r"final max $|r_{ij} - d_{ij}|$ [m], symlog: linear below 0.001"
+    return _finish(fig, ax, swept, with_unit(parameter), ylabel, title)
 
 
 def study_figures(
