@@ -255,6 +255,7 @@ class _Group(TyperGroup):
     """The root command and its sub-groups, with the help display of :class:`_Command`."""
 
     context_class = _Context
+    get_short_help_str = _Command.get_short_help_str  # (a sub-group listed in the root's help)
 
     def get_params(self, ctx: Any) -> list[Any]:
         return _conventional(super().get_params(ctx))
