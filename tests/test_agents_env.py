@@ -251,6 +251,23 @@ def test_render_modes():
     frame = env.render()
     assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
     assert len(np.unique(frame.reshape(-1, 3), axis=0)) > 3  # robots drawn, not a blank page
+    # the kept figure draws what a new one draws (the first frame fits the view to both)
+    from formationlab.plotting.agent_frame import agent_frame
+    from formationlab.plotting.colors import robot_colors
+
+    fresh = agent_frame(env.formation, env.state(), model=env.model, t=0.0)
+    assert np.mean(np.any(frame != fresh, axis=-1)) < 1e-3
+    colours = np.round(np.array(robot_colors(3))[:, :3] * 255).astype(int)
+
+    def has(image, colour):
+        return bool(np.any(np.all(np.abs(image.astype(int) - colour) <= 2, axis=-1)))
+
+    for far in (1, 40):  # a step in the view, and one that carries robot 1 far out of it
+        env.step({"robot_1": np.array([far, 0.0]), "robot_2": np.zeros(2), "robot_3": np.zeros(2)})
+        later = env.render()
+        assert later.shape == frame.shape and not np.array_equal(later, frame)
+        assert all(has(later, c) for c in colours)  # every robot is in the picture
+        frame = later
     none = exact(scenario("paper-simulation-1"))
     none.reset(seed=0)
     assert none.render() is None

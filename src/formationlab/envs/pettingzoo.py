@@ -253,6 +253,7 @@ class FormationEnv(ParallelEnv):
         self._episode = 0
         self._x = np.asarray(scenario.x0, dtype=float)
         self._k = 0
+        self._frames: Any = None  # AgentFrames: one figure for every render
 
     # ------------------------------------------------------------------ spaces
 
@@ -494,12 +495,15 @@ class FormationEnv(ParallelEnv):
         """An RGB frame ``(H, W, 3)`` of the robots with ``render_mode="rgb_array"``; else None."""
         if self.render_mode is None:
             return None
-        from ..plotting.agent_frame import agent_frame  # matplotlib: when rendering (start-up)
+        if self._frames is None:
+            from ..plotting.agent_frame import AgentFrames  # matplotlib: when rendering (start-up)
 
-        return agent_frame(self.formation, self._x, model=self.model, t=self.t)
+            self._frames = AgentFrames(self.formation, model=self.model)
+        return self._frames(self._x, self.t)
 
     def close(self) -> None:
-        """Nothing to release (frames are drawn on figures that are not kept)."""
+        """Let go of the figure the frames are drawn on (the next render makes another)."""
+        self._frames = None
 
 
 def parallel_env(
