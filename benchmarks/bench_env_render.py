@@ -6,8 +6,9 @@ of 480 x 480 pixels), so that an episode can be watched as it runs.
 Printed beside it, measured in the same run on the same machine: the reference cost of a
 plain ``fig.canvas.draw()`` of a figure of the same size holding one empty axes (with its
 ticks: matplotlib's cost of a plain frame), and the cost of building a new figure for
-every frame (``agent_frame``, how ``render()`` drew before it kept one figure). The ratios to the reference mean something
-on any machine; the frames per second only when the load (printed) is low.
+every frame (``agent_frame``, how ``render()`` drew before it kept one figure). The
+ratios to the reference mean something on any machine; the frames per second only when
+the load (printed) is low.
 
 Run ``python benchmarks/bench_env_render.py`` (``--frames N``, default 150).
 """
@@ -70,10 +71,14 @@ def main() -> None:
     load = os.getloadavg()[0]
     print(f"formationlab {fl.__version__}, {N} unicycles, 480 x 480 px, load {load:.2f}")
     print(f"reference: empty axes, canvas.draw()      {empty:7.1f} frames/s")
-    print(f"new figure every frame (agent_frame)      {fresh:7.1f} frames/s "
-          f"({fresh / empty:.2f} x reference)")
-    print(f"env.step + env.render() (one kept figure) {render:7.1f} frames/s "
-          f"({render / empty:.2f} x reference; step alone {stepping:.0f}/s)")
+    print(
+        f"new figure every frame (agent_frame)      {fresh:7.1f} frames/s "
+        f"({fresh / empty:.2f} x reference)"
+    )
+    print(
+        f"env.step + env.render() (one kept figure) {render:7.1f} frames/s "
+        f"({render / empty:.2f} x reference; step alone {stepping:.0f}/s)"
+    )
     print(f"target >= 30 frames/s: {'met' if render >= 30 else 'NOT met'}")
 
 
