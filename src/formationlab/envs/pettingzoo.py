@@ -141,6 +141,12 @@ class FormationEnv(ParallelEnv):
         The current episode's measurement channel (made by :meth:`reset`).
     seed : int or tuple of int
         The current episode's seed.
+    observation : {"flat", "dict"}
+        The observation form; ``dict_space`` is the ``Dict`` of its parts either way.
+    dtype : numpy.dtype
+        Of the observations' and actions' floating-point spaces.
+    jitter : float
+        The standard deviation (m) of the start's perturbation (module docstring).
     """
 
     metadata: ClassVar[dict[str, Any]] = {
