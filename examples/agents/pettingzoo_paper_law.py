@@ -17,7 +17,7 @@ from formationlab.outcomes.analysis import distance_errors, edge_labels
 from formationlab.io.scenario import load_scenario
 
 scenario = load_scenario(Path(__file__).resolve().parents[1] / "paper-simulation-1.toml")
-env = parallel_env(scenario)
+env = parallel_env(scenario, jitter=0.0)  # the paper's start (default: a jittered one)
 policy = law_policy(env)
 
 observations, infos = env.reset(seed=0)

@@ -7,8 +7,14 @@ closed loop (:meth:`formationlab.System.rhs_commanded`: the robot model, marchin
 obstacle repulsion, the safety filter and faults act on the agents' commands as they act
 on the law's).
 
-Observation of robot ``i`` (a ``Dict`` space; ``gymnasium.spaces.flatten`` makes it one
-vector), one slot per *other* robot, in robot-number order (robot ``i`` left out):
+Observation of robot ``i``: with ``observation="flat"`` (the default) one ``Box`` vector,
+what ``gymnasium.spaces.flatten`` makes of the ``Dict`` below (its keys in alphabetical
+order, each flattened: ``heading`` or ``velocity``, ``neighbour``, ``relative`` row by row,
+``seen``), the form SuperSuit's wrappers and learning libraries take; with
+``observation="dict"`` the ``Dict`` itself. Its floating-point parts are ``float32``
+(``dtype=np.float64`` on request), ``seen`` and ``neighbour`` ``int8`` (within the flat
+vector, 0.0 or 1.0). One slot per *other* robot, in robot-number order (robot ``i`` left
+out):
 
 ``relative`` ``(n - 1, 2)``
     robot ``i``'s measurement of ``p_j - p_i`` in its own frame, from the measurement
@@ -55,22 +61,35 @@ Seeding as in Gymnasium: ``reset(seed=s)`` makes episode ``s`` (the measurement
 channel seeded with ``s``, as ``simulate(sensing=Sensing(seed=s))`` seeds its own; the
 sensing's own ``seed`` is not used); later ``reset()`` calls make episodes ``(s, 1)``,
 ``(s, 2)``, ... ; a first ``reset()`` without a seed draws ``s`` from the operating
-system. With ``jitter`` the start is the scenario's initial state with Gaussian noise
-(standard deviation ``jitter``, m) on each position, drawn from the episode's seed too.
+system. The start of an episode is the scenario's initial state with Gaussian noise of
+standard deviation ``jitter`` (m) on each coordinate of each position (headings and
+velocities as the scenario gives them), drawn from the episode's seed too and drawn again
+while robots would touch; by default ``jitter`` is :data:`JITTER_FRACTION` of the
+formation's smallest desired distance, so that different seeds start differently;
+``jitter=0`` starts every episode at the scenario's initial state.
+
+Registered in PettingZoo's registry (PettingZoo 1.27 and later have ``pettingzoo.make``)
+when this module is imported: ``pettingzoo.make("parallel", "formationlab/Formation-v0",
+scenario=...)`` calls :func:`parallel_env`, ``pettingzoo.make("aec", ...)`` :func:`env`.
+Like PettingZoo's own environments the module also has the factories :func:`parallel_env`
+and :func:`env` and ``metadata["name"]``.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import DTypeLike, NDArray
 
 try:
+    import pettingzoo
     from gymnasium import spaces
     from pettingzoo import ParallelEnv
+    from pettingzoo.utils.conversions import parallel_to_aec
 except ImportError as exc:  # pragma: no cover - the extra is installed where tests run
     raise ImportError(
         "formationlab.envs.parallel_env needs PettingZoo and Gymnasium, the 'agents' "
@@ -78,17 +97,25 @@ except ImportError as exc:  # pragma: no cover - the extra is installed where te
     ) from exc
 
 from ..errors import FormationError, ParameterError
+from ..io.scenario import resolve_scenario
 from ..models import DoubleIntegrator, Unicycle
 from ..models.transforms import NearIdentity, heading_vectors
 from ..outcomes.analysis import Tolerances, bearing_errors, classify, distance_errors
-from ..scenario import Scenario, closed_loop, parse_scenario
+from ..scenario import Scenario, closed_loop
 from ..sensing import Channel, Faults, Seed, Sensing, rotate
 from ..simulation.run import initial_state
 from ..status import Status
 from ..validation import nonnegative, positive
 from ..validation import seed as check_seed
 
-__all__ = ["MAX_COMMAND", "FormationEnv", "parallel_env"]
+__all__ = ["ENV_ID", "JITTER_FRACTION", "MAX_COMMAND", "FormationEnv", "env", "parallel_env"]
+
+#: the environment's id in PettingZoo's registry (``pettingzoo.make``)
+ENV_ID = "formationlab/Formation-v0"
+#: the default ``jitter`` of the start, as a fraction of the smallest desired distance
+JITTER_FRACTION = 0.05
+#: the observation forms (``observation=``)
+OBSERVATIONS = ("flat", "dict")
 
 #: the action bound (m/s, or m/s^2 for double integrators) of a model without a limit
 MAX_COMMAND = 5.0
@@ -114,6 +141,12 @@ class FormationEnv(ParallelEnv):
         The current episode's measurement channel (made by :meth:`reset`).
     seed : int or tuple of int
         The current episode's seed.
+    observation : {"flat", "dict"}
+        The observation form; ``dict_space`` is the ``Dict`` of its parts either way.
+    dtype : numpy.dtype
+        Of the observations' and actions' floating-point spaces.
+    jitter : float
+        The standard deviation (m) of the start's perturbation (module docstring).
     """
 
     metadata: ClassVar[dict[str, Any]] = {
@@ -125,23 +158,34 @@ class FormationEnv(ParallelEnv):
 
     def __init__(
         self,
-        scenario: Scenario | str,
+        scenario: Scenario | str | os.PathLike[str],
         *,
         sensing: Sensing | None = None,
         faults: Faults | None = None,
         render_mode: str | None = None,
         contact_penalty: float = CONTACT_PENALTY,
         max_command: float | None = None,
-        jitter: float = 0.0,
+        jitter: float | None = None,
         tolerances: Tolerances | None = None,
+        observation: str = "flat",
+        dtype: DTypeLike = np.float32,
     ) -> None:
-        if isinstance(scenario, str):
-            scenario = parse_scenario(scenario)
-        if not isinstance(scenario, Scenario):
+        scenario = resolve_scenario(scenario)
+        if observation not in OBSERVATIONS:
             raise ParameterError(
-                "parallel_env takes a Scenario (formationlab.io.scenario.load_scenario, "
-                f"parse_scenario) or a scenario's TOML text, got {type(scenario).__name__}"
+                f'observation must be "flat" (one Box vector) or "dict", got {observation!r}',
+                key="observation",
             )
+        try:
+            self.dtype = np.dtype(dtype)
+        except TypeError:
+            self.dtype = np.dtype(object)
+        if self.dtype not in (np.float32, np.float64):
+            raise ParameterError(
+                f"dtype must be numpy.float32 (the default) or numpy.float64, got {dtype!r}",
+                key="dtype",
+            )
+        self.observation = observation
         sensing = getattr(scenario, "sensing", None) if sensing is None else sensing
         faults = getattr(scenario, "faults", None) if faults is None else faults
         if not isinstance(sensing, Sensing | None):
@@ -176,6 +220,8 @@ class FormationEnv(ParallelEnv):
         self.formation, self.model = scenario.formation, model
         self.sensing = sensing or Sensing()
         self.contact_penalty = nonnegative(contact_penalty, "contact_penalty")
+        if jitter is None:
+            jitter = JITTER_FRACTION * float(np.min(scenario.formation.distances))
         self.jitter = nonnegative(jitter, "jitter")
         self.tolerances = tolerances or Tolerances()
         self.dt = float(dt)
@@ -197,17 +243,23 @@ class FormationEnv(ParallelEnv):
         rows = np.arange(n)[:, None]
         self.neighbours = self.formation.adjacency[rows, self.others].astype(np.int8)
         self._edges = self.formation.edges
-        bound = self._action_bound(max_command)
-        self._obs_spaces = {a: self._observation_space() for a in self.possible_agents}
-        self._act_spaces = {
-            a: spaces.Box(-bound, bound, shape=(2,), dtype=np.float64) for a in self.possible_agents
+        bound = self._action_bound(max_command).astype(self.dtype)
+        self.dict_space = self._observation_space()
+        flat = observation == "flat"
+        self._obs_spaces = {
+            a: spaces.flatten_space(self.dict_space) if flat else self._observation_space()
+            for a in self.possible_agents
         }
+        self._act_spaces = {
+            a: spaces.Box(-bound, bound, shape=(2,), dtype=self.dtype) for a in self.possible_agents
+        }  # bound in self.dtype (a float64 bound in a float32 Box is warned about)
         self.state_space = spaces.Box(-np.inf, np.inf, shape=(n, model.state_size()))
         self.seed: Seed | None = None
         self._root: int | None = None
         self._episode = 0
         self._x = np.asarray(scenario.x0, dtype=float)
         self._k = 0
+        self._frames: Any = None  # AgentFrames: one figure for every render
 
     # ------------------------------------------------------------------ spaces
 
@@ -229,19 +281,19 @@ class FormationEnv(ParallelEnv):
         return np.array([b, b], dtype=float)
 
     def _observation_space(self) -> spaces.Dict:
-        n = self.formation.n
+        n, dtype = self.formation.n, self.dtype
         parts: dict[str, spaces.Space] = {
-            "relative": spaces.Box(-np.inf, np.inf, shape=(n - 1, 2), dtype=np.float64),
+            "relative": spaces.Box(-np.inf, np.inf, shape=(n - 1, 2), dtype=dtype),
             "seen": spaces.MultiBinary(n - 1),
             "neighbour": spaces.MultiBinary(n - 1),
         }
         if isinstance(self.model, Unicycle):
-            parts["heading"] = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float64)
+            parts["heading"] = spaces.Box(-1.0, 1.0, shape=(2,), dtype=dtype)
         if isinstance(self.model, DoubleIntegrator):
-            parts["velocity"] = spaces.Box(-np.inf, np.inf, shape=(2,), dtype=np.float64)
+            parts["velocity"] = spaces.Box(-np.inf, np.inf, shape=(2,), dtype=dtype)
         return spaces.Dict(parts)
 
-    def observation_space(self, agent: str) -> spaces.Dict:
+    def observation_space(self, agent: str) -> spaces.Box | spaces.Dict:
         return self._obs_spaces[self._name(agent)]
 
     def action_space(self, agent: str) -> spaces.Box:
@@ -395,16 +447,25 @@ class FormationEnv(ParallelEnv):
         if isinstance(self.model, DoubleIntegrator):
             self._own["velocity"] = rotate(self._x[:, 2:4], -frame)
 
-    def _observations(self) -> dict[str, dict[str, NDArray]]:
+    def _observations(self) -> dict[str, Any]:
         seen = self._seen.astype(np.int8)
-        out = {}
+        rel = self._rel.astype(self.dtype)
+        own = {key: v.astype(self.dtype) for key, v in self._own.items()}
+        out: dict[str, Any] = {}
         for a in self.agents:
             i = self.agent_index[a]
-            obs = {"relative": self._rel[i].copy(), "seen": seen[i].copy(),
-                   "neighbour": self.neighbours[i].copy()}  # fmt: skip
-            obs.update({key: v[i].copy() for key, v in self._own.items()})
+            obs = {"relative": rel[i], "seen": seen[i], "neighbour": self.neighbours[i].copy()}
+            obs.update({key: v[i] for key, v in own.items()})
             out[a] = obs
+            if self.observation == "flat":
+                out[a] = spaces.flatten(self.dict_space, obs).astype(self.dtype, copy=False)
         return out
+
+    def as_dict(self, observation: Any) -> dict[str, NDArray]:
+        """One agent's observation as the ``Dict``'s parts, whichever ``observation`` form."""
+        if self.observation == "dict":
+            return observation
+        return spaces.unflatten(self.dict_space, np.asarray(observation))
 
     def _errors(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Each robot's local formation error ``sum_{j in N_i} |r_ij - d_ij|`` (or of its
@@ -440,31 +501,37 @@ class FormationEnv(ParallelEnv):
         """An RGB frame ``(H, W, 3)`` of the robots with ``render_mode="rgb_array"``; else None."""
         if self.render_mode is None:
             return None
-        from ..plotting.agent_frame import agent_frame  # matplotlib: when rendering (start-up)
+        if self._frames is None:
+            from ..plotting.agent_frame import AgentFrames  # matplotlib: when rendering (start-up)
 
-        return agent_frame(self.formation, self._x, model=self.model, t=self.t)
+            self._frames = AgentFrames(self.formation, model=self.model)
+        return self._frames(self._x, self.t)
 
     def close(self) -> None:
-        """Nothing to release (frames are drawn on figures that are not kept)."""
+        """Let go of the figure the frames are drawn on (the next render makes another)."""
+        self._frames = None
 
 
 def parallel_env(
-    scenario: Scenario | str,
+    scenario: Scenario | str | os.PathLike[str],
     *,
     sensing: Sensing | None = None,
     faults: Faults | None = None,
     render_mode: str | None = None,
     contact_penalty: float = CONTACT_PENALTY,
     max_command: float | None = None,
-    jitter: float = 0.0,
+    jitter: float | None = None,
     tolerances: Tolerances | None = None,
+    observation: str = "flat",
+    dtype: DTypeLike = np.float32,
 ) -> FormationEnv:
     """The robots of ``scenario`` as the agents of a PettingZoo ``ParallelEnv``.
 
     Parameters
     ----------
-    scenario : Scenario or str
-        A scenario (``formationlab.io.scenario.load_scenario``) or its TOML text.
+    scenario : Scenario, str or pathlib.Path
+        A scenario, the path of a scenario file (``str`` or ``Path``) or a scenario's TOML
+        text (:func:`formationlab.io.scenario.resolve_scenario`).
     sensing, faults : Sensing, Faults, optional
         Override the scenario's ``[sensing]`` and ``[faults]`` (default: the scenario's;
         without them the paper's exact, common-frame sensing and no faults).
@@ -474,10 +541,16 @@ def parallel_env(
         Reward lost by every robot at a step the contact rule rejects (>= 0).
     max_command : float, optional
         The action bound of a model without a limit (default :data:`MAX_COMMAND`).
-    jitter : float
-        Standard deviation (m) of a random perturbation of the start, per position.
+    jitter : float, optional
+        Standard deviation (m) of the Gaussian perturbation of the start, per coordinate of
+        each position, drawn from the episode's seed (default :data:`JITTER_FRACTION` of
+        the smallest desired distance; 0: the scenario's initial state every episode).
     tolerances : Tolerances, optional
         When the formation counts as reached (:mod:`formationlab.outcomes.analysis`).
+    observation : {"flat", "dict"}
+        One ``Box`` vector per agent (the default), or the ``Dict`` of its parts.
+    dtype : numpy.float32 or numpy.float64
+        Of the observations' and actions' floating-point spaces (default float32).
 
     Returns
     -------
@@ -488,5 +561,20 @@ def parallel_env(
     return FormationEnv(
         scenario, sensing=sensing, faults=faults, render_mode=render_mode,
         contact_penalty=contact_penalty, max_command=max_command, jitter=jitter,
-        tolerances=tolerances,
+        tolerances=tolerances, observation=observation, dtype=dtype,
     )  # fmt: skip
+
+
+def env(scenario: Scenario | str | os.PathLike[str], **kwargs: Any) -> Any:
+    """The environment of :func:`parallel_env` as a PettingZoo ``AECEnv`` (agents in turn).
+
+    PettingZoo's ``parallel_to_aec`` of ``parallel_env(scenario, **kwargs)``; the
+    conventional ``env()`` factory of a PettingZoo environment module.
+    """
+    return parallel_to_aec(parallel_env(scenario, **kwargs))
+
+
+if hasattr(pettingzoo, "register"):  # PettingZoo 1.27 and later: pettingzoo.make
+    for _kind, _factory in (("parallel", "parallel_env"), ("aec", "env")):
+        if ENV_ID not in getattr(pettingzoo, f"{_kind}_registry"):
+            pettingzoo.register(_kind, ENV_ID, entry_point=f"{__name__}:{_factory}")

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import os
+import tomllib
 from pathlib import Path
 
 from ..errors import ScenarioError
 from ..scenario.parse import Scenario, parse_scenario
 
-__all__ = ["load_scenario"]
+__all__ = ["load_scenario", "resolve_scenario"]
 
 
 def load_scenario(path: str | os.PathLike[str]) -> Scenario:
@@ -47,3 +48,56 @@ def load_scenario(path: str | os.PathLike[str]) -> Scenario:
             f"{p}: not a UTF-8 text file (byte {exc.start}); scenario files are TOML text"
         ) from None
     return parse_scenario(text, source=str(p))
+
+
+def resolve_scenario(scenario: Scenario | str | os.PathLike[str]) -> Scenario:
+    """A scenario from what a person gives: a :class:`Scenario`, a path or TOML text.
+
+    The one reading of a scenario argument, for ``formationlab.envs.parallel_env`` and
+    ``formationlab.Viewer`` alike.
+
+    Parameters
+    ----------
+    scenario : Scenario, path-like or str
+        A scenario (returned as it is); a ``pathlib.Path`` (or other path-like), read with
+        :func:`load_scenario`; a ``str`` naming a file, read the same way; any other
+        ``str``, taken as the TOML text of a scenario (``parse_scenario``).
+
+    Raises
+    ------
+    ScenarioError
+        The file cannot be read or does not validate; a ``str`` that names no file and is
+        not TOML (the message says both were tried); any other type.
+    """
+    if isinstance(scenario, Scenario):
+        return scenario
+    if isinstance(scenario, os.PathLike):
+        return load_scenario(scenario)
+    if not isinstance(scenario, str):
+        raise ScenarioError(
+            "a scenario is a Scenario, the path of a scenario file (str or pathlib.Path) or a "
+            f"scenario's TOML text, got {type(scenario).__name__}"
+        )
+    if _names_file(scenario):
+        return load_scenario(scenario)
+    try:
+        tomllib.loads(scenario)
+    except tomllib.TOMLDecodeError as exc:
+        shown = scenario if len(scenario) <= 60 else scenario[:57] + "..."
+        raise ScenarioError(
+            f"{shown!r} is neither a scenario file (no file has that path) nor a scenario's "
+            f"TOML text ({exc}); give the path of an existing .toml file, or TOML text"
+        ) from None
+    except RecursionError:  # nested thousands deep: parse_scenario says where
+        pass
+    return parse_scenario(scenario)
+
+
+def _names_file(text: str) -> bool:
+    """Whether ``text`` is the path of an existing file (False for text no path can be)."""
+    if "\n" in text or "\0" in text:
+        return False
+    try:
+        return Path(text).is_file()
+    except (OSError, ValueError):  # a name too long for the file system
+        return False

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from ..errors import UserInputError
 from ..io.netcdf import load_trajectory
-from ..io.scenario import load_scenario
+from ..io.scenario import resolve_scenario
 from ..scenario.parse import Scenario
 from .replay import ReplaySession
 from .session import LiveSession
@@ -29,8 +29,9 @@ def open_session(
 
     Parameters
     ----------
-    target : Scenario or path
-        A scenario, a scenario file (TOML), or a folder written by
+    target : Scenario, path or str
+        A scenario, a scenario file or its TOML text
+        (:func:`formationlab.io.scenario.resolve_scenario`), or a folder written by
         ``formationlab run`` (holding ``trajectory.nc``), which is replayed.
     replay : bool
         Insist on a replay (``target`` must then be a run folder).
@@ -47,8 +48,8 @@ def open_session(
             raise UserInputError("a replay needs the folder of `formationlab run`, not a scenario")
         return LiveSession(target, seed=seed)
     path = Path(target)
-    if not (replay or path.is_dir()):
-        return LiveSession(load_scenario(path), seed=seed)
+    if not (replay or os.path.isdir(path)):  # False for TOML text, not an OSError
+        return LiveSession(resolve_scenario(target), seed=seed)
     nc = path / "trajectory.nc"
     if not nc.is_file():
         raise UserInputError(
