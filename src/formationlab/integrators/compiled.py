@@ -106,9 +106,11 @@ def run_compiled(
     third segments (the same numbers either way).
     """
     n = q0.shape[0]
-    pairs = not isinstance(terms, RunLayout) and terms.pair_i.size > 0  # (pairs=False: none)
-    keep = not pairs or n <= PAIRS_UP_TO or _measuring(system)
-    layout = terms if keep else run_layout(terms)  # type: ignore[arg-type]
+    # a layout as given; the law's pairs as they are for a small or sensing formation, else
+    # its lists laid out (terms built with pairs=False have no pairs: always laid out)
+    lists = isinstance(terms, RunLayout)
+    pairs = not lists and terms.pair_i.size > 0 and (n <= PAIRS_UP_TO or _measuring(system))
+    layout = terms if lists or pairs else run_layout(terms)  # type: ignore[arg-type]
     threads = numba.get_num_threads()
     # None: one thread, or (large formations) the faster of one thread and the threads
     # as measured on the second and third segments (the first builds the close list)
