@@ -29,14 +29,8 @@ from typer.testing import CliRunner
 import formationlab as fl
 from formationlab.cli import _load_commands, app
 from formationlab.errors import ScenarioError
-from formationlab.io.robotarium import (
-    ARENA,
-    robotarium_plan,
-    robotarium_script,
-    scaled_formation,
-    scaled_law,
-    twin_simulation,
-)
+from formationlab.io.robotarium import robotarium_script, twin_simulation
+from formationlab.io.robotarium_plan import ARENA, robotarium_plan, scaled_formation, scaled_law
 from formationlab.io.scenario import load_scenario
 from formationlab.outcomes.analysis import distance_errors, orientation_agreement
 from formationlab.safety import SafetyFilter

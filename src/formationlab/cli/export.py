@@ -61,7 +61,8 @@ def robotarium(
     budget ends (docs/robots.md).
     """
     from ..io.files import atomic_write_text
-    from ..io.robotarium import robotarium_plan, robotarium_script
+    from ..io.robotarium import robotarium_script
+    from ..io.robotarium_plan import robotarium_plan
     from ..io.scenario import load_scenario
     from ..validation import positive, whole
 
