@@ -13,6 +13,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -398,3 +399,17 @@ def test_a_scenario_that_needs_the_safety_extra_says_which_to_install(
         'pip install "formationlab[safety]"'
     )
     assert not out.exists()
+
+
+def test_animation_formats_as_a_comma_separated_list(run_folder: Path, tmp_path: Path) -> None:
+    # like the figures' --format png,pdf: a list in one option (or the option repeated)
+    out = shutil.copytree(run_folder, tmp_path / "out")  # (the module's run stays unanimated)
+    res = invoke("animate", out, "--format", "gif,html", "--frames", 3)
+    assert res.exit_code == 0, res.output
+    assert {p.name for p in out.glob("animation.*")} == {"animation.gif", "animation.html"}
+    res = invoke("animate", out, "--format", "gif,jpg", "--frames", 3, "--force")
+    assert res.exit_code == 2
+    assert one_error_line(res) == (
+        "error: unknown animation format 'jpg': choose from gif, mp4, html "
+        "(a comma-separated list, e.g. --format gif,html)"
+    )

@@ -188,7 +188,7 @@ def _note_writing(label: str) -> None:
 
 @command(
     "animate",
-    epilog="Example:  formationlab animate runs/sim2 --frames 100 --format gif",
+    epilog="Example:  formationlab animate runs/sim2 --frames 100 --format gif,html",
 )
 def animate_cmd(
     folder: Annotated[Path, typer.Argument(help="Output folder of `formationlab run`.")],
@@ -197,7 +197,9 @@ def animate_cmd(
     ] = 150,
     fmt: Annotated[
         list[str] | None,
-        typer.Option("--format", "-f", help="gif, mp4 or html; repeat for several (default: all)."),
+        typer.Option(
+            "--format", "-f", help="gif, mp4 or html, a comma-separated list (default: all three)."
+        ),
     ] = None,
     force: Annotated[
         bool, typer.Option("--force", help="Replace an existing animation in the folder.")
@@ -217,13 +219,11 @@ def animate_cmd(
     by the robots' motion (the transient gets most of them).
     """
     from ..io.animation import FORMATS
+    from ..io.figures import chosen_formats
 
-    formats = tuple(dict.fromkeys(fmt or FORMATS))
-    bad = [f for f in formats if f not in FORMATS]
-    if bad:
-        raise UserInputError(
-            f"unknown animation format {bad[0]!r}; choose from {', '.join(FORMATS)}"
-        )
+    formats = tuple(FORMATS)
+    if fmt:  # (a comma-separated list, or the option repeated)
+        formats = chosen_formats(fmt, FORMATS, what="animation", example="gif,html")
     formats = usable_formats(formats, explicit=bool(fmt))
     nc = run_trajectory(folder)
     from ..io.claim import claim_folder

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import sys
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -22,13 +23,28 @@ def figure_formats(text: str) -> tuple[str, ...]:
 
     Raises :class:`~formationlab.errors.ParameterError` naming an unknown format.
     """
-    formats = tuple(dict.fromkeys(f.strip().lower() for f in text.split(",") if f.strip()))
-    bad = [f for f in formats if f not in FIGURE_FORMATS]
+    return chosen_formats([text], FIGURE_FORMATS, what="figure", example="png,pdf")
+
+
+def chosen_formats(
+    values: Iterable[str], known: Iterable[str], *, what: str, example: str
+) -> tuple[str, ...]:
+    """The formats named in ``values``, each a comma-separated list (``--format gif,html`` or
+    ``--format gif --format html``), in order and each once, lower case.
+
+    Raises :class:`~formationlab.errors.ParameterError` naming an unknown format, and when
+    none is named; ``what`` names the kind of file (``"figure"``), ``example`` a list to try.
+    """
+    known = tuple(known)
+    formats = tuple(
+        dict.fromkeys(f.strip().lower() for v in values for f in v.split(",") if f.strip())
+    )
+    bad = [f for f in formats if f not in known]
     if bad or not formats:
-        problem = f"unknown figure format {', '.join(map(repr, bad))}" if bad else "no format"
+        problem = f"unknown {what} format {', '.join(map(repr, bad))}" if bad else "no format"
         raise ParameterError(
-            f"{problem}: choose from {', '.join(FIGURE_FORMATS)} "
-            "(a comma-separated list, e.g. --format png,pdf)"
+            f"{problem}: choose from {', '.join(known)} "
+            f"(a comma-separated list, e.g. --format {example})"
         )
     return formats
 
