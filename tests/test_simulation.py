@@ -196,3 +196,23 @@ def test_chatter_at_rest_is_stopped_and_steady_motion_is_not():
 def test_window_must_be_positive():
     with pytest.raises(fl.errors.ParameterError, match="window"):
         fl.Tolerances(window=0.0)
+
+
+def test_the_api_refuses_unknown_keywords_and_warns_about_another_models_state():
+    from formationlab.errors import IgnoredKeyWarning, ParameterError
+
+    f = fl.Formation.from_distances(3, distances=1.0, diameters=0.2)
+    q0 = [[0.0, 0.0], [2.0, 0.1], [1.0, 1.5]]
+    with pytest.raises(ParameterError, match="unknown keyword 'durration'") as exc:
+        fl.simulate(f, "distance", q0, duration=0.1, durration=3.0)  # a typo is not state
+    assert exc.value.key == "durration"
+    assert "'headings' for 'unicycle'" in str(exc.value)
+    assert "'velocities' for 'double-integrator' and 'quadrotor'" in str(exc.value)
+    with pytest.raises(ParameterError, match="backend must be 'auto', 'numpy' or 'numba'"):
+        fl.simulate(f, "distance", q0, duration=0.1, backend="gpu")  # type: ignore[arg-type]
+    with pytest.warns(IgnoredKeyWarning, match="headings is the initial state of the 'unicycle'"):
+        res = fl.simulate(f, "distance", q0, duration=0.1, headings=[0.0, 1.0, 2.0])
+    plain = fl.simulate(f, "distance", q0, duration=0.1)
+    np.testing.assert_array_equal(res.q, plain.q)  # ignored: the same run
+    uni = fl.simulate(f, "distance", q0, duration=0.1, model="unicycle", headings=[0.0, 1.0, 2.0])
+    np.testing.assert_array_equal(uni.x[0, :, 2], [0.0, 1.0, 2.0])  # its own key is taken

@@ -12,6 +12,7 @@ diagnostics.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -23,7 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..controllers import LAWS, Law
 from ..controllers.bearing import leader_target
 from ..dynamics import System
-from ..errors import FormationError, ParameterError
+from ..errors import FormationError, IgnoredKeyWarning, ParameterError
 from ..formation.chunked import over_time
 from ..formation.spec import Formation
 from ..integrators import INTEGRATORS, Euler, Integrator, RawSolution
@@ -564,6 +565,10 @@ def run_system(
     """
     save_every = whole(save_every, "save_every")
     law, robot = system.law, system.model
+    if backend not in ("auto", "numpy", "numba"):
+        raise ParameterError(
+            f"backend must be 'auto', 'numpy' or 'numba', got {backend!r}", key="backend"
+        )
     terms = compiled_terms(system, integrator) if backend != "numpy" else None
     if backend == "numba" and terms is None:
         raise ParameterError(
@@ -649,6 +654,36 @@ def _own_distances(system: System, integrator: Integrator) -> NDArray[np.float64
     return None if own is None else own[0]
 
 
+def _own_initial(model: RobotModel, initial: dict[str, Any]) -> dict[str, Any]:
+    """The keywords of ``initial`` that are ``model``'s initial state; another model's
+    (``headings`` for a single integrator) is ignored with a warning, an unknown keyword
+    refused by name (``simulate`` and ``run_async`` take the model's initial state as keywords)."""
+    own = type(model).initial_keys
+    kept = {k: v for k, v in initial.items() if k in own}
+    for key in sorted(set(initial) - set(own)):
+        owners = [n for n in MODELS.names() if key in MODELS[n].initial_keys]
+        if not owners:
+            others: dict[str, list[str]] = {}
+            for n in MODELS.names():
+                for k in MODELS[n].initial_keys:
+                    others.setdefault(k, []).append(repr(n))
+            raise ParameterError(
+                f"unknown keyword {key!r}: beside the named arguments, a run takes the "
+                f"robot model's initial state ({model.name!r}: "
+                f"{', '.join(own) if own else 'none'}; "
+                + ", ".join(f"{k!r} for {' and '.join(n)}" for k, n in others.items())
+                + ")",
+                key=key,
+            )
+        warnings.warn(
+            f"{key} is the initial state of the {' and '.join(map(repr, owners))} model"
+            f"{'s' if len(owners) > 1 else ''}; the {model.name!r} model has none: ignored",
+            IgnoredKeyWarning,
+            stacklevel=4,
+        )
+    return kept
+
+
 def initial_state(
     formation: Formation, model: RobotModel, q0: ArrayLike, **initial: Any
 ) -> NDArray[np.float64]:
@@ -674,7 +709,7 @@ def initial_state(
         formation.check_positions(model.positions(x0))
     else:
         q = formation.check_positions(arr)
-        x0 = model.initial_state(q, **initial)
+        x0 = model.initial_state(q, **_own_initial(model, initial))
     if x0.ndim != 2:
         raise ParameterError(f"simulate takes one initial state of shape (n, k), got {x0.shape}")
     points = model.points(x0)
