@@ -101,7 +101,9 @@ def test_lazily_imported_names_have_their_own_entry() -> None:
 
 
 def _numpy_warnings(objects: list[griffe.Object]) -> list[str]:
-    """What griffe logs while parsing the docstrings of ``objects`` and their members."""
+    """What griffe logs while parsing the docstrings of ``objects`` and their members, and
+    the text outside a section that Markdown would show as a quote (a ``>>>`` example out
+    of an ``Examples`` section, a description starting with ``>``)."""
     found: list[str] = []
 
     class Collect(logging.Handler):
@@ -118,7 +120,14 @@ def _numpy_warnings(objects: list[griffe.Object]) -> list[str]:
             if obj.is_alias:
                 continue
             if obj.docstring is not None:
-                obj.docstring.parse("numpy")
+                for section in obj.docstring.parse("numpy"):
+                    texts = [section.value] if section.kind.value == "text" else []
+                    texts += [
+                        getattr(item, "description", "") or ""
+                        for item in (section.value if isinstance(section.value, list) else [])
+                    ]
+                    if any(re.search(r"^\s*>", t, re.M) for t in texts):
+                        found.append(f"{obj.path}: a line starting with '>' (a Markdown quote)")
             stack.extend(obj.members.values())
     finally:
         logger.removeHandler(handler)
@@ -134,6 +143,14 @@ def test_a_docstring_numpy_style_misreads_is_caught() -> None:
     )
     warnings = _numpy_warnings([module])
     assert len(warnings) == 1 and "'b' does not appear" in warnings[0]
+    quoted = griffe.visit(
+        "example",
+        Path("example.py"),
+        'def f(r):\n    """Doc.\n\n    >>> f(1)\n\n    Parameters\n    ----------\n'
+        '    r : float\n        > 0.\n    """\n',
+    )
+    quote = "example.f: a line starting with '>' (a Markdown quote)"
+    assert _numpy_warnings([quoted]) == [quote, quote]  # the example, and r's description
 
 
 def test_every_docstring_reads_in_numpy_style() -> None:
