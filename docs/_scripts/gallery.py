@@ -4,7 +4,8 @@ Each page is what one command wrote: ``formationlab run examples/NAME.toml --out
 a temporary folder, and its page shows the command, the verdict it printed, numbers from its
 ``summary.json`` and its figures. A command that fails fails the build (``mkdocs build``
 stops with its output), so the pages cannot show a stale result. Only examples that finish in
-a few seconds are run; the commands run two at a time.
+a few seconds are run; the commands run two at a time. ``FORMATIONLAB_GALLERY=off`` writes
+the pages without running anything (for ``mkdocs serve`` while editing the other pages).
 """
 
 from __future__ import annotations
@@ -225,7 +226,23 @@ def index(runs: list[Ran], seconds: float) -> str:
     return "\n".join(lines)
 
 
+def skipped() -> None:
+    """Placeholder pages, for ``FORMATIONLAB_GALLERY=off mkdocs serve`` while writing."""
+    note = (
+        "The gallery was not run in this build (`FORMATIONLAB_GALLERY=off`); "
+        "`mkdocs build` without it runs the examples.\n"
+    )
+    with mkdocs_gen_files.open("gallery/index.md", "w") as f:
+        f.write(f"# Gallery\n\n{note}")
+    for ex in EXAMPLES:
+        with mkdocs_gen_files.open(f"gallery/{ex.name}.md", "w") as f:
+            f.write(f"# {ex.title}\n\n{ex.about}\n\n{note}")
+
+
 def main() -> None:
+    if os.environ.get("FORMATIONLAB_GALLERY") == "off":
+        skipped()
+        return
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="formationlab-gallery-") as scratch:
         with ThreadPoolExecutor(max_workers=2) as pool:
