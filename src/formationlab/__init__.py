@@ -4,6 +4,8 @@ Implements "Formation Control of Multiple Robots Avoiding Local Minima"
 (single-integrator robots, logarithmic attractive-repulsive potential, Khatib
 repulsion, and the angle-restricted sliding-mode law) and goes beyond it.
 
+Examples
+--------
 >>> import formationlab as fl
 >>> f = fl.Formation.from_template([[0, 0], [1, 0], [0.5, 0.8]], diameters=0.2)
 >>> law = fl.AngleRestrictedLaw(k_c=2.0, k_a=3.0, theta=0.5)

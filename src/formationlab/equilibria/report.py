@@ -72,7 +72,7 @@ def _parse_follow(text: str) -> tuple[str, float, float]:
 class EquilibriaConfig:
     """The ``[equilibria]`` table (command-line options of the same names win).
 
-    Parameters
+    Attributes
     ----------
     starts : int
         Random starts (>= 0; default 200), a fraction ``collinear`` of them on a line.

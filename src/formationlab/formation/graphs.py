@@ -258,7 +258,12 @@ def within_edges(points: ArrayLike, r: float) -> NDArray[np.int64]:
     ----------
     points : array_like, shape (n, 2) or, in space, (n, 3)
     r : float
-        > 0.
+        The largest distance of a pair (positive).
+
+    Returns
+    -------
+    ndarray of int64, shape (m, 2)
+        The pairs ``(i, j)``, ``i < j`` (0-based), sorted.
     """
     pts = _points(points, "within", (2, 3))
     if (
