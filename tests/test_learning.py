@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _scenarios import clear_starts, triangle
 from typer.testing import CliRunner, Result
 
 import formationlab as fl
@@ -53,28 +54,16 @@ TRIANGLE = fl.Formation.from_alpha_table(
 )
 SQUARE = fl.Formation.from_template([[0, 0], [1, 0], [1, 1], [0, 1]], diameters=0.2)
 
-#: a short study of the triangle (coarse step, 6 s) that runs the learned law
-SCENARIO = """
-name = "learned-triangle"
-[robots]
-positions = [[-3.0, -3.0], [3.0, -3.0], [0.0, 3.0]]
-diameters = 0.2
-[formation]
-edges = "complete"
-distances = 1.0
-orientation = "table"
-alpha = [[1, 2, 3, 1.0], [3, 1, 2, 1.0], [2, 1, 3, -1.0]]
-[controller]
-law = "{law}"
-{parameters}
-[simulation]
-integrator = "euler"
-dt = 0.005
-duration = 6.0
-[study]
-trials = 16
-initial = {{ kind = "box", half_width = 3.0 }}
-"""
+STUDY = '[study]\ntrials = 16\ninitial = { kind = "box", half_width = 3.0 }\n'
+
+
+def scenario_text(law: str, parameters: str = "") -> str:
+    """The paper's triangle under ``law`` (coarse step, 6 s) with a study of 16 trials;
+    ``parameters``: the policy law's file, as TOML text."""
+    text = triangle("learned-triangle", "6.0", STUDY).replace("dt = 1e-3", "dt = 0.005")
+    gains = "k_c = 2.0\nk_a = 3.0\ntheta = 0.5\n"  # the paper's, which the learned law takes not
+    text = text.replace(gains, gains if law != "policy" else "")
+    return text.replace('law = "angle-restricted"', f'law = "{law}"\n{parameters}')
 
 
 def invoke(*args: object) -> Result:
@@ -84,17 +73,6 @@ def invoke(*args: object) -> Result:
 def random_network(seed: int = 0, scale: float = 0.7) -> Network:
     rng = np.random.default_rng(seed)
     return Network.from_flat(SIZES, scale * rng.normal(size=parameter_count(SIZES)))
-
-
-def clear_positions(n: int, count: int, seed: int) -> np.ndarray:
-    """Random positions ``(count, n, 2)`` whose robots are at least 0.3 apart."""
-    rng = np.random.default_rng(seed)
-    out = []
-    while len(out) < count:
-        q = rng.uniform(-2, 2, (n, 2))
-        if np.linalg.norm(q[:, None] - q[None], axis=-1)[np.triu_indices(n, 1)].min() > 0.3:
-            out.append(q)
-    return np.array(out)
 
 
 def turn(angle: np.ndarray) -> np.ndarray:
@@ -138,7 +116,7 @@ def test_a_network_refuses_shapes_that_do_not_chain() -> None:
 @pytest.mark.parametrize("formation", [TRIANGLE, SQUARE], ids=["triangle", "square"])
 def test_turning_each_robots_frame_turns_its_command(formation: fl.Formation) -> None:
     net, hoods = random_network(3), neighbourhoods(formation)
-    q = clear_positions(formation.n, 6, 4)
+    q = clear_starts(formation.n, 6, 4)
     args = (hoods.sign, hoods.d_ij, hoods.d_ik)
     r_ij = q[:, hoods.j] - q[:, hoods.i]
     r_ik = q[:, hoods.k] - q[:, hoods.i]
@@ -157,7 +135,7 @@ def test_turning_each_robots_frame_turns_its_command(formation: fl.Formation) ->
 
 def test_the_mirror_image_with_reversed_signs_gets_the_mirror_command() -> None:
     law = PolicyLaw.from_network(random_network(6))
-    q = clear_positions(4, 5, 7)
+    q = clear_starts(4, 5, 7)
     mirror = np.array([-1.0, 1.0])
     flipped = fl.Formation.from_template(
         [[0, 0], [-1, 0], [-1, 1], [0, 1]], diameters=0.2
@@ -173,7 +151,7 @@ def test_relabelling_the_robots_relabels_the_commands() -> None:
     template = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float)
     perm = np.array([2, 0, 3, 1])
     relabelled = fl.Formation.from_template(template[perm], diameters=0.2)
-    q = clear_positions(4, 5, 9)
+    q = clear_starts(4, 5, 9)
     np.testing.assert_allclose(
         law.control(relabelled, q[:, perm]), law.control(SQUARE, q)[:, perm], rtol=0, atol=1e-12
     )
@@ -183,7 +161,7 @@ def test_the_law_is_each_robots_network_on_its_own_measurements() -> None:
     """The law against a plain loop over robots and their ordered pairs of neighbours."""
     net = random_network(10)
     law = PolicyLaw.from_network(net)
-    q = clear_positions(4, 3, 11)
+    q = clear_starts(4, 3, 11)
     u = law.control(SQUARE, q)
     for b in range(len(q)):
         for i in range(4):
@@ -247,7 +225,7 @@ def trained(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     """``formationlab train`` on a tiny budget, its evaluation a study of 16 trials."""
     root = tmp_path_factory.mktemp("learn")
     scenario = root / "train.toml"
-    scenario.write_text(SCENARIO.format(law="distance", parameters=""))
+    scenario.write_text(scenario_text("distance"))
     out = root / "policies" / "tiny.npz"
     res = invoke("train", scenario, "--out", out, "-g", 3, "-p", 4, "-b", 8, "--seed", 2,
                  "--eval-trials", 16, "--eval-seed", 5, "--figure", root / "curve.png",
@@ -275,7 +253,7 @@ def test_a_study_of_the_saved_policy_gives_the_fractions_of_trainings_evaluation
     folder = tmp_path / "elsewhere"
     folder.mkdir()
     scenario = folder / "policy.toml"
-    scenario.write_text(SCENARIO.format(law="policy", parameters=f'parameters = "{out}"'))
+    scenario.write_text(scenario_text("policy", f'parameters = "{out}"'))
     res = invoke("study", scenario, "--out", tmp_path / "study", "--seed", 5, "--quiet")
     assert res.exit_code == 0, res.output
     summary = json.loads((tmp_path / "study" / "summary.json").read_text())
@@ -289,7 +267,7 @@ def test_a_study_of_the_saved_policy_gives_the_fractions_of_trainings_evaluation
 def test_a_relative_parameters_path_is_relative_to_the_scenario_file(trained, tmp_path) -> None:
     _, out = trained
     scenario = out.parent / "uses.toml"
-    scenario.write_text(SCENARIO.format(law="policy", parameters='parameters = "tiny.npz"'))
+    scenario.write_text(scenario_text("policy", 'parameters = "tiny.npz"'))
     law = load_scenario(scenario).law
     assert isinstance(law, PolicyLaw) and Path(law.parameters) == out
     assert law.digest and law.digest == PolicyLaw(parameters=str(out)).digest
@@ -329,16 +307,16 @@ def _bad_files(root: Path) -> dict[str, tuple[Path, str]]:
 def test_bad_parameters_files_are_refused_with_the_key_named(tmp_path: Path) -> None:
     for path, message in _bad_files(tmp_path).values():
         scenario = tmp_path / "bad.toml"
-        scenario.write_text(SCENARIO.format(law="policy", parameters=f'parameters = "{path}"'))
+        scenario.write_text(scenario_text("policy", f'parameters = "{path}"'))
         with pytest.raises(ScenarioError, match=message) as err:
             load_scenario(scenario)
         assert err.value.key == "controller.parameters"
-        assert "controller.parameters (line 13)" in str(err.value)
+        assert f"{scenario}: controller.parameters (line " in str(err.value)
     no_file = tmp_path / "none.toml"
-    no_file.write_text(SCENARIO.format(law="policy", parameters=""))
+    no_file.write_text(scenario_text("policy"))
     law = load_scenario(no_file).law  # built, but it refuses to run, naming the key
     with pytest.raises(ParameterError, match=r'parameters = "policy\.npz"') as err:
-        law.control(TRIANGLE, clear_positions(3, 1, 0))
+        law.control(TRIANGLE, clear_starts(3, 1, 0))
     assert err.value.key == "parameters"
 
 
