@@ -12,6 +12,7 @@ parameters files refused by key.
 from __future__ import annotations
 
 import json
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +34,7 @@ from formationlab.controllers.policy import (
     OUTPUTS,
     PolicyLaw,
     neighbourhoods,
+    policy_control,
     triple_commands,
 )
 from formationlab.errors import ParameterError, ScenarioError
@@ -202,6 +204,20 @@ def test_the_desired_shape_is_an_equilibrium_and_its_mirror_need_not_be() -> Non
 # --------------------------------------------------------------------------------- training
 
 
+def test_a_rollout_integrates_effort_and_peak_speed_and_freezes_a_collision() -> None:
+    """Under a constant field every sum is by hand: q(T) = q0 + T u, effort T sum |u_i|^2."""
+    q0 = np.array([[[0.0, 0.0], [1.0, 0.0], [0.5, 1.0]], [[0.0, 0.0], [0.3, 0.0], [0.5, 1.0]]])
+    u = np.array([[0.5, 0.0], [-0.5, 0.0], [0.0, 0.2]])  # robots 1 and 2 close in at speed 1
+    ended = rollout(lambda q: np.broadcast_to(u, q.shape).copy(), TRIANGLE, q0, dt=0.01,
+                    steps=20)  # fmt: skip
+    assert not ended.collided[0] and ended.collided[1]  # 0.3 - 0.2 = 0.1 closes in 0.1 s
+    np.testing.assert_allclose(ended.q[0], q0[0] + 0.2 * u, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ended.effort[0], 0.2 * (0.25 + 0.25 + 0.04), rtol=1e-12)
+    np.testing.assert_allclose(ended.peak_speed, 0.5, rtol=1e-12)
+    gap = np.linalg.norm(ended.q[1, 1] - ended.q[1, 0])
+    assert 0.19 <= gap <= 0.2 and ended.effort[1] < ended.effort[0]  # frozen at contact
+
+
 def test_cma_training_improves_the_reward_on_a_tiny_seeded_budget() -> None:
     config = TrainingConfig(generations=8, population=8, batch=16, duration=4.0, dt=0.05, seed=1)
     a = train(TRIANGLE, BoxInitial(half_width=3.0), config)
@@ -214,9 +230,12 @@ def test_cma_training_improves_the_reward_on_a_tiny_seeded_budget() -> None:
     starts = trial_initial_states(TRIANGLE, BoxInitial(half_width=3.0), 99, np.arange(64))
     hoods, zero = neighbourhoods(TRIANGLE), Network.from_flat(config.sizes, 0.0 * a.network.flat())
     before, after = (
-        episode_reward(TRIANGLE, rollout(net, TRIANGLE, hoods, starts, dt=0.05, steps=80)).mean()
+        episode_reward(
+            TRIANGLE, rollout(partial(policy_control, net, hoods), TRIANGLE, starts, dt=0.05,
+                              steps=80),
+        ).mean()
         for net in (zero, a.network)
-    )
+    )  # fmt: skip
     assert before < -1.0 and after > before + 1.0, (before, after)
 
 

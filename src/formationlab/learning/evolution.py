@@ -14,13 +14,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..controllers.network import Network, parameter_count
-from ..controllers.policy import FEATURES, OUTPUTS, neighbourhoods
+from ..controllers.policy import FEATURES, OUTPUTS, neighbourhoods, policy_control
 from ..errors import ParameterError, require_extra
 from ..formation.spec import Formation
 from ..integrators.base import steps_for
@@ -143,7 +144,8 @@ def train(
         """Mean reward of each of the ``(P, count)`` candidates, all in one rollout."""
         nets = Network.from_flat(sizes, flat)
         q = np.broadcast_to(q0, (flat.shape[0], *q0.shape))
-        ended = rollout(nets, formation, hoods, q, dt=config.dt, steps=steps)
+        field = partial(policy_control, nets, hoods)
+        ended = rollout(field, formation, q, dt=config.dt, steps=steps)
         return np.asarray(np.mean(episode_reward(formation, ended), axis=-1))
 
     rows: list[tuple[float, ...]] = []
