@@ -65,7 +65,7 @@ def train(
     import dataclasses
 
     from ..controllers.policy import PolicyLaw
-    from ..errors import OutputExistsError
+    from ..errors import OutputExistsError, ParameterError
     from ..io.policy import write_policy
     from ..io.scenario import load_scenario
     from ..learning import TrainingConfig, evaluate_policy
@@ -79,7 +79,7 @@ def train(
     if out.exists() and not force:
         raise OutputExistsError(f"{out} exists; use --force to replace it, or another --out")
     if out.suffix != ".npz":
-        raise OutputExistsError(f"--out must name a .npz file, got {out}")
+        raise ParameterError(f"--out names the parameters file, a .npz: got {out}")
     sc = load_scenario(scenario)
     for w in sc.warnings:
         warn(w if w.startswith(sc.source) else f"{sc.source}: {w}")
