@@ -296,8 +296,10 @@ def test_the_study_chooses_the_numpy_path_for_the_learned_law(trained) -> None:
     _, out = trained
     law = PolicyLaw(parameters=str(out))
     assert not law.compiles() and fl.get_law("distance").compiles()
-    backend, note = batch_backend("numba", laws=[fl.get_law("distance"), law])
+    backend, note = batch_backend("numba", laws=[law])
     assert backend == "numpy" and "'policy'" in note
+    backend, note = batch_backend("numba", laws=[fl.get_law("distance"), law])  # a study's
+    assert backend == "numba" and "'policy'" in note and "other laws' on the compiled" in note
     assert batch_backend("numba", laws=[fl.get_law("distance")]) == ("numba", "")
 
 
