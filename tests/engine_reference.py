@@ -11,7 +11,7 @@ processor's kernels meet (its docstring says which and why; never bit for bit: a
 recorded on one processor is not a property of the code).
 
 The recording was made at commit 5de2f44 (before the engine refactoring of issue 24);
-``record new`` adds the example files made since (the bearing law's, with its commit),
+``record new`` adds the example files made since (the bearing law's and the learned law's),
 leaving the others as recorded.
 """
 

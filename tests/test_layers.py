@@ -45,6 +45,7 @@ LAYERS: list[list[str]] = [
     ["agents"],
     ["scenario"],
     ["studies", "equilibria"],
+    ["learning"],
     ["envs", "plotting", "io", "robots"],
     ["viewer"],
     ["cli"],

@@ -8,6 +8,7 @@ from .base import LAWS, Law, ObstacleRepulsion, Repulsion, get_law, laws_in, reg
 from .bearing import BearingLaw
 from .chirality_restricted import ChiralityRestrictedLaw
 from .distance import DistanceLaw, grad_phi, phi_sum
+from .policy import PolicyLaw
 from .signed_area import SignedAreaLaw
 from .squared_distance import SquaredDistanceLaw
 
@@ -19,6 +20,7 @@ __all__ = [
     "DistanceLaw",
     "Law",
     "ObstacleRepulsion",
+    "PolicyLaw",
     "Repulsion",
     "SignedAreaLaw",
     "SquaredDistanceLaw",

@@ -93,6 +93,9 @@ class Law:
     #: with kernel terms; space for a law whose every term is an edge's or a pair's, a
     #: function of one measured relative position and its length (the laws of distances).
     sensed_dims: ClassVar[tuple[int, ...]] = (2,)
+    #: Whether the law is built from its gains alone (its defaults run); False for a law
+    #: that needs a file (the learned law's parameters), which :func:`laws_in` leaves out.
+    from_gains: ClassVar[bool] = True
 
     def formation_for(self, formation: Formation) -> Formation:
         """The formation as this law is judged on it: a law of distances (and orientation)
@@ -195,14 +198,23 @@ class Law:
             )
         return self._own_terms(formation, pairs=True)
 
+    @classmethod
+    def compiles(cls) -> bool:
+        """Whether the compiled loop can run the law: it has :meth:`kernel_terms` of its own,
+        written where its :meth:`control` is (not inherited from another law). A law that
+        does not compiles runs on the numpy path
+        (:func:`formationlab.studies.batch.batch_backend`)."""
+
+        def owner(name: str) -> type:
+            return next(c for c in cls.__mro__ if name in c.__dict__)
+
+        return owner("kernel_terms") is owner("control") and owner("kernel_terms") is not Law
+
     def _own_terms(self, formation: Formation, *, pairs: bool) -> KernelTerms:
         """:meth:`kernel_terms`, refused when they are another law's (``control`` overridden
         without them)."""
 
-        def owner(name: str) -> type:
-            return next(c for c in type(self).__mro__ if name in c.__dict__)
-
-        if owner("kernel_terms") is not owner("control") and owner("kernel_terms") is not Law:
+        if not self.compiles() and type(self).kernel_terms is not Law.kernel_terms:
             raise ParameterError(
                 f"the law {self.name!r} ({type(self).__name__}) overrides control() but not "
                 'kernel_terms(), so the compiled kernel cannot run it; use backend="numpy"'
@@ -229,8 +241,10 @@ def register(cls: L) -> L:
 
 
 def laws_in(dim: int) -> list[str]:
-    """The names of the registered laws that work in ``dim`` dimensions (2 or 3), sorted."""
-    return sorted(name for name, cls in LAWS.items() if dim in cls.dims)
+    """The names of the registered laws that work in ``dim`` dimensions (2 or 3) and are
+    built from their gains alone (:attr:`Law.from_gains`: not the learned law, which needs
+    its parameters file), sorted."""
+    return sorted(name for name, cls in LAWS.items() if dim in cls.dims and cls.from_gains)
 
 
 def get_law(name: str, **params: object) -> Law:

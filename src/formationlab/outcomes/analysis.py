@@ -66,6 +66,7 @@ __all__ = [
     "orientation_agreement",
     "touching",
     "triangle_orientation",
+    "turned_wrong",
 ]
 
 
@@ -155,10 +156,19 @@ def orientation_agreement(formation: Formation, q: ArrayLike) -> tuple[int, int]
     if formation.dim == 3:
         agree, disagree = chirality_agreement(formation, q)
         return int(agree), int(disagree)
+    wrong = turned_wrong(formation, q)
+    return 2 * int(np.sum(~wrong)), 2 * int(np.sum(wrong))
+
+
+def turned_wrong(formation: Formation, q: ArrayLike) -> NDArray[np.bool_]:
+    """Whether each restricted triple of the plane (the halves ``j < k`` the formation
+    holds) disagrees with its desired sign of ``c_ijk`` (collinear counts as wrong);
+    ``(..., n, 2) -> (..., h)``."""
+    q = np.asarray(q, dtype=float)
     i, j, k = formation.restricted_halves.T
     s = np.sign(cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :]))
     s = s * -np.sign(formation.half_alpha())  # the desired sign(c_ijk) is -sign(alpha_ijk)
-    return 2 * int(np.sum(s > 0)), 2 * int(np.sum(s <= 0))
+    return s <= 0
 
 
 def chirality_agreement(

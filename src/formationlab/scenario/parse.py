@@ -32,6 +32,7 @@ import tomllib
 import warnings as _warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -343,6 +344,21 @@ def _judged(
     return judged if judged.bearings is not None else formation
 
 
+def _relative_to(given: dict[str, Any], source: str) -> dict[str, Any]:
+    """``[controller]`` with every law's file keys (fields marked ``metadata={"path":
+    True}``, the policy law's ``parameters``) read relative to the scenario file: a
+    relative path joined to the file's folder (to the working folder for a scenario given
+    as text)."""
+    keys = {f.name for cls in LAWS.values() if dataclasses.is_dataclass(cls)
+            for f in dataclasses.fields(cls) if f.metadata.get("path")}  # fmt: skip
+    folder = Path(source).parent if source != "<string>" else Path()
+    for key in keys & given.keys():
+        value = given[key]
+        if isinstance(value, str) and value and not Path(value).is_absolute():
+            given[key] = str(folder / value)
+    return given
+
+
 def _plain(obj: Any) -> Any:
     """Tuples and numpy values to lists and Python scalars (TOML's own types)."""
     if isinstance(obj, Mapping):
@@ -387,7 +403,7 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
 
     study_laws = (model.study or {}).get("laws")
     used_by = [str(x) for x in study_laws] if isinstance(study_laws, list) else []
-    given = dict(ctl.model_extra or {})
+    given = _relative_to(dict(ctl.model_extra or {}), source)
     law, ignored_law = build_entry(
         LAWS,
         INTEGRATORS,

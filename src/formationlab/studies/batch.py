@@ -88,23 +88,36 @@ def batch_backend(
     sensed: bool = False,
     model: RobotModel | None = None,
     dim: int = 2,
+    laws: Sequence[Law] = (),
 ) -> tuple[Backend, str]:
     """The backend a batch runs on, and why it differs from ``backend`` ("" if it does not).
 
     Every robot model, sensing model, fault, obstacle and safety filter is a stage of the
     one compiled loop (:mod:`formationlab.engine`), so a batch runs where it is asked to;
     the reason stays in the interface (and in ``summary.json``) for a part that a future
-    stage may not compile.
+    stage may not compile. A law of ``laws`` without kernel terms (:meth:`Law.compiles`:
+    the learned law) runs on the numpy path: the batch does when all its laws are such
+    (a study's chunks pass the one law of their group), else the note names them.
     """
     del obstacles, safety, sensed  # every combination is compiled
     if dim != 2 and backend == "numba":
         return "numpy", "the compiled loop steps formations in the plane; this one is in space"
+    numpy_laws = sorted({law.name for law in laws if not law.compiles()})
+    note = ""
+    if numpy_laws and backend == "numba":
+        names = ", ".join(repr(n) for n in numpy_laws)
+        note = (
+            f"the compiled loop has no terms of the law {names}: its trials run on the numpy path"
+        )
+        if all(not law.compiles() for law in laws):
+            return "numpy", note
+        note += "; the other laws' on the compiled loop"  # (each group's chunks choose)
     if model is not None and backend == "numba":
         try:
             model_terms(model)
         except ParameterError:  # a model without a stage of the loop (yet)
             return "numpy", f"the compiled loop has no stage for the robot model {model.name!r}"
-    return backend, ""  # type: ignore[return-value]
+    return backend, note  # type: ignore[return-value]
 
 
 def run_batch(

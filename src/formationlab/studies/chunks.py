@@ -101,7 +101,13 @@ def plan_chunks(
                     duration=duration,
                     tolerances=config.tol,
                     backend=batch_backend(
-                        config.backend, obstacles, safety, g.sensed, model, g.formation.dim
+                        config.backend,
+                        obstacles,
+                        safety,
+                        g.sensed,
+                        model,
+                        g.formation.dim,
+                        laws=(g.law,),
                     )[0],
                     sweep_keys=tuple(config.sweep),
                     settle=config.settle,

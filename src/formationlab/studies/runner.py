@@ -307,7 +307,7 @@ class StudySetup:
         sensed = any(g.sensed for g in self.groups)
         return batch_backend(
             self.config.backend, self.obstacles, self.safety, sensed, self.model,
-            self.formation.dim,
+            self.formation.dim, laws=[g.law for g in self.groups],
         )  # fmt: skip
 
     def safety_description(self) -> dict[str, Any] | None:
