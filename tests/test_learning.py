@@ -292,6 +292,30 @@ def test_a_relative_parameters_path_is_relative_to_the_scenario_file(trained, tm
     assert law.digest and law.digest == PolicyLaw(parameters=str(out)).digest
 
 
+def test_an_output_folder_keeps_the_policy_file_and_runs_again_from_there(trained, tmp_path):
+    # the copied scenario names a copy of the file beside it, not the original's relative path
+    _, out = trained
+    scenario = out.parent / "uses-again.toml"
+    scenario.write_text(scenario_text("policy", 'parameters = "tiny.npz"  # the network'))
+    res = invoke("study", scenario, "--out", tmp_path / "study", "--seed", 5, "--quiet")
+    assert res.exit_code == 0, res.output
+    folder = tmp_path / "study"
+    assert (folder / "tiny.npz").read_bytes() == out.read_bytes()
+    copied = (folder / "scenario.toml").read_text()
+    assert 'parameters = "tiny.npz"  # the network' in copied
+    law = load_scenario(folder / "scenario.toml").law
+    assert (
+        Path(law.parameters) == folder / "tiny.npz"
+        and law.digest == PolicyLaw(parameters=str(out)).digest
+    )
+    moved = tmp_path / "moved"
+    folder.rename(moved)  # the folder carries what it needs
+    res = invoke("run", moved / "scenario.toml", "--out", tmp_path / "again", "-q")
+    assert res.exit_code in (0, 1), res.output  # (1: the tiny policy's robots may touch)
+    assert (tmp_path / "again" / "trajectory.nc").exists()
+    assert (tmp_path / "again" / "tiny.npz").read_bytes() == out.read_bytes()
+
+
 def test_the_study_chooses_the_numpy_path_for_the_learned_law(trained) -> None:
     _, out = trained
     law = PolicyLaw(parameters=str(out))

@@ -228,12 +228,12 @@ def _write_data(
     ``LIST_LIMIT`` edges and summary.json (last: it marks the folder as holding a finished
     run); returns the summary and the names written."""
     from ..io.edges import EDGE_TABLE, write_edge_table
-    from ..io.files import atomic_write_text
     from ..io.netcdf import write_trajectory
+    from ..io.scenario import write_scenario
     from ..simulation.run import LIST_LIMIT
 
     large = result.q.size / 2 > _LARGE
-    atomic_write_text(folder / "scenario.toml", sc.text)
+    write_scenario(folder, sc)  # (with a copy of each file the law reads)
     if large:
         _note(
             f"writing trajectory.nc ({len(result.t):,} saved states; Ctrl-C now stops once "

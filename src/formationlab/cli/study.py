@@ -249,14 +249,15 @@ def _write_outputs(
     quiet: bool = False,
     formats: tuple[str, ...] = ("png",),
 ) -> None:
-    from ..io import atomic_write_json, atomic_write_text, save_figures
+    from ..io import atomic_write_json, save_figures
     from ..io.files import MANIFEST
+    from ..io.scenario import write_scenario
     from ..io.trials import write_trials
     from ..plotting.studies import study_figures
     from ..resources import package_version
 
     write_trials(result.trials, out / "trials.parquet")
-    atomic_write_text(out / "scenario.toml", sc.text)
+    write_scenario(out, sc)  # (with a copy of each file the law reads)
     figures = [
         path.name
         for stem, fig in study_figures(result.summary, result.trials, sc.formation.edges).items()

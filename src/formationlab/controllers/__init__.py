@@ -4,7 +4,16 @@
 """
 
 from .angle_restricted import AngleRestrictedLaw, active_restrictions, grad_psi, psi_sum
-from .base import LAWS, Law, ObstacleRepulsion, Repulsion, get_law, laws_in, register
+from .base import (
+    LAWS,
+    Law,
+    ObstacleRepulsion,
+    Repulsion,
+    file_keys,
+    get_law,
+    laws_in,
+    register,
+)
 from .bearing import BearingLaw
 from .chirality_restricted import ChiralityRestrictedLaw
 from .distance import DistanceLaw, grad_phi, phi_sum
@@ -25,6 +34,7 @@ __all__ = [
     "SignedAreaLaw",
     "SquaredDistanceLaw",
     "active_restrictions",
+    "file_keys",
     "get_law",
     "grad_phi",
     "grad_psi",

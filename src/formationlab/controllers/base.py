@@ -19,6 +19,7 @@ compiled kernels can evaluate returns its data from :meth:`Law.kernel_terms`.
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 from dataclasses import dataclass
 from typing import ClassVar, NamedTuple, TypeVar
@@ -32,7 +33,16 @@ from ..registry import Registry
 from ..validation import check_fields
 from .terms import KernelTerms
 
-__all__ = ["LAWS", "Law", "ObstacleRepulsion", "Repulsion", "get_law", "laws_in", "register"]
+__all__ = [
+    "LAWS",
+    "Law",
+    "ObstacleRepulsion",
+    "Repulsion",
+    "file_keys",
+    "get_law",
+    "laws_in",
+    "register",
+]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -238,6 +248,15 @@ L = TypeVar("L", bound=type[Law])
 def register(cls: L) -> L:
     """Class decorator: make a law available by its ``name``."""
     return LAWS.register(cls)
+
+
+def file_keys(law: type[Law] | Law) -> tuple[str, ...]:
+    """The parameters of a law that name files (fields marked ``metadata={"path": True}``,
+    e.g. the learned law's ``parameters``): a scenario reads them relative to its own file,
+    and an output folder keeps a copy of each."""
+    if not dataclasses.is_dataclass(law):
+        return ()
+    return tuple(f.name for f in dataclasses.fields(law) if f.metadata.get("path"))
 
 
 def laws_in(dim: int) -> list[str]:

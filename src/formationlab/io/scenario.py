@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import os
+import re
 import tomllib
 from pathlib import Path
 
+from ..controllers import file_keys
 from ..errors import ScenarioError
 from ..scenario.parse import Scenario, parse_scenario
+from ..validation import line_of
+from .files import atomic_write_bytes, atomic_write_text
 
-__all__ = ["load_scenario", "resolve_scenario"]
+__all__ = ["load_scenario", "resolve_scenario", "write_scenario"]
 
 
 def load_scenario(path: str | os.PathLike[str]) -> Scenario:
@@ -101,3 +105,45 @@ def _names_file(text: str) -> bool:
         return Path(text).is_file()
     except (OSError, ValueError):  # a name too long for the file system
         return False
+
+
+def write_scenario(folder: str | os.PathLike[str], sc: Scenario) -> list[str]:
+    """Write ``sc`` as ``folder/scenario.toml`` so that the folder runs again as it is.
+
+    Each file the law reads (:func:`~formationlab.controllers.base.file_keys`: the learned
+    law's ``parameters``) is copied beside it, and its key in the copy of the scenario names
+    the copy (a path relative to the scenario file would not be found from the output
+    folder). The rest of the text is the scenario's own, comments included. Returns the
+    names written, ``scenario.toml`` last.
+    """
+    folder = Path(folder)
+    text, written = sc.text, []
+    for key in file_keys(sc.law):
+        source = Path(getattr(sc.law, key))
+        if not source.is_file():  # (a law built from memory names no file)
+            continue
+        atomic_write_bytes(folder / source.name, source.read_bytes())
+        text = _with_string(text, f"controller.{key}", source.name)
+        written.append(source.name)
+    atomic_write_text(folder / "scenario.toml", text)
+    return [*written, "scenario.toml"]
+
+
+def _with_string(text: str, key: str, value: str) -> str:
+    """``text`` with the string value of the dotted ``key`` (on its own line) set to
+    ``value``; unchanged where the key is not written as ``name = "..."`` on one line."""
+    line = line_of(text, key)
+    lines = text.splitlines(keepends=True)
+    if line is None:
+        return text
+    name = re.escape(key.rsplit(".", 1)[-1])
+    pattern = re.compile(rf"""^(\s*{name}\s*=\s*)("[^"]*"|'[^']*')""")
+    new, count = pattern.subn(lambda m: m.group(1) + _toml_string(value), lines[line - 1])
+    if count:
+        lines[line - 1] = new
+    return "".join(lines)
+
+
+def _toml_string(value: str) -> str:
+    """``value`` as a TOML basic string."""
+    return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'

@@ -42,6 +42,7 @@ from pydantic import ValidationError
 
 from ..agents.asynchronous import check_schedule
 from ..controllers import LAWS, Law
+from ..controllers.base import file_keys
 from ..errors import IgnoredKeyWarning, ScenarioError, UserInputError
 from ..formation.spec import Formation
 from ..integrators import INTEGRATORS, FixedStepIntegrator, Integrator
@@ -349,8 +350,7 @@ def _relative_to(given: dict[str, Any], source: str) -> dict[str, Any]:
     True}``, the policy law's ``parameters``) read relative to the scenario file: a
     relative path joined to the file's folder (to the working folder for a scenario given
     as text)."""
-    keys = {f.name for cls in LAWS.values() if dataclasses.is_dataclass(cls)
-            for f in dataclasses.fields(cls) if f.metadata.get("path")}  # fmt: skip
+    keys = {key for cls in LAWS.values() for key in file_keys(cls)}
     folder = Path(source).parent if source != "<string>" else Path()
     for key in keys & given.keys():
         value = given[key]
