@@ -6,6 +6,7 @@ from contextlib import contextmanager
 
 import numpy as np
 import pytest
+from _scenarios import lattice
 from _viewer import launch_chromium, serving, sim2_session, wait_for
 from playwright.sync_api import sync_playwright
 
@@ -306,7 +307,7 @@ def test_many_edges_plot_the_worst_and_a_band(browser):
     from formationlab.scenario import parse_scenario
     from formationlab.viewer import LiveSession
 
-    session = LiveSession(parse_scenario(LATTICE_30), seed=1)
+    session = LiveSession(parse_scenario(lattice(30)), seed=1)
     session.set_paused(True)
     assert len(session.formation.edges) > 24
     session.step(5)
@@ -317,22 +318,3 @@ def test_many_edges_plot_the_worst_and_a_band(browser):
         edges = session.formation.edges + 1
         assert e["band"] and e["lines"] == [f"{edges[k - 1][0]}-{edges[k - 1][1]}" for k in worst]
         assert e["legend"] == [f"all {len(edges)} edges (band); worst 5:", *e["lines"]]
-
-
-LATTICE_30 = """
-name = "lattice-30"
-[robots]
-positions = { around = "template", sigma = 0.1, seed = 2 }
-diameters = 0.2
-[formation]
-template = { lattice = "triangular", count = 30, spacing = 1.0 }
-edges = "delaunay"
-orientation = "free"
-[controller]
-law = "distance"
-k_c = 2.0
-[simulation]
-integrator = "euler"
-dt = 1e-3
-duration = 1.0
-"""

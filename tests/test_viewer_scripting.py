@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _scenarios import lattice
 from _viewer import SIM2, sim2_session
 
 import formationlab as fl
@@ -82,27 +83,6 @@ def test_speed_reached_is_simulated_time_over_wall_time():
     assert slow.reached == pytest.approx(6 * 1e-3 / 0.6) and slow.reached < 10.0
     slow.set_paused(True)
     assert slow.frame().header["reached"] is None
-
-
-def lattice(count: int) -> str:
-    return f"""
-name = "lattice-{count}"
-[robots]
-positions = {{ around = "template", sigma = 0.05, seed = 1 }}
-diameters = 0.2
-[formation]
-template = {{ lattice = "triangular", count = {count}, spacing = 1.0 }}
-edges = "delaunay"
-orientation = "free"
-[controller]
-law = "distance"
-k_c = 2.0
-repulsion = {{ eta = 1.0, influence = 0.3 }}
-[simulation]
-integrator = "euler"
-dt = 1e-3
-duration = 1.0
-"""
 
 
 def test_a_large_formation_steps_on_the_compiled_loop_as_the_driver_does():

@@ -211,6 +211,14 @@ function flvPlotMarks(ctx, m, h, opts, t0, t1) {
   return events.length;
 }
 
+function flvZeroLine(ctx, m, w) {
+  ctx.strokeStyle = "#999";
+  ctx.beginPath();
+  ctx.moveTo(m.left, m.Y(0));
+  ctx.lineTo(w - m.right, m.Y(0));
+  ctx.stroke();
+}
+
 function flvPolyline(ctx, t, col, X, Y, ok) {
   ctx.beginPath();
   let pen = false;
@@ -232,8 +240,9 @@ function flvTimeSpan(t) {
   return [t0, Math.max(t[t.length - 1], t0 + 1)];
 }
 
-// V over time: a log axis while every V shown is > 0, else a linear one with a note (V of
-// eq. 15 is not bounded below: a held robot can take it negative). Returns what was drawn.
+// V over time: a log axis while every V shown is > 0, else a linear one with a note (V_n of
+// eq. 15 can be negative: its restriction term reaches -6 theta near a switching surface,
+// where a dragged robot takes it easily). Returns what was drawn.
 function flvDrawV(ctx, w, h, series, opts) {
   ctx.fillStyle = "#fff";
   ctx.fillRect(0, 0, w, h);
@@ -271,13 +280,7 @@ function flvDrawV(ctx, w, h, series, opts) {
     }
   }
   const m = flvPlotFrame(ctx, w, h, opts, t0, t1, y0, y1, log);
-  if (!log && y0 < 0 && y1 > 0) {
-    ctx.strokeStyle = "#999";
-    ctx.beginPath();
-    ctx.moveTo(m.left, m.Y(0));
-    ctx.lineTo(w - m.right, m.Y(0));
-    ctx.stroke();
-  }
+  if (!log && y0 < 0 && y1 > 0) flvZeroLine(ctx, m, w);
   out.switches = flvPlotMarks(ctx, m, h, opts, t0, t1);
   ctx.strokeStyle = FLV_PALETTE[0];
   ctx.lineWidth = 1.4;
@@ -287,7 +290,7 @@ function flvDrawV(ctx, w, h, series, opts) {
     ctx.font = "11px sans-serif";
     ctx.textAlign = "right";
     ctx.textBaseline = "top";
-    ctx.fillText("V ≤ 0 shown: eq. 15 is not bounded below (e.g. a dragged robot); linear axis",
+    ctx.fillText("V ≤ 0 (eq. 15 can be negative, e.g. on a drag): linear axis",
       w - m.right - 2, m.top + 2);
   }
   return out;
@@ -360,11 +363,7 @@ function flvDrawErrors(ctx, w, h, series, opts) {
     ctx.fill();
     out.band = true;
   }
-  ctx.strokeStyle = "#999";
-  ctx.beginPath();
-  ctx.moveTo(m.left, m.Y(0));
-  ctx.lineTo(w - m.right, m.Y(0));
-  ctx.stroke();
+  flvZeroLine(ctx, m, w);
   out.switches = flvPlotMarks(ctx, m, h, opts, t0, t1);
   ctx.lineWidth = 1.4;
   out.lines = shown.map((e) => opts.labels[e - 1] || `edge ${e}`);
