@@ -181,6 +181,10 @@ def test_replay_with_the_time_slider(browser, tmp_path):
         wait_for(lambda: session.index == 25, what="the seek")
         wait_for(lambda: abs(float(attr(page, "t")) - 0.25) < 1e-9, what="frame 25 drawn")
         assert int(attr(page, "robots")) == 3
+        # the switching events the plots mark: the saved sigma's, all within the run
+        switches = session.info()["series"]["switches"]
+        assert attr(page, "switches") == str(len(switches))
+        assert all(0 < t <= 0.5 for t in switches)
         page.close()
 
 
