@@ -303,6 +303,15 @@ def test_the_page_reads_like_a_plot(browser):
         wait_for(lambda: attr(page, "reached"), timeout=15, what="the speed reached")
         label = page.text_content(f"{ROOT_SEL} .flv-speed")
         assert label.startswith("x1 (reached x") and float(attr(page, "reached")) > 0
+        # a switching event marked: a perturbation (seeded) turns the restriction off
+        assert attr(page, "switches") == "0"
+        pause(page, session)
+        page.fill("input[data-role=perturb-scale]", "1")
+        page.click("button[data-role=perturb]")
+        page.fill("input[data-role=step-count]", "3000")
+        page.click("button[data-role=step]")
+        wait_for(lambda: int(attr(page, "switches")) >= 1, what="a switching event marked")
+        assert flv(page, "plots")["v"]["switches"] >= 1
 
 
 def test_many_edges_plot_the_worst_and_a_band(browser):
