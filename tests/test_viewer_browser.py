@@ -44,8 +44,11 @@ def attr(page, name):
 
 
 def pause(page, session):
+    """Pause, and wait until the page has drawn the paused state (the view, which follows
+    the formation, then stays where it is)."""
     page.click("button[data-role=pause]")
     wait_for(lambda: session.paused, what="the run to pause")
+    wait_for(lambda: float(attr(page, "t")) == session.t, what="the paused state drawn")
 
 
 def test_page_draws_every_robot_and_streams(live):

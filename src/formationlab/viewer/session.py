@@ -6,7 +6,12 @@ robot model, marching, obstacles, safety filter, sensing, faults) advanced one s
 time by the stepping driver's body (:class:`formationlab.integrators.driver.Stepping`:
 the time ``t_k = k dt``, the measurement channel, the contact rule
 ``System.step_verdict`` and its messages). From a reset, ``step(k)`` gives the states
-``simulate(..., backend="numpy")`` saves. A person may change the state between steps
+``simulate(..., backend="numpy")`` saves. A large formation (from
+:data:`~formationlab.viewer.stepping.COMPILED_FROM` robots) that can run compiled steps in
+segments on the engine's compiled single run instead (:mod:`.stepping`: the same states,
+to rounding), so that "x1" is real time at a thousand robots; :attr:`LiveSession.reached`
+says what speed the run reached. A state that is not finite (or beyond float32, which the
+page receives) pauses the run with a message. A person may change the state between steps
 (drag, perturb): a dragged robot is held where the pointer is, before the step is judged.
 What the live view cannot honour is refused by name (:class:`SessionError`) or, for a
 substitute it shows instead (a ``filippov`` integrator shown with ``implicit-euler``),
@@ -43,13 +48,13 @@ from .export import SessionError, export_table, finish_export, plain
 from .frames import (
     Frame,
     History,
-    edge_errors,
     finite_or_none,
     live_header,
     scene_info,
     split_state,
     static_info,
 )
+from .history import StateHistory
 from .stepping import CompiledSteps
 
 __all__ = ["Frame", "LiveSession", "SessionError", "law_parameters"]
@@ -64,11 +69,6 @@ DRAWABLE = float(np.finfo(np.float32).max)
 SERIES_MAX = 2000
 #: Steps a live run may take (it has no end: a person stops it).
 LIVE_STEPS = 2**62
-#: Most samples :attr:`LiveSession.history` keeps: past it (or past :data:`HISTORY_BYTES`),
-#: every other sample is dropped, so that it spans the whole run at a coarser step.
-HISTORY_MAX = 100_000
-#: Most bytes of states :attr:`LiveSession.history` keeps (a sample is a state ``(n, k)``).
-HISTORY_BYTES = 256 * 1024**2
 #: Wall seconds over which the speed reached is measured.
 REACHED_OVER_S = 0.5
 
@@ -142,11 +142,8 @@ class LiveSession:
         self._pin_at: NDArray[np.float64] | None = None
         self._debt = 0.0
         self._V: tuple[Any, float, float, float] | None = None
-        #: ``(t, state, system)`` of the states stepped since the last reset (the system in
-        #: force then: V and the errors of :meth:`trajectory` are its own)
-        self.history: list[tuple[float, NDArray[np.float64], System]] = []
-        self._thin = 1  # history keeps every _thin-th state offered (doubles when full)
-        self._offered = 0
+        #: the states stepped since the last reset, with the closed loop of each
+        self.history = StateHistory()
         self._compiled: CompiledSteps | bool | None = False  # False: not yet looked at
         self._step_cost = 0.0  # wall seconds per compiled step, as last measured
         #: simulated seconds per wall second over the last REACHED_OVER_S of running (None
@@ -194,41 +191,15 @@ class LiveSession:
 
     def trajectory(self) -> History:
         """What was stepped since the last reset: times ``(T,)``, positions ``(T, n, 2)``,
-        ``V`` ``(T,)`` (eq. 15 for the paper's law, with the obstacles' repulsion) and the
-        per-edge errors ``(T, m)``, each state's by the law in force when it was stepped.
-
-        Every state, until :data:`HISTORY_MAX` samples or :data:`HISTORY_BYTES`; then every
-        other one is dropped (and every other state kept after), so that the history spans
-        the whole run (a large formation stepped on the compiled loop keeps every few steps
-        of a long segment: :mod:`.stepping`)."""
-        t = np.array([h[0] for h in self.history])
-        n, m = self.formation.n, len(self.formation.edges)
-        q, V, err = np.zeros((len(t), n, 2)), np.zeros(len(t)), np.zeros((len(t), m))
-        start = 0
-        while start < len(t):  # runs of states stepped under one law
-            system = self.history[start][2]
-            stop = start + 1
-            while stop < len(t) and self.history[stop][2] is system:
-                stop += 1
-            x = np.array([h[1] for h in self.history[start:stop]])
-            q[start:stop] = system.positions(x)
-            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-                V[start:stop] = system.potential(x)
-                err[start:stop] = edge_errors(self.formation, system.model.points(x))
-            start = stop
-        return History(t=t, positions=q, V=V, errors=err)
+        ``V`` ``(T,)`` and the per-edge errors ``(T, m)``, each state's by the law in force
+        when it was stepped (:class:`~formationlab.viewer.history.StateHistory`: every
+        state, thinned past its budget; a large formation on the compiled loop keeps every
+        few steps of a long segment, :mod:`.stepping`)."""
+        return self.history.read()
 
     def _record(self, x: NDArray[np.float64] | None = None, t: float | None = None) -> None:
-        """Keep a state (default the state now) in :attr:`history`, thinned past its budget."""
-        self._offered += 1
-        if (self._offered - 1) % self._thin:
-            return
-        x = self.state if x is None else x
-        full = len(self.history) >= HISTORY_MAX
-        if full or (len(self.history) + 1) * x.nbytes > HISTORY_BYTES:
-            del self.history[1::2]
-            self._thin *= 2
-        self.history.append((self.t if t is None else t, x.copy(), self.system))
+        """Keep a state (default the state now) in :attr:`history`."""
+        self.history.record(self.t if t is None else t, self.state if x is None else x, self.system)
 
     def _live_integrator(self, integrator: Integrator) -> FixedStepIntegrator:
         if isinstance(integrator, FixedStepIntegrator):
@@ -458,7 +429,6 @@ class LiveSession:
         self.status, self.message = "running", ""
         self.pinned = self._pin_at = None
         self.history.clear()
-        self._thin, self._offered = 1, 0
         self._start(np.array(self.scenario.x0, dtype=float), 0.0)
 
     # ------------------------------------------------------------------ interaction
