@@ -43,6 +43,11 @@ def attr(page, name):
     return page.get_attribute(ROOT_SEL, f"data-{name}")
 
 
+def flv(page, what):
+    """What the page's test hooks say (``axes``, ``view``, ``plots``, ``legend``)."""
+    return page.evaluate(f"document.querySelector('{ROOT_SEL}').flv.{what}()")
+
+
 def pause(page, session):
     """Pause, and wait until the page has drawn the paused state (the view, which follows
     the formation, then stays where it is)."""
@@ -64,13 +69,18 @@ def test_drag_robot_1_moves_it_on_the_server_and_the_run_continues(live):
     page, session = live
     pause(page, session)
     x0, y0 = page.evaluate(f"document.querySelector('{ROOT_SEL}').flv.robotPx(1)")
-    tx, ty = page.evaluate(f"document.querySelector('{ROOT_SEL}').flv.worldToPage(-1.5, 0.5)")
+    # a drop inside the view (which follows the formation): near its top left corner
+    left, top, right, bottom = flv(page, "view")["world"]
+    drop = [left + 0.15 * (right - left), top - 0.15 * (top - bottom)]
+    tx, ty = page.evaluate(
+        f"document.querySelector('{ROOT_SEL}').flv.worldToPage({drop[0]}, {drop[1]})"
+    )
     page.mouse.move(x0, y0)
     page.mouse.down()
     for k in range(1, 11):
         page.mouse.move(x0 + (tx - x0) * k / 10, y0 + (ty - y0) * k / 10)
         page.wait_for_timeout(20)
-    wait_for(lambda: np.linalg.norm(session.q[0] - [-1.5, 0.5]) < 0.05, what="robot 1 at the drop")
+    wait_for(lambda: np.linalg.norm(session.q[0] - drop) < 0.05, what="robot 1 at the drop")
     page.mouse.up()
     wait_for(lambda: session.pinned is None, what="the release")
     dropped, t_drop = session.q[0].copy(), session.t
@@ -245,10 +255,6 @@ def drawn_page(browser, session, *, robots: int):
         yield page
         page.close()
         assert not errors, errors
-
-
-def flv(page, what):
-    return page.evaluate(f"document.querySelector('{ROOT_SEL}').flv.{what}()")
 
 
 def test_the_page_reads_like_a_plot(browser):
