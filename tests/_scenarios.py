@@ -4,6 +4,8 @@
 simulation-2 alpha table and the paper's gains) with explicit Euler at dt = 1e-3, the
 given ``duration`` (a number or a placeholder the test replaces) and ``extra`` tables.
 ``clear_starts(n, batch, seed)`` draws random positions of ``n`` robots clear of contact.
+``lattice(n, law, duration)`` is a round patch of ``n`` robots of the triangular lattice
+(Delaunay edges, a start drawn around the template), as ``examples/lattice-1000.toml``.
 """
 
 import numpy as np
@@ -26,6 +28,32 @@ theta = 0.5
 integrator = "euler"
 dt = 1e-3
 """
+
+
+LATTICE = """
+name = "lattice-{n}"
+[robots]
+positions = {{ around = "template", sigma = 0.05, seed = 1 }}
+diameters = 0.2
+[formation]
+template = {{ lattice = "triangular", count = {n}, spacing = 1.0 }}
+edges = "delaunay"
+orientation = "{orientation}"
+[controller]
+law = "{law}"
+repulsion = {{ eta = 1.0, influence = 0.3 }}
+[simulation]
+integrator = "euler"
+dt = 1e-3
+duration = {duration}
+"""
+
+
+def lattice(n: int, *, law: str = "distance", duration: float = 0.01) -> str:
+    """Scenario text of ``n`` robots of the triangular lattice under ``law`` (the template's
+    orientation for the angle-restricted law)."""
+    orientation = "template" if law == "angle-restricted" else "free"
+    return LATTICE.format(n=n, law=law, orientation=orientation, duration=duration)
 
 
 def triangle(name: str, duration: str, extra: str = "") -> str:

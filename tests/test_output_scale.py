@@ -10,6 +10,7 @@ import h5py
 import numpy as np
 import pytest
 import xarray as xr
+from _scenarios import lattice as lattice_text
 from PIL import Image
 from typer.testing import CliRunner, Result
 
@@ -25,33 +26,14 @@ from formationlab.simulation import run as simulation
 _load_commands()
 runner = CliRunner()
 
-LATTICE = """
-name = "lattice-{n}"
-[robots]
-positions = {{ around = "template", sigma = 0.05, seed = 1 }}
-diameters = 0.2
-[formation]
-template = {{ lattice = "triangular", count = {n}, spacing = 1.0 }}
-edges = "delaunay"
-orientation = "{orientation}"
-[controller]
-law = "{law}"
-repulsion = {{ eta = 1.0, influence = 0.3 }}
-[simulation]
-integrator = "euler"
-dt = 1e-3
-duration = {duration}
-"""
-
 
 def invoke(*args: object) -> Result:
     return runner.invoke(app, [str(a) for a in args], catch_exceptions=False)
 
 
 def lattice(tmp: Path, n: int, *, law: str = "distance", duration: float = 0.01) -> Path:
-    orientation = "template" if law == "angle-restricted" else "free"
     path = tmp / f"lattice-{n}.toml"
-    path.write_text(LATTICE.format(n=n, law=law, orientation=orientation, duration=duration))
+    path.write_text(lattice_text(n, law=law, duration=duration))
     return path
 
 

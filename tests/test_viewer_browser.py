@@ -6,6 +6,7 @@ from contextlib import contextmanager
 
 import numpy as np
 import pytest
+from _scenarios import lattice
 from _viewer import launch_chromium, serving, sim2_session, wait_for
 from playwright.sync_api import sync_playwright
 
@@ -42,9 +43,17 @@ def attr(page, name):
     return page.get_attribute(ROOT_SEL, f"data-{name}")
 
 
+def flv(page, what):
+    """What the page's test hooks say (``axes``, ``view``, ``plots``, ``legend``)."""
+    return page.evaluate(f"document.querySelector('{ROOT_SEL}').flv.{what}()")
+
+
 def pause(page, session):
+    """Pause, and wait until the page has drawn the paused state (the view, which follows
+    the formation, then stays where it is)."""
     page.click("button[data-role=pause]")
     wait_for(lambda: session.paused, what="the run to pause")
+    wait_for(lambda: float(attr(page, "t")) == session.t, what="the paused state drawn")
 
 
 def test_page_draws_every_robot_and_streams(live):
@@ -60,13 +69,18 @@ def test_drag_robot_1_moves_it_on_the_server_and_the_run_continues(live):
     page, session = live
     pause(page, session)
     x0, y0 = page.evaluate(f"document.querySelector('{ROOT_SEL}').flv.robotPx(1)")
-    tx, ty = page.evaluate(f"document.querySelector('{ROOT_SEL}').flv.worldToPage(-1.5, 0.5)")
+    # a drop inside the view (which follows the formation): near its top left corner
+    left, top, right, bottom = flv(page, "view")["world"]
+    drop = [left + 0.15 * (right - left), top - 0.15 * (top - bottom)]
+    tx, ty = page.evaluate(
+        f"document.querySelector('{ROOT_SEL}').flv.worldToPage({drop[0]}, {drop[1]})"
+    )
     page.mouse.move(x0, y0)
     page.mouse.down()
     for k in range(1, 11):
         page.mouse.move(x0 + (tx - x0) * k / 10, y0 + (ty - y0) * k / 10)
         page.wait_for_timeout(20)
-    wait_for(lambda: np.linalg.norm(session.q[0] - [-1.5, 0.5]) < 0.05, what="robot 1 at the drop")
+    wait_for(lambda: np.linalg.norm(session.q[0] - drop) < 0.05, what="robot 1 at the drop")
     page.mouse.up()
     wait_for(lambda: session.pinned is None, what="the release")
     dropped, t_drop = session.q[0].copy(), session.t
@@ -180,6 +194,10 @@ def test_replay_with_the_time_slider(browser, tmp_path):
         wait_for(lambda: session.index == 25, what="the seek")
         wait_for(lambda: abs(float(attr(page, "t")) - 0.25) < 1e-9, what="frame 25 drawn")
         assert int(attr(page, "robots")) == 3
+        # the switching events the plots mark: the saved sigma's, all within the run
+        switches = session.info()["series"]["switches"]
+        assert attr(page, "switches") == str(len(switches))
+        assert all(0 < t <= 0.5 for t in switches)
         page.close()
 
 
@@ -237,3 +255,88 @@ def drawn_page(browser, session, *, robots: int):
         yield page
         page.close()
         assert not errors, errors
+
+
+def test_the_page_reads_like_a_plot(browser):
+    """One page, several checks (a page costs seconds): the drawing takes the window, its
+    grid is in metres with tick labels and a scale bar that match the drawing's scale, the
+    legend names the layers drawn, the view follows the formation's extent now and a key
+    fits the start, and the plots have a log V, the edge legend and the speed reached."""
+    session = sim2_session()
+    session.set_paused(True)
+    with drawn_page(browser, session, robots=3) as page:
+        # the drawing uses the window: at most the status lines and padding below it
+        box = page.locator("[data-role=scene]").bounding_box()
+        assert box["height"] >= 720 - 80 and box["width"] >= 1100 - 330 - 60
+        # axes: ticks every `step` metres, `scale` pixels per metre apart, labelled in metres
+        axes, view = flv(page, "axes"), flv(page, "view")
+        step, scale = axes["step"], view["scale"]
+        assert step * scale == pytest.approx(np.diff([p for _, p in axes["x"]]).mean(), rel=1e-6)
+        mantissa = step / 10 ** np.floor(np.log10(step))
+        assert min(abs(mantissa - m) for m in (1, 2, 5, 10)) < 1e-9
+        for value, px in axes["x"][:3]:  # each tick where its value in metres is drawn
+            there = page.evaluate(
+                f"document.querySelector('{ROOT_SEL}').flv.worldToPage({value}, 0)"
+            )
+            assert there[0] - box["x"] == pytest.approx(px, abs=1e-6)
+        bar = axes["bar"]
+        assert bar["px"] == pytest.approx(bar["metres"] * scale, rel=1e-9)
+        assert 0.1 * view["w"] <= bar["px"] <= 0.25 * view["w"] + 1e-9
+        # the legend: the layers drawn at the start of simulation 2
+        assert flv(page, "legend") == ["robots", "edges", "active", "lines"]
+        legend_text = page.text_content(f"{ROOT_SEL} [data-role=legend]")
+        assert "switching lines s (eq. 26)" in legend_text and "active restriction" in legend_text
+        # fit: the 6 m start fills the view; after 3 s the 1 m triangle still does
+        start = flv(page, "view")["start"]
+        x0, y0, x1, y1 = view["world"]
+        assert x0 <= start[0] and x1 >= start[1] and y1 <= start[2] and y0 >= start[3]
+        page.fill("input[data-role=step-count]", "3000")
+        page.click("button[data-role=step]")
+        wait_for(lambda: abs(float(attr(page, "t")) - 3.0) < 1e-9, what="the state at 3 s drawn")
+        q = session.q
+        extent = max(np.ptp(q[:, 0]), np.ptp(q[:, 1])) + max(session.formation.diameters)
+        wait_for(lambda: extent * flv(page, "view")["scale"] >= 0.4 * 666, what="a refit")
+        near = flv(page, "view")["scale"]
+        page.click("[data-role=scene]", position={"x": 5, "y": 5})
+        page.keyboard.press("s")  # the start again
+        wait_for(lambda: flv(page, "view")["mode"] == "start", what="the key s")
+        wait_for(lambda: flv(page, "view")["scale"] < near / 3, what="the start fitted")
+        page.keyboard.press("f")
+        wait_for(lambda: flv(page, "view")["scale"] == pytest.approx(near), what="fit now")
+        # plots: V > 0 on a log axis; one line and legend entry per edge (three edges)
+        plots = flv(page, "plots")
+        assert plots["v"]["log"] and not plots["v"]["negative"]
+        assert plots["e"]["lines"] == ["1-2", "1-3", "2-3"] and not plots["e"]["band"]
+        # running: the speed reached next to the one asked for
+        page.click("button[data-role=pause]")
+        wait_for(lambda: attr(page, "reached"), timeout=15, what="the speed reached")
+        label = page.text_content(f"{ROOT_SEL} .flv-speed")
+        assert label.startswith("x1 (reached x") and float(attr(page, "reached")) > 0
+        # a switching event marked: a perturbation (seeded) turns the restriction off
+        assert attr(page, "switches") == "0"
+        pause(page, session)
+        page.fill("input[data-role=perturb-scale]", "1")
+        page.click("button[data-role=perturb]")
+        page.fill("input[data-role=step-count]", "3000")
+        page.click("button[data-role=step]")
+        wait_for(lambda: int(attr(page, "switches")) >= 1, what="a switching event marked")
+        assert flv(page, "plots")["v"]["switches"] >= 1
+
+
+def test_many_edges_plot_the_worst_and_a_band(browser):
+    """More edges than colours: the five worst edges as lines with a legend row that
+    stays within the plot (no overprinted title), and every edge as a band."""
+    from formationlab.scenario import parse_scenario
+    from formationlab.viewer import LiveSession
+
+    session = LiveSession(parse_scenario(lattice(30)), seed=1)
+    session.set_paused(True)
+    assert len(session.formation.edges) > 24
+    session.step(5)
+    with drawn_page(browser, session, robots=session.formation.n) as page:
+        wait_for(lambda: flv(page, "plots")["e"], what="the error plot")
+        e = flv(page, "plots")["e"]
+        worst = session.frame().header["worst"]["edges"]
+        edges = session.formation.edges + 1
+        assert e["band"] and e["lines"] == [f"{edges[k - 1][0]}-{edges[k - 1][1]}" for k in worst]
+        assert e["legend"] == [f"all {len(edges)} edges (band); worst 5:", *e["lines"]]

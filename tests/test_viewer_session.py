@@ -183,8 +183,8 @@ def test_a_state_the_page_cannot_draw_pauses_the_stream_with_a_message():
     s.state[0] = [1e39, 0.0]
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # (no overflow warning from the cast either)
-        s.step(5)
+        assert s.step(5) == 0
         fr = s.frame()
     assert s.paused and fr.header["status"] == "out-of-range"
-    assert "lower the gains" in fr.header["message"] and s.steps == 1
+    assert "lower the gains" in fr.header["message"] and s.steps == 0  # refused before a step
     assert np.all(np.isfinite(fr.positions))

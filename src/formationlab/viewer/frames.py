@@ -23,6 +23,7 @@ from ..outcomes.analysis import bearing_errors, distance_errors
 
 __all__ = [
     "EDGE_ERRORS_MAX",
+    "EDGE_TOP",
     "SURFACES_MAX",
     "Frame",
     "History",
@@ -34,6 +35,10 @@ __all__ = [
 EDGE_ERRORS_MAX = 24
 #: Surfaces whose on/off state goes into each frame (beyond: none, no switching lines drawn).
 SURFACES_MAX = 400
+#: Edges whose errors the plot draws as lines (the worst); the rest as a band.
+EDGE_TOP = 5
+#: Most switching events a replay marks on its plots.
+SWITCHES_MAX = 500
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -56,7 +61,7 @@ class Frame:
 
 @dataclasses.dataclass(frozen=True, kw_only=True, eq=False)
 class History:
-    """What a viewer has shown: times and positions.
+    """What a viewer has shown: times, positions, V and the errors.
 
     Attributes
     ----------
@@ -64,10 +69,18 @@ class History:
         Seconds.
     positions : ndarray, shape (T, n, 2)
         Robot centres at those times (robot 1 is column 0).
+    V : ndarray, shape (T,)
+        The law's Lyapunov function (eq. 15 for the paper's law; NaN where unknown). It
+        can be negative where the paper's V is: a held robot (a drag) is not bound by it.
+    errors : ndarray, shape (T, m)
+        Per edge (``formation.edges`` order): ``r_ij - d_ij`` in metres, or the bearing
+        errors ``||g_ij - g*_ij||`` of a formation judged by its bearings.
     """
 
     t: NDArray[np.float64]
     positions: NDArray[np.float64]
+    V: NDArray[np.float64]
+    errors: NDArray[np.float64]
 
 
 def split_state(state: NDArray[np.float64], names: tuple[str, ...] = ()) -> tuple[NDArray, Any]:
@@ -97,15 +110,40 @@ def errors_kind(formation: Formation) -> str:
     return "bearing" if formation.bearings is not None else "distance"
 
 
+def worst_edges(err: NDArray[np.float64], k: int = EDGE_TOP) -> NDArray[np.intp]:
+    """The 0-based edges of the ``k`` largest ``|err|`` (``err`` ``(m,)``), worst first
+    (NaN counts as the worst)."""
+    size = np.where(np.isnan(err), np.inf, np.abs(err))
+    k = min(k, err.size)
+    top = np.argpartition(-size, k - 1)[:k] if k else np.zeros(0, np.intp)
+    return top[np.argsort(-size[top], kind="stable")]
+
+
 def error_fields(err: NDArray[np.float64]) -> dict[str, Any]:
-    """The frame's error summary: ``err_max``, ``err_rms``, and ``errors`` for few edges."""
+    """The frame's error summary: ``err_max``, ``err_rms``, ``band`` (the least and the
+    largest error), ``worst`` (the 1-based edges of the :data:`EDGE_TOP` largest ``|err|``
+    and their errors), and ``errors`` (every edge's) for few edges."""
+    top = worst_edges(err)
     out: dict[str, Any] = {
         "err_max": float(np.max(np.abs(err))) if err.size else 0.0,
         "err_rms": float(np.sqrt(np.mean(err * err))) if err.size else 0.0,
+        "band": [float(np.min(err)), float(np.max(err))] if err.size else None,
+        "worst": {"edges": (top + 1).tolist(), "values": [float(err[e]) for e in top]},
     }
     if err.size <= EDGE_ERRORS_MAX:
         out["errors"] = [float(x) for x in err]
     return out
+
+
+def switch_times(t: NDArray[np.float64], sigma: NDArray[np.float64] | None) -> list[float]:
+    """The times ``t`` ``(T,)`` at which some restriction turned on or off between two
+    saved states (``sigma`` ``(T, s)``: the switching functions; none without them), at
+    most :data:`SWITCHES_MAX` (the first)."""
+    if sigma is None or len(t) < 2 or sigma.shape[-1] == 0:
+        return []
+    on = np.asarray(sigma) >= 0
+    changed = np.flatnonzero(np.any(on[1:] != on[:-1], axis=-1)) + 1
+    return [float(v) for v in t[changed[:SWITCHES_MAX]]]
 
 
 def finite_or_none(v: float) -> float | None:

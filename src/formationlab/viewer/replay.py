@@ -24,6 +24,8 @@ from .frames import (
     finite_or_none,
     split_state,
     static_info,
+    switch_times,
+    worst_edges,
 )
 from .session import SERIES_MAX, law_parameters
 
@@ -120,8 +122,15 @@ class ReplaySession:
             "V": [finite_or_none(v) for v in self.V[sl]],
             "err_max": np.max(np.abs(err), axis=-1).tolist() if err.shape[-1] else [],
         }
+        if err.shape[-1]:
+            series["band"] = [np.min(err, axis=-1).tolist(), np.max(err, axis=-1).tolist()]
+            top = worst_edges(
+                np.max(np.abs(np.nan_to_num(err, nan=np.inf)), axis=0)
+            )  # the run's worst
+            series["worst"] = {"edges": (top + 1).tolist(), "values": err[:, top].T.tolist()}
         if static["edge_errors"]:
             series["errors"] = err.T.tolist()
+        series["switches"] = switch_times(self.t, self.sigma)
         law = None
         if self.scenario is not None:
             law = {"name": self.scenario.law.name, "params": law_parameters(self.scenario.law)}

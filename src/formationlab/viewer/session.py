@@ -6,7 +6,12 @@ robot model, marching, obstacles, safety filter, sensing, faults) advanced one s
 time by the stepping driver's body (:class:`formationlab.integrators.driver.Stepping`:
 the time ``t_k = k dt``, the measurement channel, the contact rule
 ``System.step_verdict`` and its messages). From a reset, ``step(k)`` gives the states
-``simulate(..., backend="numpy")`` saves. A person may change the state between steps
+``simulate(..., backend="numpy")`` saves. A large formation (from
+:data:`~formationlab.viewer.stepping.COMPILED_FROM` robots) that can run compiled steps in
+segments on the engine's compiled single run instead (:mod:`.stepping`: the same states,
+to rounding), so that "x1" is real time at a thousand robots; :attr:`LiveSession.reached`
+says what speed the run reached. A state that is not finite (or beyond float32, which the
+page receives) pauses the run with a message. A person may change the state between steps
 (drag, perturb): a dragged robot is held where the pointer is, before the step is judged.
 What the live view cannot honour is refused by name (:class:`SessionError`) or, for a
 substitute it shows instead (a ``filippov`` integrator shown with ``implicit-euler``),
@@ -49,6 +54,8 @@ from .frames import (
     split_state,
     static_info,
 )
+from .history import StateHistory
+from .stepping import CompiledSteps
 
 __all__ = ["Frame", "LiveSession", "SessionError", "law_parameters"]
 
@@ -62,8 +69,8 @@ DRAWABLE = float(np.finfo(np.float32).max)
 SERIES_MAX = 2000
 #: Steps a live run may take (it has no end: a person stops it).
 LIVE_STEPS = 2**62
-#: Most ``(t, positions)`` samples :attr:`LiveSession.history` keeps (the oldest go first).
-HISTORY_MAX = 100_000
+#: Wall seconds over which the speed reached is measured.
+REACHED_OVER_S = 0.5
 
 
 def law_parameters(law: Law) -> dict[str, float]:
@@ -135,7 +142,14 @@ class LiveSession:
         self._pin_at: NDArray[np.float64] | None = None
         self._debt = 0.0
         self._V: tuple[Any, float, float, float] | None = None
-        self.history: list[tuple[float, NDArray[np.float64]]] = []
+        #: the states stepped since the last reset, with the closed loop of each
+        self.history = StateHistory()
+        self._compiled: CompiledSteps | bool | None = False  # False: not yet looked at
+        self._step_cost = 0.0  # wall seconds per compiled step, as last measured
+        #: simulated seconds per wall second over the last REACHED_OVER_S of running (None
+        #: before it is measured, and while paused)
+        self.reached: float | None = None
+        self._window = [0.0, 0.0]  # wall seconds and simulated seconds of the window
         self._start(np.array(scenario.x0, dtype=float), 0.0)
 
     # ------------------------------------------------------------------ the loop
@@ -163,27 +177,29 @@ class LiveSession:
         """Simulated time now, seconds."""
         return self._run.time(self._run.k)
 
-    def _start(self, x: NDArray[np.float64], t: float) -> None:
-        """Step on from the state ``x`` ``(n, k)`` at time ``t`` (a new pass of the driver)."""
+    def _start(self, x: NDArray[np.float64], t: float, *, record: bool = True) -> None:
+        """Step on from the state ``x`` ``(n, k)`` at time ``t`` (a new pass of the driver);
+        ``record``: keep it in the history (it is not there yet)."""
         try:
             self._run = Stepping(
                 self.system, self.integrator, x[None], n_steps=LIVE_STEPS, t0=t
             )  # the sensing's own seed, as simulate's run
         except UserInputError as exc:
             raise SessionError(str(exc), key=exc.key) from None
-        self._record()
+        if record:
+            self._record()
 
     def trajectory(self) -> History:
-        """Times ``(T,)`` and positions ``(T, n, 2)`` since the last reset (the latest
-        :data:`HISTORY_MAX` at most)."""
-        t = np.array([h[0] for h in self.history])
-        q = np.array([h[1] for h in self.history]).reshape(len(t), self.formation.n, 2)
-        return History(t=t, positions=q)
+        """What was stepped since the last reset: times ``(T,)``, positions ``(T, n, 2)``,
+        ``V`` ``(T,)`` and the per-edge errors ``(T, m)``, each state's by the law in force
+        when it was stepped (:class:`~formationlab.viewer.history.StateHistory`: every
+        state, thinned past its budget; a large formation on the compiled loop keeps every
+        few steps of a long segment, :mod:`.stepping`)."""
+        return self.history.read()
 
-    def _record(self) -> None:
-        if len(self.history) >= HISTORY_MAX:
-            del self.history[: HISTORY_MAX // 10]
-        self.history.append((self.t, self.positions.copy()))
+    def _record(self, x: NDArray[np.float64] | None = None, t: float | None = None) -> None:
+        """Keep a state (default the state now) in :attr:`history`."""
+        self.history.record(self.t if t is None else t, self.state if x is None else x, self.system)
 
     def _live_integrator(self, integrator: Integrator) -> FixedStepIntegrator:
         if isinstance(integrator, FixedStepIntegrator):
@@ -209,19 +225,83 @@ class LiveSession:
         if run.step(hold):
             self.steps += 1
             self._record()
-            if not np.all(np.abs(self.state) <= DRAWABLE):  # finite, but not drawable
-                return self._stop(
-                    "out-of-range",
-                    f"a robot left the range the page can draw (|x| > {DRAWABLE:.1e} m) at t = "
-                    f"{self.t:.4g} s: reset the robots, or lower the gains",
-                )
-            return True
+            return self._drawable()
         # the contact rule refused the step (System.step_verdict): stay at the last
         # accepted state, ready to run on from it
         status, message = Status.from_code(run.status[0]), run.message[0]
-        self._start(run.x_out[0].copy(), run.time(int(run.steps[0])))
-        self.history.pop()
+        self._start(run.x_out[0].copy(), run.time(int(run.steps[0])), record=False)
         return self._stop(str(status), message)
+
+    def _compiled_steps(self) -> CompiledSteps | None:
+        """The compiled loop of the closed loop in force, for a large formation that no
+        one holds (:mod:`.stepping`), else None."""
+        if self._compiled is False or (
+            isinstance(self._compiled, CompiledSteps)
+            and (self._compiled.system is not self.system
+                 or self._compiled.integrator != self.integrator)
+        ):  # fmt: skip
+            self._compiled = CompiledSteps.for_system(self.system, self.integrator)
+        return self._compiled if self.pinned is None else None  # type: ignore[return-value]
+
+    def _segment(self, compiled: CompiledSteps, count: int) -> int:
+        """Take ``count`` steps on the compiled loop; returns how many were accepted."""
+        run, t0 = self._run, self.t
+        seg = compiled.run(self.state, t0, count)
+        dt = self.integrator.dt
+        for k, x in zip(seg.k[1:], seg.x[1:], strict=True):
+            self._record(x, t0 + int(k) * dt)
+        run.move(seg.x[-1][None])  # the driver's state and step, moved on
+        run.k += seg.steps
+        self.steps += seg.steps
+        if seg.status is not Status.SUCCESS:
+            self._stop(str(seg.status), seg.message)
+            return seg.steps
+        self._drawable()
+        return seg.steps
+
+    def _take(self, count: int, budget_s: float | None = None) -> int:
+        """Take up to ``count`` steps (within ``budget_s`` wall seconds, at least one step);
+        returns how many were taken. Stops at a refused step (paused, with its message)."""
+        done, start = 0, time.perf_counter()
+        compiled = self._compiled_steps()
+        while done < count and self.status == "running":
+            if compiled is None:
+                if not self._one_step():
+                    break
+                done += 1
+            else:  # segments sized to the budget by the last one's cost per step
+                left = count - done
+                if budget_s is not None and self._step_cost > 0:
+                    spare = budget_s - (time.perf_counter() - start)
+                    left = max(1, min(left, int(spare / self._step_cost)))
+                began = time.perf_counter()
+                took = self._segment(compiled, left)
+                if took:
+                    self._step_cost = (time.perf_counter() - began) / took
+                done += took
+            if budget_s is not None and time.perf_counter() - start > budget_s:
+                break
+        return done
+
+    def _drawable(self) -> bool:
+        """Whether the state now can be drawn; if not, pause with a message (a state that
+        is not finite, or beyond float32, which the page receives)."""
+        x = self.state
+        if not np.all(np.isfinite(x)):
+            bad = sorted({int(i) + 1 for i in np.flatnonzero(~np.all(np.isfinite(x), axis=-1))})
+            robots = ", ".join(map(str, bad[:5])) + (" ..." if len(bad) > 5 else "")
+            return self._stop(
+                "non-finite",
+                f"the state is not finite (robot {robots} at inf or NaN) at t = {self.t:.4g} s: "
+                "the stream is paused; reset the robots, or lower the gains or dt",
+            )
+        if not np.all(np.abs(x) <= DRAWABLE):  # finite, but not drawable
+            return self._stop(
+                "out-of-range",
+                f"a robot left the range the page can draw (|x| > {DRAWABLE:.1e} m) at t = "
+                f"{self.t:.4g} s: reset the robots, or lower the gains",
+            )
+        return True
 
     def _stop(self, status: str, message: str) -> bool:
         self.status, self.message, self.paused = status, message, True
@@ -237,21 +317,29 @@ class LiveSession:
         """The state now."""
         x = self.state
         pos, heading = split_state(x, type(self.system.model).state_names)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # (not finite:
+            numbers = live_header(self.system, x, self.t)  # the status says so)
         header: dict[str, Any] = {
             "t": self.t,
             "V": finite_or_none(self._lyapunov(x)),
-            **live_header(self.system, x, self.t),
+            **numbers,
             "steps": self.steps,
             "paused": self.paused,
             "status": self.status,
             "message": self.message,
             "speed": self.speed,
+            "reached": None if self.paused else self.reached,
+            "compiled": isinstance(self._compiled, CompiledSteps),
             "pinned": None if self.pinned is None else self.pinned + 1,
             "law": self.law.name,
         }
         return Frame(
             header=header,
-            positions=np.clip(pos, -DRAWABLE, DRAWABLE).astype(np.float32),  # (the status says)
+            # drawable numbers only (a robot at NaN drawn at 0, one at inf at the edge of
+            # float32: the status says why the run paused)
+            positions=np.nan_to_num(pos, nan=0.0, posinf=DRAWABLE, neginf=-DRAWABLE)
+            .clip(-DRAWABLE, DRAWABLE)
+            .astype(np.float32),
             heading=None if heading is None else heading.astype(np.float32),
         )
 
@@ -298,30 +386,39 @@ class LiveSession:
         dt = self.integrator.dt
         self._debt = min(self._debt + self.speed * max(wall_dt, 0.0), 50 * dt + self.speed * 0.1)
         want = int(self._debt / dt)
-        done = 0
-        start = time.perf_counter()
-        while done < want:
-            if not self._one_step():
-                break
-            done += 1
-            if time.perf_counter() - start > self.step_budget_s:
-                break
+        done = self._take(want, self.step_budget_s) if self._resume() else 0
         self._debt = self._debt - done * dt if done == want else 0.0
+        window = self._window
+        window[0] += max(wall_dt, 0.0)
+        window[1] += done * dt
+        if window[0] >= REACHED_OVER_S:
+            self.reached = window[1] / window[0]
+            window[:] = [0.0, 0.0]
         return done
 
     def step(self, count: int = 1) -> int:
-        """Take ``count`` steps now (paused or not); returns how many were taken."""
+        """Take ``count`` steps now (paused or not); returns how many were taken (fewer when
+        a step is refused, or when the state cannot be drawn: :attr:`status` says why)."""
+        return self._take(count) if self._resume() else 0
+
+    def run_for(self, seconds: float) -> int:
+        """Run ``seconds`` of simulated time now (the steps of dt that fit, at least one);
+        returns the steps taken."""
+        return self.step(max(1, round(seconds / self.integrator.dt)))
+
+    def _resume(self) -> bool:
+        """Whether the run may step from the state now: a refused step's status is cleared
+        (the next step is judged again), a state that cannot be drawn keeps it paused."""
         if self.status != "running":
             self.status, self.message = "running", ""
-        done = 0
-        while done < count and self._one_step():
-            done += 1
-        return done
+        return self._drawable()
 
     def set_paused(self, paused: bool) -> None:
         self.paused = paused
-        if not paused and self.status != "running":
-            self.status, self.message = "running", ""
+        self._window[:] = [0.0, 0.0]
+        self.reached = None
+        if not paused:
+            self._resume()
 
     def set_speed(self, speed: float) -> None:
         self.speed = float(speed)
@@ -432,11 +529,10 @@ class LiveSession:
         x, t = self.state.copy(), self.t
         self.system, self.integrator = system, integrator
         try:
-            self._start(x, t)
+            self._start(x, t, record=False)  # (the same state, already recorded)
         except SessionError:
             self.system, self.integrator = old
             raise
-        self.history.pop()  # the same state, already recorded
         self._debt = 0.0
 
     def set_integrator(self, name: str, dt: float) -> None:

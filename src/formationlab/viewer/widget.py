@@ -8,8 +8,9 @@ buffers). The state a notebook user may read or set is mirrored in traitlets:
 ``t``, ``paused``, ``speed``, ``law``, ``law_params``, ``integrator``, ``dt``,
 ``status``; setting one from Python applies it to the run (and is validated
 like a message from the page), and every message from the page updates them.
-Without a browser: ``step(n)`` steps the run, ``positions`` ``(n, 2)``, ``state``
-``(n, k)`` and ``history`` (times and positions since the last reset) read it.
+Without a browser: ``step(n)`` and ``run(seconds)`` step the run, ``t``, ``positions``
+``(n, 2)``, ``state`` ``(n, k)`` and ``history`` (times, positions, V and the per-edge
+errors since the last reset) read it.
 Works in JupyterLab, Jupyter Notebook 7 and VS Code notebooks (anywidget).
 """
 
@@ -57,6 +58,7 @@ class Viewer(anywidget.AnyWidget):  # type: ignore[misc]
     >>> v = fl.Viewer("examples/paper-simulation-2.toml"); v           # doctest: +SKIP
     >>> v.law_params = {"k_a": 5.0}; v.positions                       # doctest: +SKIP
     >>> v.step(100); v.t, v.state.shape, v.history.positions.shape     # doctest: +SKIP
+    >>> v.run(2.0); v.history.V[-1], v.history.errors.shape            # doctest: +SKIP
     """
 
     _esm = traitlets.Unicode(bundle()).tag(sync=True)
@@ -120,31 +122,54 @@ class Viewer(anywidget.AnyWidget):  # type: ignore[misc]
 
     @property
     def history(self) -> History:
-        """The times ``(T,)`` and positions ``(T, n, 2)`` stepped since the last reset (live),
-        or the saved run (replay)."""
+        """What the run went through: times ``(T,)``, positions ``(T, n, 2)``, ``V``
+        ``(T,)`` and the per-edge errors ``(T, m)`` (:class:`History`), stepped since the
+        last reset (live: :meth:`LiveSession.trajectory`) or saved (replay)."""
         s = self.session
         if isinstance(s, LiveSession):
             return s.trajectory()
-        return History(t=np.array(s.t), positions=np.array(s.x[..., :2]))
+        return History(t=np.array(s.t), positions=np.array(s.x[..., :2]), V=np.array(s.V),
+                       errors=np.array(s.err))  # fmt: skip
 
     def step(self, count: int = 1) -> int:
         """Take ``count`` steps of the live run now (paused or not); returns how many.
 
-        Fewer when the contact rule refuses a step (:attr:`status` then says which).
+        Fewer when the contact rule refuses a step or the state stops being finite
+        (:attr:`status` then says which, and the run pauses).
 
         Raises
         ------
         SessionError
             For a replay (it plays a saved run; move its cursor with the slider).
         """
-        s = self.session
-        if not isinstance(s, LiveSession):
-            raise SessionError("a replay cannot step; it plays the saved run (use the slider)")
         if isinstance(count, bool) or not isinstance(count, int | np.integer) or count < 0:
             raise SessionError(f"step takes a whole number of steps >= 0, got {count!r}")
-        done = s.step(int(count))
+        done = self._live("step").step(int(count))
         self._sync()
         return done
+
+    def run(self, seconds: float) -> int:
+        """Run ``seconds`` of simulated time now (``round(seconds / dt)`` steps, at least
+        one), as fast as the machine can; returns the steps taken (fewer as for :meth:`step`).
+
+        Raises
+        ------
+        SessionError
+            For a replay, or a duration that is not a positive number of seconds.
+        """
+        if isinstance(seconds, bool) or not isinstance(seconds, int | float | np.floating):
+            raise SessionError(f"run takes a duration in seconds, got {seconds!r}")
+        if not 0 < seconds < float("inf"):
+            raise SessionError(f"run takes a positive, finite duration in seconds, got {seconds!r}")
+        done = self._live("run").run_for(float(seconds))
+        self._sync()
+        return done
+
+    def _live(self, what: str) -> LiveSession:
+        s = self.session
+        if not isinstance(s, LiveSession):
+            raise SessionError(f"a replay cannot {what}; it plays the saved run (use the slider)")
+        return s
 
     # ------------------------------------------------------------------ front end -> Python
 

@@ -9,6 +9,9 @@ const FLV_COLORS = {
   background: "#ffffff",
   grid: "#eef0f3",
   axis: "#d5d9df",
+  tick: "#6b7480",
+  axisTitle: "#333a42",
+  bar: "#222222",
   edge: "#9aa3ad",
   robot: "#1f6fb5",
   pinned: "#d0342c",
@@ -160,25 +163,29 @@ function flvBounds(pos, diameters, minSpan) {
   return bounds;
 }
 
+// The grid in metres, its tick labels along the left and bottom edges, the axis titles
+// and a scale bar (bottom right); returns what was drawn: the ticks' values and pixels and
+// the bar's length in metres and in pixels (for the tests).
 function flvGrid(ctx, view) {
   const [wx0, wy1] = view.world(0, 0);
   const [wx1, wy0] = view.world(view.w, view.h);
-  const span = Math.max(wx1 - wx0, wy1 - wy0);
-  let step = Math.pow(10, Math.floor(Math.log10(span / 4)));
-  if (span / step > 20) step *= 5;
-  else if (span / step > 10) step *= 2;
+  // about one line per 80 pixels
+  const step = flvNiceStep(80 / view.scale);
+  const axes = { step, x: [], y: [], bar: null };
   ctx.lineWidth = 1;
   ctx.strokeStyle = FLV_COLORS.grid;
   ctx.beginPath();
-  for (let x = Math.ceil(wx0 / step) * step; x <= wx1; x += step) {
-    const [px] = view.px(x, 0);
+  for (let k = Math.ceil(wx0 / step); k * step <= wx1; k++) {
+    const [px] = view.px(k * step, 0);
     ctx.moveTo(Math.round(px) + 0.5, 0);
     ctx.lineTo(Math.round(px) + 0.5, view.h);
+    axes.x.push([k * step, px]);
   }
-  for (let y = Math.ceil(wy0 / step) * step; y <= wy1; y += step) {
-    const [, py] = view.px(0, y);
+  for (let k = Math.ceil(wy0 / step); k * step <= wy1; k++) {
+    const [, py] = view.px(0, k * step);
     ctx.moveTo(0, Math.round(py) + 0.5);
     ctx.lineTo(view.w, Math.round(py) + 0.5);
+    axes.y.push([k * step, py]);
   }
   ctx.stroke();
   ctx.strokeStyle = FLV_COLORS.axis;
@@ -189,6 +196,44 @@ function flvGrid(ctx, view) {
   ctx.moveTo(0, oy);
   ctx.lineTo(view.w, oy);
   ctx.stroke();
+  // tick labels: numbers of metres at the edges (off the corners), the unit in the titles
+  const label = (v) => flvFmt(Math.abs(v) < 1e-9 * step ? 0 : v);
+  ctx.font = "11px sans-serif";
+  ctx.fillStyle = FLV_COLORS.tick;
+  ctx.textAlign = "center";
+  ctx.textBaseline = "bottom";
+  for (const [v, px] of axes.x) if (px > 30 && px < view.w - 60) ctx.fillText(label(v), px, view.h - 3);
+  ctx.textAlign = "left";
+  ctx.textBaseline = "middle";
+  for (const [v, py] of axes.y) if (py > 20 && py < view.h - 20) ctx.fillText(label(v), 3, py);
+  ctx.fillStyle = FLV_COLORS.axisTitle;
+  ctx.textAlign = "right";
+  ctx.textBaseline = "bottom";
+  ctx.fillText("x (m)", view.w - 4, view.h - 3);
+  ctx.textAlign = "left";
+  ctx.textBaseline = "top";
+  ctx.fillText("y (m)", 3, 3);
+  // the scale bar: the nice length nearest below a fifth of the width
+  let metres = flvNiceStep(view.w / 5 / view.scale);
+  if (metres * view.scale > view.w / 4) metres /= 2;
+  const px = metres * view.scale;
+  const x1 = view.w - 12, x0 = x1 - px, y = view.h - 22;
+  ctx.strokeStyle = FLV_COLORS.bar;
+  ctx.lineWidth = 3;
+  ctx.beginPath();
+  ctx.moveTo(x0, y);
+  ctx.lineTo(x1, y);
+  ctx.moveTo(x0, y - 5);
+  ctx.lineTo(x0, y + 5);
+  ctx.moveTo(x1, y - 5);
+  ctx.lineTo(x1, y + 5);
+  ctx.stroke();
+  ctx.fillStyle = FLV_COLORS.bar;
+  ctx.textAlign = "center";
+  ctx.textBaseline = "bottom";
+  ctx.fillText(`${flvFmt(metres)} m`, (x0 + x1) / 2, y - 4);
+  axes.bar = { metres, px };
+  return axes;
 }
 
 // Line s of eq. (26) for the vertex `a` of a surface beta c_abc + theta = 0 (b, c the
@@ -211,11 +256,12 @@ function flvSwitchingLine(pos, a, b, c, beta, theta) {
 function flvDrawScene(ctx, view, info, frame, opts) {
   const pos = frame.pos;
   const n = pos.length / 2;
-  const drawn = { obstacles: 0, headings: 0, filtered: 0, reference: false };
+  const drawn = { obstacles: 0, headings: 0, filtered: 0, reference: false, lines: 0,
+    active: 0, axes: null };
   opts.drawn = drawn;
   ctx.fillStyle = FLV_COLORS.background;
   ctx.fillRect(0, 0, view.w, view.h);
-  if (opts.grid) flvGrid(ctx, view);
+  if (opts.grid) drawn.axes = flvGrid(ctx, view);
   drawn.obstacles = flvDrawObstacles(ctx, view, info.obstacles);
 
   // graph
@@ -251,7 +297,9 @@ function flvDrawScene(ctx, view, info, frame, opts) {
       tris.lineTo(pb[0], pb[1]);
       tris.lineTo(pc[0], pc[1]);
       tris.closePath();
+      drawn.active++;
       if (active.length > 60) continue; // beyond, the lines hide the formation
+      drawn.lines++;
       for (const [v, w, u] of [[a, b, c], [b, c, a], [c, a, b]]) {
         const seg = flvSwitchingLine(pos, v, w, u, beta, theta);
         if (!seg) continue;

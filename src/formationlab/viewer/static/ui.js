@@ -81,8 +81,9 @@ function flvLayout(el) {
   const B = (role, text, title) => flvEl("button", { "data-role": role, title: title || "", text });
   const root = flvEl("div", { class: "flv-root", "data-robots": "0", "data-fps": "0",
     "data-frames": "0", "data-errors": "0", "data-state": "connecting" });
-  const scene = flvEl("canvas", { class: "flv-scene", "data-role": "scene" });
+  const scene = flvEl("canvas", { class: "flv-scene", "data-role": "scene", tabindex: "0" });
   const status = flvEl("div", { class: "flv-status", "data-role": "status" });
+  const legend = flvEl("div", { class: "flv-legend", "data-role": "legend" });
   const speed = flvEl("input", { type: "range", min: "-2", max: "2", step: "0.1", value: "0",
     "data-role": "speed" });
   const speedLabel = flvEl("span", { class: "flv-speed", text: "x1" });
@@ -119,17 +120,39 @@ function flvLayout(el) {
     Row("speed", speed, speedLabel),
     live, replay,
     flvEl("div", { class: "flv-row" }, [B("export", "Export TOML", "download the state as a scenario"),
-      B("png", "PNG", "download a snapshot"), B("fit", "Fit", "fit the view")]),
+      B("png", "PNG", "download a snapshot")]),
+    flvEl("div", { class: "flv-row" }, [
+      B("fit", "Fit", "fit the view to the formation now (key f; it follows the formation)"),
+      B("fit-start", "Fit start", "fit the view to the start (key s; it stays until f)")]),
     flvEl("div", { class: "flv-row" }, [flvEl("label", {}, [lines, " switching lines"]),
       flvEl("label", {}, [labels, " numbers"])]),
     plotV, plotE, logBox,
   ]);
-  root.append(flvEl("div", { class: "flv-main" }, [scene, status]), side);
+  root.append(flvEl("div", { class: "flv-main" }, [scene, legend, status]), side);
   el.appendChild(root);
-  return { root, scene, status, speed, speedLabel, stepCount, scale, law, params, integrator,
+  return { root, scene, status, legend, speed, speedLabel, stepCount, scale, law, params, integrator,
     dt, model, slider, lines, labels, plotV, plotE, logBox, live, replay,
     title: side.querySelector("[data-role=title]"),
     button: (role) => root.querySelector(`button[data-role=${role}]`) };
+}
+
+// The legend of what the drawing shows now: an entry per layer drawn.
+function flvLegend(box, info, frame, drawn) {
+  const hd = frame.header;
+  const layers = [["robots", "robots (diameters to scale)"]];
+  if (info.edges.length) layers.push(["edges", "graph edges"]);
+  if (drawn.active) layers.push(["active", "active restriction (σ ≥ 0)"]);
+  if (drawn.lines) layers.push(["lines", "switching lines s (eq. 26)"]);
+  if (drawn.obstacles) layers.push(["obstacles", "obstacles"]);
+  if (info.safety) layers.push(["filtered", `filter ${info.safety} acting on the robot`]);
+  if (drawn.reference) layers.push(["reference", "marching reference v_ref"]);
+  if (drawn.headings) layers.push(["headings", "headings"]);
+  if (hd.pinned) layers.push(["pinned", "dragged robot"]);
+  const key = layers.map((l) => l[0]).join(",");
+  if (box.dataset.key === key) return; // unchanged: nothing to rebuild
+  box.dataset.key = key;
+  box.replaceChildren(...layers.map(([layer, text]) => flvEl("span", { class: "flv-key",
+    "data-layer": layer }, [flvEl("span", { class: `flv-sw flv-sw-${layer}` }), text])));
 }
 
 function render({ model, el }) {
@@ -138,8 +161,11 @@ function render({ model, el }) {
   const ctx = ui.scene.getContext("2d");
   let info = null, latest = null, drawn = null, pending = false, pendingSince = 0;
   let alive = true, needFit = true, drag = null, dragSend = null;
+  // the view follows the formation's extent ("now"), or stays on the start ("start")
+  let fitMode = "now", startBounds = null, lastActive = null, switches = [];
+  let plotInfo = { v: null, e: null };
   let drawMs = 0, frames = 0, fpsCount = 0, fpsStart = performance.now();
-  let seriesV = new FlvSeries(1), seriesE = new FlvSeries(2);
+  let seriesV = new FlvSeries(1), seriesE = new FlvEdgeSeries();
   const dpr = () => window.devicePixelRatio || 1;
 
   function log(text, kind) {
@@ -178,9 +204,11 @@ function render({ model, el }) {
 
   function onInfo(msg) {
     info = msg;
-    let longest = 0;
+    let longest = 0, widest = 0;
     for (const d of info.distances) longest = Math.max(longest, d);
-    info.minSpan = 3 * longest;
+    for (const d of info.diameters) widest = Math.max(widest, d);
+    // the least span the view fits: a little more than the formation's longest edge
+    info.minSpan = Math.max(1.2 * longest, 4 * widest);
     ui.title.textContent = `${info.name} — ${info.n} robots (${info.mode})`;
     ui.live.style.display = info.mode === "live" ? "" : "none";
     ui.replay.style.display = info.mode === "replay" ? "" : "none";
@@ -189,15 +217,19 @@ function render({ model, el }) {
     ui.model.replaceChildren(...(info.models || []).map((k) => flvEl("option", { value: k, text: k })));
     ui.model.disabled = (info.models || []).length < 2;
     fillLaw();
-    const k = info.edge_errors ? info.edges.length : 2;
     seriesV = new FlvSeries(1);
-    seriesE = new FlvSeries(k);
+    seriesE = new FlvEdgeSeries();
+    switches = [];
+    lastActive = null;
+    startBounds = null;
     if (info.mode === "replay") {
       ui.slider.max = String(info.frames - 1);
       const s = info.series;
       seriesV.set(s.t, [s.V]);
-      if (info.edge_errors && s.errors) seriesE.set(s.t, s.errors);
-      else seriesE.set(s.t, [s.err_max]);
+      if (s.errors) seriesE.set(s.t, s.band, s.errors.map((_, j) => j + 1), s.errors);
+      else if (s.worst) seriesE.set(s.t, s.band, s.worst.edges, s.worst.values);
+      if (s.worst) seriesE.latest = s.worst.edges.slice();
+      switches = (s.switches || []).slice();
     }
     for (const n of info.notices || []) log(n, "notice");
     needFit = true;
@@ -210,9 +242,26 @@ function render({ model, el }) {
     latest = { header: msg, pos, heading };
     pending = false;
     if (info && info.mode === "live") {
-      if (info.edge_errors && msg.errors) seriesE.push(msg.t, msg.errors);
-      else seriesE.push(msg.t, [msg.err_max, msg.err_rms]);
+      const values = new Map();
+      if (msg.errors) msg.errors.forEach((v, j) => values.set(j + 1, v));
+      else if (msg.worst) msg.worst.edges.forEach((e, j) => values.set(e, msg.worst.values[j]));
+      const worst = msg.worst ? msg.worst.edges : [];
+      if (seriesV.t.length && msg.t < seriesV.t[seriesV.t.length - 1]) {
+        switches = []; // a reset
+        lastActive = null;
+      }
+      seriesE.push(msg.t, msg.band, values, worst);
       seriesV.push(msg.t, [msg.V]);
+      // a switching event: the set of active restrictions changed since the last frame
+      const active = msg.active ? msg.active.join(",") : null;
+      if (active !== null && lastActive !== null && active !== lastActive) {
+        switches.push(msg.t);
+        if (switches.length > 500) switches = switches.slice(-500);
+      }
+      lastActive = active;
+    }
+    if (!startBounds || (msg.t === 0 && !msg.index)) {
+      startBounds = info ? flvBounds(pos, info.diameters, info.minSpan) : null;
     }
     ui.button("pause").textContent = msg.paused ? "Run" : "Pause";
     if (info && info.mode === "replay" && document.activeElement !== ui.slider) {
@@ -267,19 +316,24 @@ function render({ model, el }) {
     const pos = latest.pos;
     const minSpan = info.minSpan;
     if (needFit) {
-      view.fit(flvBounds(pos, info.diameters, minSpan), w, h);
+      view.fit(fitMode === "start" && startBounds ? startBounds : flvBounds(pos, info.diameters, minSpan), w, h);
       needFit = false;
-    } else if (!drag && pos.length <= 2000) {
-      // refit when a robot leaves the view, or when the formation has shrunk to a speck
+    } else if (!drag && pos.length <= 20000) {
+      // follow the formation: refit when a robot leaves the view, or (fitting the formation
+      // now) when it fills less than 40 % of the view both ways
       const b = flvBounds(pos, info.diameters, minSpan);
-      const small = (b[1] - b[0]) * view.scale < 0.2 * w && (b[3] - b[2]) * view.scale < 0.2 * h;
+      const small = fitMode === "now" && (b[1] - b[0]) * view.scale < 0.4 * w &&
+        (b[3] - b[2]) * view.scale < 0.4 * h;
       let out = false;
-      for (let i = 0; i < pos.length && !out; i += 2) out = !view.contains(pos[i], pos[i + 1], 4);
+      const every = Math.max(2, 2 * Math.floor(pos.length / 2000)); // a sample of many robots
+      for (let i = 0; i < pos.length && !out; i += every) out = !view.contains(pos[i], pos[i + 1], 4);
       if (out || small) view.fit(b, w, h);
     }
     const theta = info.law && info.law.params && "theta" in info.law.params ? info.law.params.theta : null;
     const opts = { grid: true, lines: ui.lines.checked, labels: ui.labels.checked, theta };
     const count = flvDrawScene(ctx, view, info, latest, opts);
+    ui.root.flvAxes = opts.drawn.axes;
+    flvLegend(ui.legend, info, latest, opts.drawn);
     const hd = latest.header;
     const V = hd.V === null ? "—" : flvFmt(hd.V);
     const parts = [];
@@ -295,7 +349,14 @@ function render({ model, el }) {
     // a formation judged by its bearings (the bearing law) plots its bearing errors
     const bearing = (hd.errors_kind || info.errors_kind) === "bearing";
     const errWord = bearing ? "max|g-g*|" : "max|r-d|";
-    ui.status.textContent = `t = ${hd.t.toFixed(3)} s   V = ${V}   ${errWord} = ${flvFmt(hd.err_max)}` +
+    const unit = bearing ? "" : " m";
+    // the speed asked for and, while running, the one reached (simulated s per wall s)
+    const asked = `x${flvFmt(hd.speed)}`;
+    const reached = hd.reached === null || hd.reached === undefined || hd.paused
+      ? "" : ` (reached x${flvFmt(hd.reached)}${hd.compiled ? ", compiled loop" : ""})`;
+    ui.speedLabel.textContent = asked + reached;
+    ui.root.dataset.reached = reached ? String(hd.reached) : "";
+    ui.status.textContent = `t = ${hd.t.toFixed(3)} s   V = ${V}   ${errWord} = ${flvFmt(hd.err_max)}${unit}` +
       (parts.length ? "   " + parts.join("   ") : "") +
       `   ${ui.root.dataset.fps} fps` + (hd.status !== "running" && hd.status !== "replay" ? `   [${hd.status}]` : "");
     ui.root.dataset.robots = String(count);
@@ -304,19 +365,20 @@ function render({ model, el }) {
     ui.root.dataset.filtered = (hd.filtered || []).join(",");
     ui.root.dataset.reference = opts.drawn.reference ? hd.reference.join(",") : "";
     ui.root.dataset.t = String(hd.t);
-    for (const [c, s, title, labels, cursor] of [
-      [ui.plotV, seriesV, "Lyapunov function V", null],
-      [ui.plotE, seriesE, bearing
-        ? (info.edge_errors ? "bearing errors |g_ij − g*_ij|" : "bearing errors: max |g−g*|, rms")
-        : (info.edge_errors ? "distance errors r_ij − d_ij" : "distance errors: max |r−d|, rms"),
-        info.edge_errors ? info.edges.map((e) => `${e[0]}-${e[1]}`) : ["max", "rms"]],
-    ]) {
+    const cursor = info.mode === "replay" ? hd.t : null;
+    const plot = (c) => {
       const [pw, ph] = sizeCanvas(c);
       const pc = c.getContext("2d");
       pc.setTransform(dpr(), 0, 0, dpr(), 0, 0);
-      flvDrawPlot(pc, pw, ph, s, { title, labels, zero: s === seriesE,
-        cursor: info.mode === "replay" ? hd.t : cursor });
-    }
+      return [pc, pw, ph];
+    };
+    plotInfo.v = flvDrawV(...plot(ui.plotV), seriesV, { title: "Lyapunov function V (eq. 15)",
+      yTitle: "V", switches, cursor });
+    plotInfo.e = flvDrawErrors(...plot(ui.plotE), seriesE, {
+      title: bearing ? "bearing errors ‖g_ij − g*_ij‖" : "distance errors r_ij − d_ij (m)",
+      yTitle: bearing ? "‖g − g*‖" : "r − d (m)", switches, cursor, top: 5,
+      edges: info.edges.length, labels: info.edges.map((e) => `${e[0]}-${e[1]}`) });
+    ui.root.dataset.switches = String(switches.length);
   }
 
   function loop() {
@@ -388,10 +450,25 @@ function render({ model, el }) {
     model.send({ type: "reset" });
     needFit = true;
   });
-  ui.button("fit").addEventListener("click", () => (needFit = true));
+  const fit = (mode) => {
+    fitMode = mode;
+    needFit = true;
+    ui.root.dataset.fit = mode;
+  };
+  ui.button("fit").addEventListener("click", () => fit("now"));
+  ui.button("fit-start").addEventListener("click", () => fit("start"));
+  // keys on the drawing (click it first): f fits the formation now, s the start
+  ui.scene.addEventListener("keydown", (e) => {
+    if (e.ctrlKey || e.metaKey || e.altKey) return;
+    if (e.key === "f" || e.key === "s") {
+      fit(e.key === "f" ? "now" : "start");
+      e.preventDefault();
+    }
+  });
+  ui.scene.addEventListener("pointerdown", () => ui.scene.focus({ preventScroll: true }));
   ui.speed.addEventListener("input", () => {
     const v = Math.pow(10, Number(ui.speed.value));
-    ui.speedLabel.textContent = `x${v.toPrecision(2)}`;
+    ui.speedLabel.textContent = `x${flvFmt(v)}`;
     model.send({ type: "speed", value: v });
   });
   ui.law.addEventListener("change", () => model.send({ type: "set_law", name: ui.law.value }));
@@ -425,6 +502,12 @@ function render({ model, el }) {
       const [px, py] = view.px(x, y);
       return [r.left + px, r.top + py];
     },
+    // what the last frame drew: the grid's ticks and scale bar, the view, the plots
+    axes: () => ui.root.flvAxes,
+    view: () => ({ scale: view.scale, w: view.w, h: view.h, mode: fitMode,
+      start: startBounds, world: [...view.world(0, 0), ...view.world(view.w, view.h)] }),
+    plots: () => plotInfo,
+    legend: () => [...ui.legend.querySelectorAll("[data-layer]")].map((e) => e.dataset.layer),
   };
 
   if (!model.socket) model.send({ type: "hello" }); // a notebook widget is connected already
