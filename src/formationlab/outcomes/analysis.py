@@ -64,6 +64,7 @@ __all__ = [
     "final_motion",
     "net_speed",
     "orientation_agreement",
+    "orientation_signs",
     "touching",
     "triangle_orientation",
 ]
@@ -155,10 +156,17 @@ def orientation_agreement(formation: Formation, q: ArrayLike) -> tuple[int, int]
     if formation.dim == 3:
         agree, disagree = chirality_agreement(formation, q)
         return int(agree), int(disagree)
+    s = orientation_signs(formation, q)
+    return 2 * int(np.sum(s > 0)), 2 * int(np.sum(s <= 0))
+
+
+def orientation_signs(formation: Formation, q: ArrayLike) -> NDArray[np.float64]:
+    """``sign(c_ijk)`` times the desired sign, per restricted triple ``(i, j, k)`` of
+    ``Formation.restricted_halves``: ``(..., T)`` of ``q`` ``(..., n, 2)``; 1 agrees, -1 or 0
+    (collinear) disagrees."""
     i, j, k = formation.restricted_halves.T
     s = np.sign(cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :]))
-    s = s * -np.sign(formation.half_alpha())  # the desired sign(c_ijk) is -sign(alpha_ijk)
-    return 2 * int(np.sum(s > 0)), 2 * int(np.sum(s <= 0))
+    return s * -np.sign(formation.half_alpha())  # the desired sign(c_ijk) is -sign(alpha_ijk)
 
 
 def chirality_agreement(
