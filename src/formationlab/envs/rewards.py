@@ -35,7 +35,7 @@ from ..formation.spec import Formation
 from ..outcomes.analysis import bearing_errors, distance_errors, orientation_signs
 from ..validation import nonnegative
 
-__all__ = ["CONTACT_PENALTY", "Rewards", "orientation_errors", "robot_errors"]
+__all__ = ["CONTACT_PENALTY", "Rewards", "edge_errors", "orientation_errors", "robot_errors"]
 
 #: the reward lost by every robot at a step rejected by the contact rule
 CONTACT_PENALTY = 100.0
@@ -50,13 +50,21 @@ def _per_robot(formation: Formation, rows: NDArray[np.intp], values: NDArray) ->
     return np.moveaxis(out, 0, -1)
 
 
-def robot_errors(formation: Formation, p: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Each robot's local formation error ``e_i`` (module docstring) at the law's points
-    ``p`` ``(..., n, 2)``; ``(..., n)``."""
+def edge_errors(formation: Formation, p: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Each edge's error at the law's points ``p`` ``(..., n, 2)``: ``|r_ij - d_ij|``, or
+    ``||g_ij - g*_ij||`` for a formation judged by its bearings; ``(..., E)``."""
     if formation.bearings is not None:
-        e = bearing_errors(formation, p)
-    else:
-        e = np.abs(distance_errors(formation, p))
+        return bearing_errors(formation, p)
+    return np.abs(distance_errors(formation, p))
+
+
+def robot_errors(
+    formation: Formation, p: NDArray[np.float64], edges: NDArray[np.float64] | None = None
+) -> NDArray[np.float64]:
+    """Each robot's local formation error ``e_i`` (module docstring) at the law's points
+    ``p`` ``(..., n, 2)``, from the edges' errors (:func:`edge_errors`, computed when not
+    given); ``(..., n)``."""
+    e = edge_errors(formation, p) if edges is None else edges
     edges = formation.edges
     both = np.concatenate([edges[:, 0], edges[:, 1]])
     return _per_robot(formation, both, np.concatenate([e, e], axis=-1))

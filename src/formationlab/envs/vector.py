@@ -69,7 +69,7 @@ from ..io.scenario import resolve_scenario
 from ..models import Unicycle
 from ..models.terms import model_terms
 from ..models.transforms import NearIdentity
-from ..outcomes.analysis import Tolerances, bearings_met, classify, distance_errors
+from ..outcomes.analysis import Tolerances, bearings_met, classify
 from ..scenario import Scenario
 from ..sensing import Channel, Faults, Seed, Sensing
 from ..studies.config import GaussianInitial, parse_study
@@ -84,7 +84,7 @@ from .observations import (
     observation_space,
     other_robots,
 )
-from .rewards import Rewards, robot_errors
+from .rewards import Rewards, edge_errors, robot_errors
 
 __all__ = ["VECTOR_ENV_ID", "FormationVectorEnv"]
 
@@ -334,9 +334,10 @@ class FormationVectorEnv(VectorEnv):
         moved = np.flatnonzero(~rejected)
         self._observe(moved)
         p = self.model.points(x)
-        err = robot_errors(self.formation, p)
+        e = edge_errors(self.formation, p)
+        err = robot_errors(self.formation, p, e)
         done = rejected.copy()
-        candidates = moved[self._met(p[moved])]
+        candidates = moved[self._met(p[moved], e[moved])]
         outcome = np.full(B, "", dtype=object)
         outcome[rejected] = "collision"
         for b in candidates:  # (rare: the shape is met; classify decides)
@@ -359,11 +360,11 @@ class FormationVectorEnv(VectorEnv):
             self._begin(ended)
         return self._obs.copy(), rewards, done, cut, infos
 
-    def _met(self, p: NDArray[np.float64]) -> NDArray[np.bool_]:
-        """Whether the shape is met at points ``p`` ``(L, n, 2)`` (``classify``'s first test)."""
+    def _met(self, p: NDArray[np.float64], e: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Whether the shape is met at points ``p`` ``(L, n, 2)`` with edge errors ``e``
+        ``(L, E)`` (``classify``'s first test)."""
         if self.formation.bearings is not None:
             return bearings_met(self.formation, p, self.tolerances)
-        e = np.abs(distance_errors(self.formation, p))
         return np.max(e, axis=-1) <= self.tolerances.distance
 
     def _infos(
