@@ -236,3 +236,13 @@ def test_refuses_bad_input():
     assert err.value.key == "actions"
     with pytest.raises(ParameterError, match="2 seeds"):
         env.reset(seed=[1, 2, 3])
+
+
+def test_torchrl_adapter():
+    pytest.importorskip("torchrl")  # the optional 'torch' extra (not in the test extra)
+    from formationlab.envs.torchrl import torchrl_env
+
+    env = torchrl_env(TRIANGLE, num_envs=4)
+    assert tuple(env.batch_size) == (4,)
+    td = env.rollout(3)
+    assert tuple(td["observation"].shape) == (4, 3, 3, 8)
