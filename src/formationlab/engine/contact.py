@@ -26,6 +26,7 @@ __all__ = [
     "TOO_LARGE",
     "contact",
     "segment_clearance",
+    "verdict",
 ]
 
 END = Status.SUCCESS.code
@@ -101,3 +102,20 @@ def contact(x, xp, disp, gap, swept, near, nact, terms, rr):
             a = terms.pair_contact[p]
             if rr[p, b] - a <= SWEPT_MARGIN * disp[b]:
                 swept[b] = min(swept[b], _swept(x, xp, i, j, b, a))
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
+def verdict(fin, gap, swept):
+    """A step's verdict (``System.step_verdict``): 0 when accepted, else ``Status.code``.
+
+    ``fin`` is 0 while the new state is finite (:func:`.euler.euler`), ``gap`` its least
+    clearance and ``swept`` the least along the step (:func:`contact`); the order of the
+    checks is the driver's (and :func:`.loop.step_chunk`'s, which interleaves obstacles).
+    """
+    if fin != 0.0:
+        return NON_FINITE
+    if not gap > 0.0:
+        return COLLISION
+    if not swept > 0.0:
+        return TOO_LARGE
+    return 0

@@ -98,15 +98,25 @@ except ImportError as exc:  # pragma: no cover - the extra is installed where te
 
 from ..errors import FormationError, ParameterError
 from ..io.scenario import resolve_scenario
-from ..models import DoubleIntegrator, Unicycle
-from ..models.transforms import NearIdentity, heading_vectors
-from ..outcomes.analysis import Tolerances, bearing_errors, classify, distance_errors
+from ..models import Unicycle
+from ..models.transforms import NearIdentity
+from ..outcomes.analysis import Tolerances, classify
 from ..scenario import Scenario, closed_loop
-from ..sensing import Channel, Faults, Seed, Sensing, rotate
+from ..sensing import Channel, Faults, Seed, Sensing
 from ..simulation.run import initial_state
 from ..status import Status
-from ..validation import nonnegative, positive
+from ..validation import nonnegative
 from ..validation import seed as check_seed
+from .observations import (
+    MAX_COMMAND,
+    action_bound,
+    common_commands,
+    flat_observations,
+    observation_parts,
+    observation_space,
+    other_robots,
+)
+from .rewards import CONTACT_PENALTY, robot_errors
 
 __all__ = ["ENV_ID", "JITTER_FRACTION", "MAX_COMMAND", "FormationEnv", "env", "parallel_env"]
 
@@ -117,10 +127,6 @@ JITTER_FRACTION = 0.05
 #: the observation forms (``observation=``)
 OBSERVATIONS = ("flat", "dict")
 
-#: the action bound (m/s, or m/s^2 for double integrators) of a model without a limit
-MAX_COMMAND = 5.0
-#: the reward lost by every robot at a step rejected by the contact rule
-CONTACT_PENALTY = 100.0
 #: draws of a jittered start before giving up on one clear of contact
 _JITTER_TRIES = 100
 _LIVE = np.zeros(1, dtype=np.intp)  # the channel's one trial
@@ -239,15 +245,17 @@ class FormationEnv(ParallelEnv):
         self.possible_agents = [f"robot_{i + 1}" for i in range(n)]
         self.agent_index = {a: i for i, a in enumerate(self.possible_agents)}
         self.agents: list[str] = []
-        self.others = np.array([[j for j in range(n) if j != i] for i in range(n)], dtype=np.intp)
+        self.others = other_robots(n)
         rows = np.arange(n)[:, None]
         self.neighbours = self.formation.adjacency[rows, self.others].astype(np.int8)
         self._edges = self.formation.edges
-        bound = self._action_bound(max_command).astype(self.dtype)
-        self.dict_space = self._observation_space()
+        bound = action_bound(model, max_command).astype(self.dtype)
+        self.dict_space = observation_space(self.formation, model, self.dtype)
         flat = observation == "flat"
         self._obs_spaces = {
-            a: spaces.flatten_space(self.dict_space) if flat else self._observation_space()
+            a: spaces.flatten_space(self.dict_space)
+            if flat
+            else observation_space(self.formation, model, self.dtype)
             for a in self.possible_agents
         }
         self._act_spaces = {
@@ -262,36 +270,6 @@ class FormationEnv(ParallelEnv):
         self._frames: Any = None  # AgentFrames: one figure for every render
 
     # ------------------------------------------------------------------ spaces
-
-    def _action_bound(self, max_command: float | None) -> NDArray[np.float64]:
-        m = self.model
-        b = MAX_COMMAND if max_command is None else positive(max_command, "max_command")
-        if isinstance(m, Unicycle):
-            v = m.max_speed if m.max_speed is not None else b
-            if m.max_turn_rate is not None:
-                w = m.max_turn_rate
-            elif m.mapping == NearIdentity.name:
-                w = b / m.offset  # omega = u . h_perp / l
-            else:
-                w = 2.0 * m.turn_gain  # omega_max atan2(.) / (pi / 2)
-            return np.array([v, w], dtype=float)
-        limit = getattr(m, "max_speed", None)
-        if limit is not None and not isinstance(m, DoubleIntegrator):
-            b = limit
-        return np.array([b, b], dtype=float)
-
-    def _observation_space(self) -> spaces.Dict:
-        n, dtype = self.formation.n, self.dtype
-        parts: dict[str, spaces.Space] = {
-            "relative": spaces.Box(-np.inf, np.inf, shape=(n - 1, 2), dtype=dtype),
-            "seen": spaces.MultiBinary(n - 1),
-            "neighbour": spaces.MultiBinary(n - 1),
-        }
-        if isinstance(self.model, Unicycle):
-            parts["heading"] = spaces.Box(-1.0, 1.0, shape=(2,), dtype=dtype)
-        if isinstance(self.model, DoubleIntegrator):
-            parts["velocity"] = spaces.Box(-np.inf, np.inf, shape=(2,), dtype=dtype)
-        return spaces.Dict(parts)
 
     def observation_space(self, agent: str) -> spaces.Box | spaces.Dict:
         return self._obs_spaces[self._name(agent)]
@@ -428,37 +406,26 @@ class FormationEnv(ParallelEnv):
 
     def _command(self, a: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.float64]:
         """The commands ``(n, 2)`` the closed loop takes (common frame, at the law's points)."""
-        if isinstance(self.model, Unicycle):  # (v, omega) -> v h + l omega h_perp
-            h = heading_vectors(x[:, 2])
-            turn = self.model.offset * a[:, 1]
-            return a[:, :1] * h + turn[:, None] * np.stack([-h[:, 1], h[:, 0]], axis=-1)
-        return self.channel.world(a[None], x[None], _LIVE)[0]
+        world = lambda v: self.channel.world(v[None], x[None], _LIVE)[0]  # noqa: E731
+        return common_commands(self.model, a, x, world)
 
     def _observe(self) -> None:
         z, seen = self.channel.observe(self._x[None], _LIVE, self._k)
-        rows = np.arange(self.formation.n)[:, None]
-        self._seen = seen[0][rows, self.others]
-        self._rel = np.where(self._seen[..., None], z[0][rows, self.others], 0.0)
         angles = self.channel.angles(self._x[None], _LIVE)
-        frame = np.zeros(self.formation.n) if angles is None else angles[0]
-        self._own: dict[str, NDArray[np.float64]] = {}
-        if isinstance(self.model, Unicycle):
-            self._own["heading"] = heading_vectors(self._x[:, 2] - frame)
-        if isinstance(self.model, DoubleIntegrator):
-            self._own["velocity"] = rotate(self._x[:, 2:4], -frame)
+        self._parts = observation_parts(self.model, self._x[None], z, seen, angles, self.others)
 
     def _observations(self) -> dict[str, Any]:
-        seen = self._seen.astype(np.int8)
-        rel = self._rel.astype(self.dtype)
-        own = {key: v.astype(self.dtype) for key, v in self._own.items()}
+        parts = self._parts
         out: dict[str, Any] = {}
+        if self.observation == "flat":
+            flat = flat_observations(self.dict_space, parts, self.neighbours, self.dtype)[0]
+            return {a: flat[self.agent_index[a]] for a in self.agents}
+        seen = parts["seen"][0].astype(np.int8)
+        own = {k: v[0].astype(self.dtype) for k, v in parts.items() if k != "seen"}
         for a in self.agents:
             i = self.agent_index[a]
-            obs = {"relative": rel[i], "seen": seen[i], "neighbour": self.neighbours[i].copy()}
-            obs.update({key: v[i] for key, v in own.items()})
-            out[a] = obs
-            if self.observation == "flat":
-                out[a] = spaces.flatten(self.dict_space, obs).astype(self.dtype, copy=False)
+            out[a] = {"seen": seen[i], "neighbour": self.neighbours[i].copy()}
+            out[a].update({key: v[i] for key, v in own.items()})
         return out
 
     def as_dict(self, observation: Any) -> dict[str, NDArray]:
@@ -468,17 +435,8 @@ class FormationEnv(ParallelEnv):
         return spaces.unflatten(self.dict_space, np.asarray(observation))
 
     def _errors(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Each robot's local formation error ``sum_{j in N_i} |r_ij - d_ij|`` (or of its
-        bearings, ``||g_ij - g*_ij||``, for a formation judged by them); ``(n,)``."""
-        p = self.model.points(x)
-        if self.formation.bearings is not None:
-            e = bearing_errors(self.formation, p)
-        else:
-            e = np.abs(distance_errors(self.formation, p))
-        out = np.zeros(self.formation.n)
-        np.add.at(out, self._edges[:, 0], e)
-        np.add.at(out, self._edges[:, 1], e)
-        return out
+        """Each robot's local formation error (:func:`.rewards.robot_errors`); ``(n,)``."""
+        return robot_errors(self.formation, self.model.points(x))
 
     def _infos(self, err: NDArray, end: dict[str, Any] | None = None) -> dict[str, dict[str, Any]]:
         return {

@@ -16,19 +16,21 @@ same seed.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..models import Unicycle
+from ..controllers.terms import KernelTerms
+from ..models import RobotModel, Unicycle
 from ..sensing import local_controls
 
 if TYPE_CHECKING:
     from .pettingzoo import FormationEnv
+    from .vector import FormationVectorEnv
 
-__all__ = ["law_policy"]
+__all__ = ["law_actions", "law_policy", "vector_law_policy"]
 
 Policy = Callable[[Mapping[str, Mapping[str, NDArray]]], dict[str, NDArray[np.float64]]]
 
@@ -51,14 +53,64 @@ def law_policy(env: FormationEnv) -> Policy:
         for a, i in zip(observations, ids, strict=True):
             z[i, others[i]] = parts[a]["relative"]
             seen[i, others[i]] = np.asarray(parts[a]["seen"], dtype=bool)
-        own = env.own_distance
-        u = local_controls(
-            env.terms, z[None], seen=seen[None], own_distance=None if own is None else own[None]
-        )[0]
+        h = None
         if transform is not None:
-            h = np.array([parts[a]["heading"] for a in observations], dtype=float)
-            v, omega = transform.commands(u[ids], np.arctan2(h[:, 1], h[:, 0]))
-            return {a: np.array([v[r], omega[r]]) for r, a in enumerate(observations)}
-        return {a: u[i].copy() for a, i in zip(observations, ids, strict=True)}
+            h = np.array([parts[a]["heading"] for a in observations], dtype=float)[None]
+        act = law_actions(env.terms, env.model, z[None], seen[None], env.own_distance, h, ids)[0]
+        return {a: act[r].copy() for r, a in enumerate(observations)}
+
+    return policy
+
+
+def law_actions(
+    terms: KernelTerms,
+    model: RobotModel,
+    z: NDArray[np.float64],
+    seen: NDArray[np.bool_],
+    own: NDArray[np.float64] | None,
+    heading: NDArray[np.float64] | None,
+    ids: Sequence[int] | NDArray[np.intp] | None = None,
+) -> NDArray[np.float64]:
+    """The law's actions ``(B, m, 2)`` of robots ``ids`` (default all) of ``B`` formations.
+
+    ``z`` ``(B, n, n, 2)`` and ``seen`` ``(B, n, n)``: what each robot measures in its own
+    frame; ``own``: the robots' own desired distances ``(B, E, 2)`` or ``(E, 2)`` (None:
+    the formation's); ``heading`` ``(B, m, 2)``: the unicycles' observed ``(cos, sin)``
+    (else None). The command ``u_i`` of :func:`formationlab.sensing.local_controls`, as
+    ``(v_i, omega_i)`` through the model's transform for unicycles.
+    """
+    if own is not None and own.ndim == 2:
+        own = own[None]
+    u = local_controls(terms, z, seen=seen, own_distance=own)
+    if ids is not None:
+        u = u[:, np.asarray(ids, dtype=np.intp)]
+    if isinstance(model, Unicycle):
+        assert heading is not None
+        v, omega = model.transform.commands(u, np.arctan2(heading[..., 1], heading[..., 0]))
+        return np.stack([v, omega], axis=-1)
+    return u
+
+
+def vector_law_policy(env: FormationVectorEnv) -> Callable[[NDArray], NDArray[np.float64]]:
+    """``policy(observations) -> actions``: the law of ``env``'s scenario in every robot of
+    every formation of a :class:`~formationlab.envs.vector.FormationVectorEnv`.
+
+    ``observations`` ``(B, n, obs)`` (flat, as the environment gives them) become each
+    robot's measurements and its actions ``(B, n, 2)`` are :func:`law_actions` of them: one
+    array computation for all formations, each row from that robot's observation only.
+    """
+    n, others = env.formation.n, env.others
+    rows = np.arange(n)[:, None]
+    at = env.parts  # where each part of the observation is in the flat vector
+
+    def policy(observations: NDArray) -> NDArray[np.float64]:
+        o = np.asarray(observations, dtype=float)
+        B = o.shape[0]
+        z = np.zeros((B, n, n, 2))
+        seen = np.zeros((B, n, n), dtype=bool)
+        z[:, rows, others] = o[..., at["relative"]].reshape(B, n, n - 1, 2)
+        seen[:, rows, others] = o[..., at["seen"]] != 0
+        heading = o[..., at["heading"]] if "heading" in at else None
+        return law_actions(env.terms, env.model, z, seen, env.own_distance, heading)
 
     return policy

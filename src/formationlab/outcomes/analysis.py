@@ -64,6 +64,7 @@ __all__ = [
     "final_motion",
     "net_speed",
     "orientation_agreement",
+    "orientation_signs",
     "touching",
     "triangle_orientation",
     "turned_wrong",
@@ -156,19 +157,24 @@ def orientation_agreement(formation: Formation, q: ArrayLike) -> tuple[int, int]
     if formation.dim == 3:
         agree, disagree = chirality_agreement(formation, q)
         return int(agree), int(disagree)
-    wrong = turned_wrong(formation, q)
-    return 2 * int(np.sum(~wrong)), 2 * int(np.sum(wrong))
+    s = orientation_signs(formation, q)
+    return 2 * int(np.sum(s > 0)), 2 * int(np.sum(s <= 0))
 
 
-def turned_wrong(formation: Formation, q: ArrayLike) -> NDArray[np.bool_]:
-    """Whether each restricted triple of the plane (the halves ``j < k`` the formation
-    holds) disagrees with its desired sign of ``c_ijk`` (collinear counts as wrong);
-    ``(..., n, 2) -> (..., h)``."""
+def orientation_signs(formation: Formation, q: ArrayLike) -> NDArray[np.float64]:
+    """``sign(c_ijk)`` times the desired sign, per restricted triple ``(i, j, k)`` of
+    ``Formation.restricted_halves``: ``(..., T)`` of ``q`` ``(..., n, 2)``; 1 agrees, -1 or 0
+    (collinear) disagrees."""
     q = np.asarray(q, dtype=float)
     i, j, k = formation.restricted_halves.T
     s = np.sign(cross(q[..., j, :] - q[..., i, :], q[..., k, :] - q[..., i, :]))
-    s = s * -np.sign(formation.half_alpha())  # the desired sign(c_ijk) is -sign(alpha_ijk)
-    return s <= 0
+    return s * -np.sign(formation.half_alpha())  # the desired sign(c_ijk) is -sign(alpha_ijk)
+
+
+def turned_wrong(formation: Formation, q: ArrayLike) -> NDArray[np.bool_]:
+    """Whether each restricted triple of the plane disagrees with its desired sign of
+    ``c_ijk`` (:func:`orientation_signs` not 1; collinear counts as wrong); ``(..., T)``."""
+    return orientation_signs(formation, q) <= 0
 
 
 def chirality_agreement(

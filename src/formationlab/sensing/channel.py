@@ -27,6 +27,7 @@ evaluated at every stage of a scheme; otherwise measurements change once per ste
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -47,6 +48,16 @@ BLOCK = 256
 SENSING_LIMIT = 256
 #: what a trial's randomness is drawn from: an int, or a tuple of ints (study seed, trial)
 Seed = int | tuple[int, ...]
+
+
+class _Draws(NamedTuple):
+    """What a channel draws for each of its trials at creation (``None``: not drawn)."""
+
+    noise: list[np.random.Generator]
+    drop: list[np.random.Generator]
+    angles: NDArray[np.float64] | None  #: (B, n) fixed frames or frame errors, in the plane
+    rotations: NDArray[np.float64] | None  #: (B, n, 3, 3) fixed frames in space
+    own_distance: NDArray[np.float64] | None  #: (B, E, 2) with mismatch
 
 
 def _entropy(seed: Seed) -> list[int]:
@@ -93,34 +104,11 @@ class Channel:
         self.B = len(seeds)
         self.m = delay_ring(sensing.delay, dt, n, self.B) if sensing.delay > 0 else 0
         self.k = -1  # the last step observed
-        roots = [np.random.SeedSequence(_entropy(s)) for s in seeds]
-        kids = [r.spawn(4) for r in roots]  # frames, mismatch, noise, drops
-        self._noise = [np.random.Generator(np.random.PCG64(c[2])) for c in kids]
-        self._drop = [np.random.Generator(np.random.PCG64(c[3])) for c in kids]
-        self.fixed_angles: NDArray[np.float64] | None = None  # in the plane
-        self.fixed_rotations: NDArray[np.float64] | None = None  # in space, (B, n, 3, 3)
-        if sensing.frames == "local" and not model.has_heading and self.dim == 3:
-            self.fixed_rotations = np.stack(
-                [uniform_rotations(np.random.Generator(np.random.PCG64(c[0])), n) for c in kids]
-            ).reshape(self.B, n, 3, 3)
-        elif sensing.frames == "local" and not model.has_heading:
-            self.fixed_angles = np.stack(
-                [np.random.Generator(np.random.PCG64(c[0])).uniform(0, 2 * np.pi, n) for c in kids]
-            )
-        elif sensing.frame_error > 0:  # the common frame, turned by each robot's own error
-            self.fixed_angles = np.stack(
-                [np.random.Generator(np.random.PCG64(c[0])).normal(0.0, sensing.frame_error, n)
-                 for c in kids]
-            )  # fmt: skip
-        self.own_distance: NDArray[np.float64] | None = None
-        if sensing.mismatch > 0:
-            d, a = self.terms.edge_distance, self.terms.edge_contact
-            e = np.stack(
-                [np.random.Generator(np.random.PCG64(c[1])).standard_normal((d.size, 2))
-                 for c in kids]
-            ) * sensing.mismatch  # fmt: skip
-            cap = (0.5 * (d - a))[None, :, None]
-            self.own_distance = d[None, :, None] + np.clip(e, -cap, cap)
+        draws = self._draws(seeds)
+        self._noise, self._drop = draws.noise, draws.drop
+        self.fixed_angles: NDArray[np.float64] | None = draws.angles  # in the plane
+        self.fixed_rotations: NDArray[np.float64] | None = draws.rotations  # (B, n, 3, 3)
+        self.own_distance: NDArray[np.float64] | None = draws.own_distance  # (B, E, 2)
         shape = (self.B, n, n)
         # the delay ring and the held measurements (made at the first observed step: a
         # compiled path keeps its own and asks the channel only for seeds and draws)
@@ -129,6 +117,67 @@ class Channel:
         self._blocks: dict[str, NDArray[np.float64]] = {}
         self._eye = np.eye(n, dtype=bool)
         self._block_of: dict[str, int] = {}
+
+    def _draws(self, seeds: Sequence[Seed]) -> _Draws:
+        """Each trial's frames, mismatch and generators, drawn from its own seed."""
+        n, sensing = self.n, self.sensing
+        roots = [np.random.SeedSequence(_entropy(s)) for s in seeds]
+        kids = [r.spawn(4) for r in roots]  # frames, mismatch, noise, drops
+        angles = rotations = own = None
+        if sensing.frames == "local" and not self.model.has_heading and self.dim == 3:
+            rotations = np.stack(
+                [uniform_rotations(np.random.Generator(np.random.PCG64(c[0])), n) for c in kids]
+            ).reshape(len(kids), n, 3, 3)
+        elif sensing.frames == "local" and not self.model.has_heading:
+            angles = np.stack(
+                [np.random.Generator(np.random.PCG64(c[0])).uniform(0, 2 * np.pi, n) for c in kids]
+            )
+        elif sensing.frame_error > 0:  # the common frame, turned by each robot's own error
+            angles = np.stack(
+                [np.random.Generator(np.random.PCG64(c[0])).normal(0.0, sensing.frame_error, n)
+                 for c in kids]
+            )  # fmt: skip
+        if sensing.mismatch > 0:
+            d, a = self.terms.edge_distance, self.terms.edge_contact
+            e = np.stack(
+                [np.random.Generator(np.random.PCG64(c[1])).standard_normal((d.size, 2))
+                 for c in kids]
+            ) * sensing.mismatch  # fmt: skip
+            cap = (0.5 * (d - a))[None, :, None]
+            own = d[None, :, None] + np.clip(e, -cap, cap)
+        return _Draws(
+            [np.random.Generator(np.random.PCG64(c[2])) for c in kids],
+            [np.random.Generator(np.random.PCG64(c[3])) for c in kids],
+            angles, rotations, own,
+        )  # fmt: skip
+
+    def renew(self, trials: NDArray[np.intp], seeds: Sequence[Seed]) -> None:
+        """Give ``trials`` new seeds: their frames, mismatch and generators become those a
+        channel made with ``seeds`` draws (formations of a vectorised environment that start
+        a new episode, :mod:`formationlab.envs.vector`).
+
+        Only for a channel that is a function of the state (no noise, delay or drops:
+        :meth:`field`), whose trials carry no measurements from step to step.
+        """
+        if self.sensing.sampled:
+            raise ParameterError(
+                "a channel with noise, delay or drops carries its trials' measurements from "
+                "step to step: make a new Channel for the new seeds",
+                key="sensing",
+            )
+        trials = np.asarray(trials, dtype=np.intp).reshape(-1)
+        if trials.size != len(seeds):
+            raise ValueError(f"{len(seeds)} seeds for {trials.size} trials")
+        new = self._draws(seeds)
+        for ours, theirs in (
+            (self.fixed_angles, new.angles),
+            (self.fixed_rotations, new.rotations),
+            (self.own_distance, new.own_distance),
+        ):
+            if ours is not None and theirs is not None:
+                ours[trials] = theirs
+        for row, t in enumerate(trials):
+            self._noise[t], self._drop[t] = new.noise[row], new.drop[row]
 
     # ------------------------------------------------------------------ frames and views
 
