@@ -109,8 +109,9 @@ def verdict(fin, gap, swept):
     """A step's verdict (``System.step_verdict``): 0 when accepted, else ``Status.code``.
 
     ``fin`` is 0 while the new state is finite (:func:`.euler.euler`), ``gap`` its least
-    clearance and ``swept`` the least along the step (:func:`contact`); the order of the
-    checks is the driver's (and :func:`.loop.step_chunk`'s, which interleaves obstacles).
+    clearance and ``swept`` the least along the step (:func:`contact`, with the obstacles'
+    joined in by :func:`.loop.step_chunk`); the order of the checks is the driver's. The
+    compiled loop and the commanded step (:mod:`.commanded`) both decide by it.
     """
     if fin != 0.0:
         return NON_FINITE

@@ -55,7 +55,13 @@ from ..models.terms import HEADING, NEAR_IDENTITY, SINGLE
 from ..outcomes.tolerances import NET_STEPS
 from ..safety.stage import CENTRALIZED, WAIT, filter_command, filter_scratch, obstacle_contact
 from ..sensing.stage import halt, informed, sensed_field
-from .contact import COLLISION, CONVERGED, END, NON_FINITE, SWEPT_MARGIN, TOO_LARGE, contact
+from .contact import (
+    CONVERGED,
+    END,
+    SWEPT_MARGIN,
+    contact,
+    verdict,
+)
 from .euler import euler
 from .lists import list_contact, list_field, list_step
 from .saving import save
@@ -304,20 +310,16 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
                 if code[b] >= 0:
                     continue
                 ended += 1
-                if fin[b] != 0.0:
-                    code[b] = NON_FINITE
-                    continue
-                if obs is not None:
+                if fin[b] == 0.0 and obs is not None:  # the obstacles' clearances join in
                     if obs.radius.shape[0] > 0:
                         reach = SWEPT_MARGIN * disp[b]
                         floor = min(mc[b], gap[b])
                         end, sw = obstacle_contact(obs, radius, x, xn, b, reach, floor)
                         gap[b] = min(gap[b], end)
                         swept[b] = min(swept[b], sw)
-                if not gap[b] > 0.0:
-                    code[b] = COLLISION
-                elif not swept[b] > 0.0:
-                    code[b] = TOO_LARGE
+                said = verdict(fin[b], gap[b], swept[b])  # (the step's verdict, in one place)
+                if said != 0:
+                    code[b] = said
                 else:
                     ended -= 1
                     if bad == 0:  # (else the vectorised loop above took it)
