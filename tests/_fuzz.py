@@ -167,6 +167,8 @@ VARIANTS: dict[str, dict[str, dict[str, Any]]] = {
 TIED: dict[str, tuple[str, ...]] = {
     "simulation.duration": ("simulation.dt", "sensing.delay", "asynchronous.periods"),
     "simulation.dt": ("sensing.delay", "asynchronous.periods"),
+    "study.duration": ("study.dt",),  # the steps of a trial: duration / dt
+    "equilibria.duration": ("equilibria.dt",),
     "simulation.integrator": ("sensing", "asynchronous", "faults"),
     "robots.positions": ("robots.headings", "formation", "obstacles", "faults.stop",
                          "marching.leader", "asynchronous.periods", "study", "robots.diameters"),
@@ -205,10 +207,14 @@ def _odd_values() -> st.SearchStrategy[Any]:
                          {"a": 1}, {"kind": "gaussian"}, [None.__class__.__name__]]),
         words,
         nested,
-        st.integers(min_value=1000, max_value=20000).map(lambda n: [[0.5 * i, 0.0]
-                                                                    for i in range(n)]),
+        st.sampled_from([300, 5000, 20000]).map(_row),  # a huge list (a complete graph of 5000
+        # robots is refused by its estimate; between, thousands of robots take seconds each)
         st.lists(st.floats(allow_nan=False, width=32), max_size=5),
     )  # fmt: skip
+
+
+def _row(n: int) -> list[list[float]]:
+    return [[0.5 * i, 0.0] for i in range(n)]
 
 
 def _deep(depth: int) -> Any:

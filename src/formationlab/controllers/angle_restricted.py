@@ -14,9 +14,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import ParameterError
 from ..formation.geometry import cross, perp, scatter_rows
 from ..formation.spec import DENSE_LIMIT, Formation
-from ..errors import ParameterError
 from ..validation import check_fields
 from .base import Law, ObstacleRepulsion, Repulsion, register
 from .distance import grad_phi, pair_geometry, phi_sum
