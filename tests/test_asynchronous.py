@@ -247,12 +247,15 @@ def test_a_held_command_runs_a_slow_robot_into_a_stopped_one():
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        ({"periods": [1e-3, 0.0, 1e-3]}, r"periods\[1\] \(robot 2\) must be a finite number > 0"),
+        ({"periods": [1e-3, 0.0, 1e-3]}, r"periods, robot 2, must be a finite number > 0"),
         ({"periods": [1e-3, -1e-3, 1e-3]}, r"robot 2"),
         ({"periods": [1e-3, math.nan, 1e-3]}, r"robot 2"),
         ({"periods": [1e-3, 1e-3]}, r"one number or one per robot \(3 robots"),
-        ({"periods": 0.0}, r"robot 1\) must be a finite number > 0"),
-        ({"periods": np.int64(-2)}, r"robot 1\) must be a finite number > 0, got np.int64\(-2\)"),
+        ({"periods": 0.0}, r"robot 1, must be a finite number > 0"),
+        (
+            {"periods": np.int64(-2)},
+            r"robot 1, must be a finite number > 0 \(seconds\), got np.int64\(-2\)",
+        ),
         ({"periods": [[1e-3] * 3]}, r"one number or one per robot"),
         ({"jitter": 1.0}, r"jitter is a fraction of each period in \[0, 1\), got 1.0"),
         ({"jitter": -0.1}, r"jitter must be a finite number >= 0"),

@@ -24,17 +24,60 @@ def package_version() -> str:
 
 
 def available_memory() -> float | None:
-    """Memory available to a new allocation, bytes (Linux ``MemAvailable``); None if unknown."""
+    """Memory available to a new allocation, bytes; None if unknown.
+
+    The machine's (Linux ``MemAvailable``), less when the process runs under a limit: the
+    room left below its address-space limit (``ulimit -v``, ``RLIMIT_AS``) or its control
+    group's ``memory.max`` (a container's limit), so that a run is refused by its estimate
+    instead of failing to allocate.
+    """
+    found = [
+        v for v in (_meminfo("MemAvailable:"), _address_room(), _cgroup_room()) if v is not None
+    ]
+    if not found:
+        try:
+            found.append(float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")))
+        except (ValueError, OSError, AttributeError):
+            return None
+    return max(0.0, min(found))
+
+
+def _meminfo(field: str, path: str = "/proc/meminfo") -> float | None:
+    """A ``kB`` field of ``/proc/meminfo`` (or ``/proc/self/status``) in bytes, or None."""
     try:
-        with open("/proc/meminfo", encoding="ascii") as fh:
+        with open(path, encoding="ascii") as fh:
             for line in fh:
-                if line.startswith("MemAvailable:"):
+                if line.startswith(field):
                     return float(line.split()[1]) * 1024
-    except OSError:
+    except (OSError, ValueError, IndexError):
         pass
+    return None
+
+
+def _address_room() -> float | None:
+    """Bytes left below the address-space limit (``RLIMIT_AS``), or None without one."""
     try:
-        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):
+        import resource  # (not on Windows)
+
+        limit = resource.getrlimit(resource.RLIMIT_AS)[0]
+    except (ImportError, OSError, ValueError):
+        return None
+    if limit == resource.RLIM_INFINITY:
+        return None
+    used = _meminfo("VmSize:", "/proc/self/status")
+    return float(limit) - (used or 0.0)
+
+
+def _cgroup_room() -> float | None:
+    """Bytes left below the control group's ``memory.max`` (cgroup v2), or None."""
+    try:
+        with open("/sys/fs/cgroup/memory.max", encoding="ascii") as fh:
+            limit = fh.read().strip()
+        if limit == "max":
+            return None
+        with open("/sys/fs/cgroup/memory.current", encoding="ascii") as fh:
+            return float(limit) - float(fh.read().strip())
+    except (OSError, ValueError):
         return None
 
 

@@ -20,6 +20,7 @@ import functools
 import math
 import numbers
 import re
+import tomllib
 import typing
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any
@@ -272,6 +273,33 @@ def _instance(cls: type, model: BaseModel) -> Any:
 _TABLE = re.compile(r"^\[\[?\s*([A-Za-z0-9_.\"' -]+?)\s*\]\]?")
 
 
+_BARE_KEY = re.compile(r"^([A-Za-z0-9_.\"' -]+?)\s*=")
+_PIECE = r"""(?:"(?:[^"\\]|\\.)*"|'[^']*'|[A-Za-z0-9_-]+)"""
+_QUOTED_KEY = re.compile(rf"^({_PIECE}(?:\s*\.\s*{_PIECE})*)\s*=")
+
+
+def _key_path(line: str) -> list[str] | None:
+    """The dotted key a ``key = value`` line sets, as its parts, or None (not such a line).
+
+    A quoted key may hold any character (``"ü" = 1``, ``"\\u0000" = 1``): TOML's own
+    reading of the key gives its parts."""
+    m = _BARE_KEY.match(line)
+    if m:
+        return [p.strip().strip("\"'") for p in m.group(1).split(".")]
+    m = _QUOTED_KEY.match(line) if line[:1] in "\"'" else None
+    if not m:
+        return None
+    try:
+        table: Any = tomllib.loads(f"{m.group(1)} = 0")
+    except tomllib.TOMLDecodeError:
+        return None
+    parts = []
+    while isinstance(table, dict) and table:
+        parts.append(next(iter(table)))
+        table = table[parts[-1]]
+    return parts
+
+
 def line_of(text: str, key: str) -> int | None:
     """1-based line of the dotted ``key`` (``"controller.k_c"``, ``"study.sweep.kA"``) in ``text``.
 
@@ -293,10 +321,10 @@ def line_of(text: str, key: str) -> int | None:
             if table == parts[:depth] and (best is None or depth > best[0]):
                 best = (depth, number)
             continue
-        m = re.match(r"^([A-Za-z0-9_.\"' -]+?)\s*=", s)
-        if not m:
+        keys = _key_path(s)
+        if keys is None:
             continue
-        path = table + [p.strip().strip("\"'") for p in m.group(1).split(".")]
+        path = table + keys
         depth = 0
         while depth < min(len(path), len(parts)) and path[depth] == parts[depth]:
             depth += 1

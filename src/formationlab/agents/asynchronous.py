@@ -313,7 +313,13 @@ def _periods(periods: float | ArrayLike | None, n: int, dt: float) -> NDArray[np
         )  # fmt: skip
     out = np.empty(n)
     for r, v in enumerate(values):
-        out[r] = positive(v, f"periods[{r}] (robot {r + 1})")
+        try:
+            out[r] = positive(v, "periods")
+        except ParameterError:  # the key is the list's; the robot is named in the message
+            raise ParameterError(
+                f"periods, robot {r + 1}, must be a finite number > 0 (seconds), got {v!r}",
+                key="periods",
+            ) from None
     return out
 
 

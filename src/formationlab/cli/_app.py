@@ -28,6 +28,7 @@ import os
 import re
 import subprocess
 import sys
+import unicodedata
 import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -49,6 +50,7 @@ __all__ = [
     "err_console",
     "fail",
     "group",
+    "printable",
     "warn",
 ]
 
@@ -72,6 +74,14 @@ FigureFormatOption = Annotated[
 INTERRUPTED = 130
 
 
+def printable(message: str) -> str:
+    """``message`` with its control characters (a NUL, an escape) written as escapes
+    (``\\x00``): messages quote what a user gave, which must not reach a terminal raw."""
+    return "".join(
+        c if c in "\n\t" or unicodedata.category(c) != "Cc" else repr(c)[1:-1] for c in message
+    )
+
+
 def fail(message: str, code: int = 2) -> NoReturn:
     """Print ``error: message`` on standard error and exit with ``code`` (an interrupt's
     message alone, below).
@@ -84,7 +94,9 @@ def fail(message: str, code: int = 2) -> NoReturn:
     if code == INTERRUPTED:
         err_console.print(f"[bold yellow]{escape(message)}[/]", highlight=False, soft_wrap=True)
         raise typer.Exit(interrupted_status())
-    err_console.print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True)
+    err_console.print(
+        f"[bold red]error:[/] {escape(printable(message))}", highlight=False, soft_wrap=True
+    )
     raise typer.Exit(code)
 
 
@@ -94,7 +106,7 @@ def warn(message: str) -> None:
         return
     _shown.add(message)
     err_console.print(
-        f"[bold yellow]warning:[/] {escape(message)}", highlight=False, soft_wrap=True
+        f"[bold yellow]warning:[/] {escape(printable(message))}", highlight=False, soft_wrap=True
     )
 
 

@@ -14,6 +14,12 @@ initial state under :mod:`tracemalloc`, which counts numpy's allocations.
 
 The size of ``trajectory.nc`` is that of its data before compression: an upper
 bound (trajectories compress by a factor of about 1.1 to 2).
+
+A study's size (:class:`StudyPlan`, :func:`plan_study`) is its trial-steps (all groups'
+trials times the steps of each) and the memory of its table of trials, which ``study``
+holds whole before it writes ``trials.parquet``; ``validate`` and ``study`` refuse a
+study beyond either (:func:`check_study`), at the key that sets the trials, with the
+largest number of trials that fits (which is accepted).
 """
 
 from __future__ import annotations
@@ -33,7 +39,17 @@ from ..formation.chunked import BUDGET, row_bytes
 from ..resources import available_memory
 from ..resources import size as _size
 
-__all__ = ["RunPlan", "available_disk", "available_memory", "check_plan", "plan_run"]
+__all__ = [
+    "TRIAL_STEP_LIMIT",
+    "RunPlan",
+    "StudyPlan",
+    "available_disk",
+    "available_memory",
+    "check_plan",
+    "check_study",
+    "plan_run",
+    "plan_study",
+]
 
 #: states in the stack whose post-processing is measured (fewer for many robots: each
 #: state of a swarm costs a k-d tree, and 400,000 robot-states measure well enough)
@@ -182,4 +198,79 @@ def check_plan(plan: RunPlan, out: Path, *, save_every_given: bool) -> str | Non
         f"the run is too large{given}: {plan.steps:,} steps, {plan.saved:,} saved states need "
         f"{what}; store fewer states with --save-every {k} (it keeps "
         f"{_saved(plan.steps, k):,}), shorten the run, or pass --force to run it anyway"
+    )
+
+
+# ----------------------------------------------------------------------------- studies
+
+#: the most trial-steps one study may take: more is a mistyped number (1e13 trial-steps of
+#: the paper's triangle take about two days at the 6e7 trial-steps/s of docs/studies.md)
+TRIAL_STEP_LIMIT = 1e13
+#: columns of ``trials.parquet`` besides the positions (docs/studies.md lists them), and the
+#: copies of the table a study holds at its end (the chunks' frames, their concatenation,
+#: the parquet writer's): a million trials of three robots measured 0.73 GB at the peak
+_TRIAL_COLUMNS = 24
+_TABLE_COPIES = 3
+
+
+@dataclass(frozen=True, kw_only=True)
+class StudyPlan:
+    """The size of a study: ``trials`` per group in ``groups`` groups, ``steps`` per trial,
+    of ``robots`` robots in ``dim`` dimensions."""
+
+    trials: int
+    groups: int
+    steps: int
+    robots: int
+    dim: int = 2
+
+    @property
+    def trial_steps(self) -> float:
+        """Explicit Euler steps of all trials (an upper bound: trials stop when they settle)."""
+        return float(self.trials) * self.groups * self.steps
+
+    @property
+    def per_trial(self) -> float:
+        """Bytes of memory per trial at the study's end (its row of the table, in copies)."""
+        return 8.0 * _TABLE_COPIES * (_TRIAL_COLUMNS + 2 * self.robots * self.dim)
+
+    @property
+    def memory(self) -> float:
+        """Bytes of memory of the table of trials at the study's end."""
+        return float(self.trials) * self.groups * self.per_trial
+
+
+def plan_study(setup: Any, trials: int | None = None) -> StudyPlan:
+    """The :class:`StudyPlan` of a :class:`formationlab.studies.runner.StudySetup` (with
+    ``trials`` per group instead of its table's, when given)."""
+    from ..integrators.base import steps_for
+
+    return StudyPlan(
+        trials=int(setup.config.trials if trials is None else trials),
+        groups=len(setup.groups),
+        steps=steps_for(setup.duration, setup.dt),
+        robots=setup.formation.n,
+        dim=setup.formation.dim,
+    )
+
+
+def check_study(plan: StudyPlan) -> str | None:
+    """Why the study is too large (its trials, with the most that fit), or None if it fits."""
+    memory = available_memory()
+    most = TRIAL_STEP_LIMIT / (plan.groups * plan.steps)
+    too: list[str] = []
+    if plan.trial_steps > TRIAL_STEP_LIMIT:
+        too.append(f"{plan.trial_steps:.3g} trial-steps, more than {TRIAL_STEP_LIMIT:.0e}")
+    if memory is not None:
+        most = min(most, _SHARE * memory / (plan.groups * plan.per_trial))
+        if plan.memory > _SHARE * memory:
+            too.append(f"~{_size(plan.memory)} of memory for its table of trials, "
+                       f"{_size(memory)} available")  # fmt: skip
+    if not too:
+        return None
+    groups = f" x {plan.groups:,} groups" if plan.groups > 1 else ""
+    fix = f"use at most {math.floor(most):,} trials" if most >= 1 else "shorten the trials"
+    return (
+        f"{plan.trials:,} trials{groups} of {plan.steps:,} steps need {' and '.join(too)}: "
+        f"{fix} (or fewer steps: a longer dt or a shorter duration)"
     )

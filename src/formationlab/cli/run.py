@@ -12,8 +12,8 @@ import typer
 from rich.markup import escape
 
 from ..errors import ParameterError, UserInputError
-from ._app import INTERRUPTED, FigureFormatOption, command, err_console, fail, warn
-from ._plan import RunPlan, check_plan, plan_run
+from ._app import INTERRUPTED, FigureFormatOption, command, err_console, fail, printable, warn
+from ._plan import RunPlan, check_plan, check_study, plan_run, plan_study
 from ._progress import progress_bar, shows_progress
 from .animate import ANIMATION_STEM, FORMATS_ALL, usable_formats, write_animation
 
@@ -451,7 +451,9 @@ def validate(
             sc = load_scenario(path)
             try:  # the tables other commands read
                 if sc.study is not None:
-                    StudySetup.from_scenario(sc)
+                    problem = check_study(plan_study(StudySetup.from_scenario(sc)))
+                    if problem:  # what `study` would refuse
+                        raise sc.error("study.trials", problem)
                 if sc.equilibria is not None:
                     equilibria_scenario(sc, parse_equilibria(sc))
             except UserInputError as exc:
@@ -459,7 +461,9 @@ def validate(
         except UserInputError as exc:
             bad += 1
             err_console.print(
-                f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True
+                f"[bold red]error:[/] {escape(printable(str(exc)))}",
+                highlight=False,
+                soft_wrap=True,
             )
             continue
         for w in sc.warnings:

@@ -9,7 +9,9 @@ from typing import Annotated, Any
 
 import typer
 
+from ..errors import ParameterError
 from ._app import FigureFormatOption, command, err_console, fail, warn
+from ._plan import check_study, plan_study
 from ._progress import progress_bar
 
 #: files of an earlier study that ``study --force`` removes
@@ -135,6 +137,11 @@ def study(
     if safety_filter is not None:
         sc = _with_filter(sc, safety_filter)
     setup = StudySetup.from_scenario(sc, config)
+    problem = check_study(plan_study(setup))
+    if problem:  # before anything is written or allocated
+        if trials is not None:
+            raise ParameterError(f"--trials {trials}: {problem}")
+        raise sc.error("study.trials", problem)
     _, note = setup.backend
     if note:
         say(f"note: {note}")

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from ..errors import ParameterError
 from ..formation.geometry import cross, perp, scatter_rows
 from ..formation.spec import DENSE_LIMIT, Formation
 from ..validation import check_fields
@@ -209,6 +210,12 @@ class RestrictedLaw(Law):
 
     def __post_init__(self) -> None:
         check_fields(self, positive=("k_c",), nonnegative=("k_a", "theta"))
+        if not np.isfinite(2.0 * self.k_a / (3.0 * self.k_c)):  # lambda of eq. (25), kappa >= 3
+            raise ParameterError(
+                f"k_c = {self.k_c:g} is so small beside k_a = {self.k_a:g} that lambda = "
+                "2 k_a / (kappa k_c) of eq. (25) overflows; use gains of moderate size",
+                key="k_c",
+            )
 
     def lam(self, formation: Formation) -> float:
         """``lambda`` of eq. (25): ``lambda kappa k_c = 2 k_a`` (kappa = pi or 3 in the

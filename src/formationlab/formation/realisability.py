@@ -35,6 +35,20 @@ _STARTS = 8
 _MAX_ROBOTS = 200
 
 
+#: most pairs of neighbours the triangle check looks at (``sum_i C(deg_i, 2)``: about a
+#: minute of Python beyond it); a denser graph is not checked by triangles
+_TRIANGLE_WORK = 2_000_000
+#: most robots of a complete graph checked by multidimensional scaling (an ``n x n`` matrix
+#: and its eigenvalues: 32 MB and a few seconds at this size)
+_MDS_ROBOTS = 2000
+
+
+def _triangle_work(edges: NDArray[np.integer], n: int) -> float:
+    """Pairs of neighbours :func:`_triangles` looks at: ``sum_i C(deg_i, 2)``."""
+    deg = np.bincount(np.asarray(edges, np.int64).ravel(), minlength=n).astype(float)
+    return float(np.sum(deg * (deg - 1) / 2))
+
+
 def _triangles(edges: NDArray[np.integer], n: int) -> list[tuple[int, int, int]]:
     """Triples ``i < j < k`` whose three pairs are all edges."""
     nbrs: list[set[int]] = [set() for _ in range(n)]
@@ -121,21 +135,31 @@ def realisability_problems(f: Formation) -> list[str]:
 
     Each entry is a sentence for a warning: a violated triangle inequality
     (naming the robots), or, when every triangle passes, the best
-    configuration's largest distance error. See the module docstring.
+    configuration's largest distance error. See the module docstring. Its work is bounded:
+    a graph with more than :data:`_TRIANGLE_WORK` pairs of neighbours is not checked by
+    triangles, and a complete graph of more than :data:`_MDS_ROBOTS` robots not at all.
     """
-    out = _triangle_problems(f)
+    out = _triangle_problems(f) if _triangle_work(f.edges, f.n) <= _TRIANGLE_WORK else []
     if out:
         return out
     complete = len(f.edges) == f.n * (f.n - 1) // 2
-    if complete and _mds_error(f) <= 1e-9:
-        return []
-    if f.n > _MAX_ROBOTS and not complete:
+    if complete and f.n > _MDS_ROBOTS:
+        return []  # a dense check of this size would take minutes and gigabytes
+    space = "space" if f.dim == 3 else "the plane"
+    if complete:
+        mds = _mds_error(f)
+        if mds <= 1e-9:
+            return []
+        if f.n > _MAX_ROBOTS:  # least squares on this many pairs would take gigabytes
+            return [
+                f"no configuration in {space} has these distances (they are not those of "
+                f"points in {space}: multidimensional scaling leaves {mds:.3g} of their "
+                "spread outside it)"
+            ]
+    if f.n > _MAX_ROBOTS:
         return []  # least squares would be slow; the triangles are checked
     _, err = best_realisation(f)
     if err <= _RTOL * float(np.max(f.distances)):
         return []
-    return [
-        f"no configuration in {'space' if f.dim == 3 else 'the plane'} has these distances "
-        "(the closest one found misses "
-        f"one by {err:.3g})"
-    ]
+    return [f"no configuration in {space} has these distances (the closest one found misses "
+            f"one by {err:.3g})"]  # fmt: skip

@@ -36,7 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import FormationError
 from ..neighbours.kdtree import close_pairs
-from ..validation import coordinates
+from ..validation import COORDINATE_LIMIT, coordinates
 from .chirality import chirality_from_shape, chirality_surfaces
 from .geometry import parity, row_norms
 from .graph import as_edges, complete_edges, edges_connected, is_rigid
@@ -284,8 +284,20 @@ class Formation:
             raise FormationError(
                 f"diameters must be finite and >= 0, got {d.tolist()}", key="diameters"
             )
+        if np.any(d > COORDINATE_LIMIT):  # contact distances add them: they would overflow
+            raise FormationError(
+                f"diameters must be at most {COORDINATE_LIMIT:g} m, got {float(d.max()):.3g}; "
+                "give them in metres",
+                key="diameters",
+            )
         edges = as_edges(self.edges, n, one_based=False)
         dist = _per_item(self.distances, len(edges), "distances", "edge")
+        if np.any(dist > COORDINATE_LIMIT):  # their squares would overflow
+            raise FormationError(
+                f"desired distances must be at most {COORDINATE_LIMIT:g} m, got "
+                f"{float(dist.max()):.3g}; give them in metres",
+                key="distances",
+            )
         a = 0.5 * (d[edges[:, 0]] + d[edges[:, 1]])
         bad = np.flatnonzero(dist <= a)
         if bad.size:
@@ -612,8 +624,7 @@ class Formation:
                         key="alpha",
                     )
                 rows.append((tuple(r[:3]), r[3]))
-        alpha = np.zeros((n, n, n))
-        given = np.zeros((n, n, n), bool)
+        given: dict[tuple[int, int, int], float] = {}  # a list, never an (n, n, n) array
         for key, value in rows:
             numbers = isinstance(key, Sequence | np.ndarray) and len(key) == 3
             if not (numbers and all(_robot_number(x) for x in key)):
@@ -636,18 +647,19 @@ class Formation:
                     f"alpha_{label} must be a finite non-zero number, got {value!r}", key="alpha"
                 )
             for (a, b, c), w in (((i, j, k), v), ((i, k, j), -v)):
-                if given[a, b, c] and alpha[a, b, c] != w:
+                if given.get((a, b, c), w) != w:
                     raise FormationError(
                         f"alpha_{a + 1}{b + 1}{c + 1} is given twice with different values "
                         "(remember alpha_ikj = -alpha_ijk)",
                         key="alpha",
                     )
-                alpha[a, b, c], given[a, b, c] = w, True
+                given[a, b, c] = w
         return cls(
             diameters=base.diameters,
             edges=base.edges,
             distances=base.distances,
-            alpha=alpha,
+            restricted_triples=np.array(list(given), np.int64).reshape(-1, 3),
+            restricted_alpha=np.array(list(given.values()), float),
             orientation="table",
             alpha_values=alpha_values,
         )

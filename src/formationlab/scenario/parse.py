@@ -449,9 +449,10 @@ def _build(model: ScenarioModel, raw: dict[str, Any], text: str, source: str) ->
             message = f"{source}: [{table}]{at}: {registry.ignored_message(name, ignored)}"
             warnings.append(message)
             _warnings.warn(message, IgnoredKeyWarning, stacklevel=3)
+    # the duration first: the sensing's delay and the robots' periods are judged against it
+    duration = _whole_steps(float(sim.duration), integrator, text, source, fail, warnings)
     sensing, faults = _sensing(model, formation, integrator, fail)
     asynchronous = _asynchronous(model, formation, integrator, fail)
-    duration = _whole_steps(float(sim.duration), integrator, text, source, fail, warnings)
     return Scenario(
         name=model.name or stem(source),
         text=text,
