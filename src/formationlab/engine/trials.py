@@ -88,6 +88,7 @@ def run_trials(
     command from their own measurements (``seeds``: each trial's, default the sensing's).
     """
     obstacles = tuple(obstacles)
+    safety = safety.at_step(dt) if safety is not None else None  # (the rows guard dt)
     system = System(
         formation=formation, law=law, model=model, obstacles=obstacles, safety=safety,
         sensing=sensing, faults=faults,
