@@ -214,7 +214,15 @@ def test_crowded_robots_match_barrier_filter(max_speed, gamma):
         tight = _clarabel(c.G.toarray(), imposed, u_hat, 1e-12)
         if tight is not None:
             converged += 1
-            np.testing.assert_allclose(out.reshape(-1), tight, rtol=0, atol=1e-8)
+            x = out.reshape(-1)
+            # where Clarabel is farther (seed 7 at gamma = 1e4: 9.1e-8, measured), the kernel's
+            # answer is feasible and no worse than Clarabel's: Clarabel's tolerance, not the
+            # kernel (the KKT conditions above hold for the kernel's answer)
+            if np.abs(x - tight).max() > 1e-8:
+                want = u_hat.reshape(-1)
+                assert (c.G @ x - imposed).max() <= 1e-12
+                assert np.sum((x - want) ** 2) <= np.sum((tight - want) ** 2), seed
+                np.testing.assert_allclose(x, tight, rtol=0, atol=1e-6)
         many += np.count_nonzero(lam) >= 3
         if code == FilterStatus.SOLVED:
             assert solve_barrier_qp(c, u_hat).status == FilterStatus.SOLVED

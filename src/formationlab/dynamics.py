@@ -211,6 +211,21 @@ class System:
             xdot[..., stopped, :] = 0.0
         return xdot
 
+    def at_step(self, dt: float | None) -> System:
+        """This system with its safety filter guarding steps of length ``dt``
+        (:meth:`SafetyFilter.at_step <formationlab.safety.SafetyFilter.at_step>`; None: no
+        step known, the continuous rows). Every loop that steps a system calls it with its
+        step: the stepping driver, the compiled runs and batches, the record of a run."""
+        if not self.filtered:
+            return self
+        assert self.safety is not None
+        safety = self.safety.at_step(dt)
+        if safety is self.safety:
+            return self
+        out = copy.copy(self)  # (the checks of __post_init__ were made for this filter)
+        object.__setattr__(out, "safety", safety)
+        return out
+
     @property
     def filtered(self) -> bool:
         """Whether a safety filter changes the commands (``safety.filter != "none"``)."""

@@ -88,6 +88,7 @@ def run_trials(
     command from their own measurements (``seeds``: each trial's, default the sensing's).
     """
     obstacles = tuple(obstacles)
+    safety = safety.at_step(dt) if safety is not None else None  # (the rows guard dt)
     system = System(
         formation=formation, law=law, model=model, obstacles=obstacles, safety=safety,
         sensing=sensing, faults=faults,
@@ -140,10 +141,12 @@ def safety_stage(law: Law, obstacles: Sequence[Any], safety: Any) -> tuple[Any, 
     """The loop's obstacle and filter terms of a closed loop of ``law`` among ``obstacles``
     under the filter ``safety`` (or None), or ``(None, None)`` when it has neither (the loop
     is then compiled without that stage)."""
-    d_o, gamma = (safety.d_obstacle, safety.gamma) if safety is not None else (0.0, 0.0)
+    d_o, gamma, step = (
+        (safety.d_obstacle, safety.gamma, safety.rows_step) if safety is not None else (0, 0, 0)
+    )
     rep = law.obstacle_repulsion() if obstacles else None
     obs = obstacle_terms(
-        obstacles, d_obstacle=d_o, gamma=gamma,
+        obstacles, d_obstacle=d_o, gamma=gamma, step=step,
         gain=rep.gain if rep else 0.0, eta=rep.repulsion.eta if rep else 1.0,
         influence=rep.repulsion.influence if rep else 1.0,
     )  # fmt: skip

@@ -188,7 +188,9 @@ class SingleRun:
         self.model = model_terms(model)
         kind = self.model.kind
         self.obstacles = tuple(system.obstacles) if system is not None else ()
-        self.safety = system.safety if system is not None and system.filtered else None
+        self.safety = (  # (its rows guard steps of dt)
+            system.at_step(dt).safety if system is not None and system.filtered else None
+        )
         self.stage = (
             safety_stage(system.law, self.obstacles, self.safety)
             if system is not None

@@ -245,9 +245,10 @@ def twin_simulation(
         "unicycle", mapping="near-identity", offset=PROJECTION_DISTANCE, max_speed=MAX_SPEED,
         max_turn_rate=MAX_TURN_RATE,
     )  # fmt: skip
-    safety = SafetyFilter(
-        filter="barrier" if certificate else "none", distance=SAFETY_RADIUS, gamma=BARRIER_GAIN
-    )
+    safety = SafetyFilter(  # (the Robotarium's certificate: the continuous condition)
+        filter="barrier" if certificate else "none", distance=SAFETY_RADIUS, gamma=BARRIER_GAIN,
+        condition="continuous",
+    )  # fmt: skip
     n = plan.steps if steps is None else steps
     return simulate(
         plan.formation, plan.law, plan.q0, duration=n * TIME_STEP,

@@ -19,6 +19,7 @@ from .barrier import (
     pair_barrier_rows,
     solve_barrier_qp,
 )
+from .condition import CONDITIONS, barrier_bound, barrier_bounds
 from .config import FILTERS, SafetyFilter
 from .contact import segment_distances, swept_clearances
 from .decentralized import (
@@ -61,6 +62,7 @@ def check_extra() -> None:
 
 
 __all__ = [
+    "CONDITIONS",
     "FILTERS",
     "BarrierConstraints",
     "Circle",
@@ -71,6 +73,8 @@ __all__ = [
     "QPSolution",
     "SafetyFilter",
     "SafetyRecord",
+    "barrier_bound",
+    "barrier_bounds",
     "barrier_constraints",
     "barrier_filter",
     "check_extra",

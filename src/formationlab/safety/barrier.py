@@ -10,7 +10,9 @@ pair barrier ``h_ij = |q_i - q_j|^2 - D_s^2`` and single integrators ``q_dot = u
     ``       -2 (q_i - p*) . u_i <= gamma h_io^3``            for every obstacle piece
     ``       n_k . u_i <= max_speed cos(pi / S)``              (speed polygon, optional)
 
-i.e. ``h_dot >= -gamma h^3`` for every barrier. Written as a QP in the stacked
+i.e. ``h_dot >= -gamma h^3`` for every barrier; under the discrete condition (the default)
+every ``gamma h^3`` of a barrier ``h > 0`` is capped at ``h / dt``
+(:func:`~formationlab.safety.condition.barrier_bound`). Written as a QP in the stacked
 ``x = (u_1x, u_1y, u_2x, ...)``: ``min 1/2 x'x - u_hat'x`` s.t. ``G x <= bound``, ``G``
 sparse (``scipy.sparse``; four non-zeros per pair row, two per robot row), so a
 thousand robots with a finite sensing radius pose a QP of a few thousand rows.
@@ -52,6 +54,7 @@ from scipy.sparse.csgraph import connected_components
 
 from ..errors import require_extra
 from .closed_form import closed_form
+from .condition import barrier_bounds
 from .config import SafetyFilter, register_filter
 from .decentralized import decentralized_filter
 from .obstacles import Obstacle, obstacle_barrier_rows
@@ -74,9 +77,14 @@ SOLVER_TOL = 1e-10
 
 
 def pair_barrier_rows(
-    q: NDArray[np.float64], pairs: NDArray[np.int64], *, distance: float, gamma: float
+    q: NDArray[np.float64],
+    pairs: NDArray[np.int64],
+    *,
+    distance: float,
+    gamma: float,
+    step: float = 0.0,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Rows ``a . u_i - a . u_j <= b`` of ``h_dot_ij >= -gamma h_ij^3`` for the given pairs.
+    """Rows ``a . u_i - a . u_j <= b`` of ``h_dot_ij >= -b(h_ij)`` for the given pairs.
 
     Parameters
     ----------
@@ -85,19 +93,22 @@ def pair_barrier_rows(
         0-based ``(i, j)``.
     distance, gamma : float
         ``D_s`` and the gain.
+    step : float
+        The Euler step the rows guard (``SafetyFilter.rows_step``; 0: continuous rows).
 
     Returns
     -------
     a : ndarray, shape (m, 2)
         ``-2 (q_i - q_j)``.
     b : ndarray, shape (m,)
-        ``gamma h_ij^3``.
+        :func:`~formationlab.safety.condition.barrier_bound` of ``h_ij``: ``gamma h_ij^3``,
+        capped at ``h_ij / step``.
     h : ndarray, shape (m,)
         ``h_ij = |q_i - q_j|^2 - D_s^2``.
     """
     w = q[pairs[:, 0]] - q[pairs[:, 1]]
     h = np.sum(w * w, axis=-1) - distance**2
-    return -2.0 * w, gamma * h**3, h  # h_dot = 2 (q_i - q_j).(u_i - u_j) >= -gamma h^3
+    return -2.0 * w, barrier_bounds(h, gamma, step), h  # h_dot = 2 (q_i - q_j).(u_i - u_j)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -146,9 +157,12 @@ def barrier_constraints(
     n = q.shape[0]
     if pairs is None:
         pairs = sensed_pairs(q, config.sensing_radius)[:, 1:]
-    a, b, h = pair_barrier_rows(q, pairs, distance=config.distance, gamma=config.gamma)
+    step = config.rows_step
+    a, b, h = pair_barrier_rows(q, pairs, distance=config.distance, gamma=config.gamma, step=step)
     m = len(pairs)
-    obs = obstacle_barrier_rows(q, obstacles, distance=config.d_obstacle, gamma=config.gamma)
+    obs = obstacle_barrier_rows(
+        q, obstacles, distance=config.d_obstacle, gamma=config.gamma, step=step
+    )
     k = obs.b.shape[1]
     normals, vmax = config.speed_polygon()
     s = len(normals)
@@ -336,13 +350,15 @@ def _maybe_violated(
     w = q[t, i] - q[t, j]
     du = u[t, i] - u[t, j]
     h = np.sum(w * w, axis=-1) - config.distance**2
-    bound = config.gamma * h**3
+    bound = barrier_bounds(h, config.gamma, config.rows_step)
     lhs = -2.0 * np.sum(w * du, axis=-1)
     size = np.abs(bound) + 2.0 * np.sum(np.abs(w) * np.abs(du), axis=-1)
     out = np.zeros(q.shape[0], bool)
     np.logical_or.at(out, t[lhs > bound - tol * size], True)
     if obstacles:
-        rows = obstacle_barrier_rows(q, obstacles, distance=config.d_obstacle, gamma=config.gamma)
+        rows = obstacle_barrier_rows(
+            q, obstacles, distance=config.d_obstacle, gamma=config.gamma, step=config.rows_step
+        )
         lhs_o = np.sum(rows.a * u[:, :, None, :], axis=-1)
         size_o = np.abs(rows.b) + np.sum(np.abs(rows.a) * np.abs(u[:, :, None, :]), axis=-1)
         out |= np.any(lhs_o > rows.b - tol * size_o, axis=(-2, -1))

@@ -7,6 +7,7 @@ Scenario-file form (the ``[safety]`` table)::
     distance = 0.25           # D_s (m), at least the contact distance
     gamma = 100.0
     max_speed = 0.5           # optional speed limit in the filter
+    condition = "discrete"    # "discrete" (default) | "continuous"
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, Literal, NamedTuple
 
 import numpy as np
@@ -22,6 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import FormationlabWarning, ParameterError
 from ..validation import number, whole
+from .condition import CONDITIONS, Condition
 from .result import unchanged
 
 if TYPE_CHECKING:
@@ -92,6 +94,17 @@ class SafetyFilter:
     obstacle_distance : float or None
         ``D_o`` (m): the centre-to-obstacle distance kept; ``None`` means ``distance / 2``
         (half the pair distance, as each robot keeps half of ``D_s`` to a neighbour).
+    condition : {"discrete", "continuous"}
+        The rows' bound (:func:`~formationlab.safety.condition.barrier_bound`):
+        ``"discrete"`` (default) ``h_dot >= -min(gamma h^3, h / dt)`` where ``h > 0``, which
+        keeps every pair and obstacle clearance at every explicit Euler step of length
+        ``dt`` (single integrators); ``"continuous"`` the paper's ``h_dot >= -gamma h^3``,
+        which keeps it along the flow only (a step with ``dt gamma h^2 > 1`` can jump past).
+        Both are the same row wherever ``dt gamma h^2 <= 1``.
+    step : float or None
+        The step ``dt`` the discrete condition guards. The closed loop sets it from its
+        integrator (:meth:`at_step`); ``None`` (a filter used outside a fixed-step loop:
+        Filippov's integrator, equilibria) gives the continuous rows.
     """
 
     filter: FilterKind = "none"
@@ -101,6 +114,8 @@ class SafetyFilter:
     speed_sides: int = 8
     sensing_radius: float = math.inf
     obstacle_distance: float | None = None
+    condition: Condition = "discrete"
+    step: float | None = None
 
     def __post_init__(self) -> None:
         if self.filter not in FILTERS:
@@ -137,6 +152,26 @@ class SafetyFilter:
         if self.obstacle_distance is not None:
             number(self.obstacle_distance, "obstacle_distance", low=0.0, strict=True,
                    owner="safety")  # fmt: skip
+        if self.condition not in CONDITIONS:
+            known = ", ".join(f'"{c}"' for c in CONDITIONS)
+            raise ParameterError(
+                f"safety.condition must be one of {known} (the barrier's discrete-time "
+                f"condition, default, or the paper's continuous one), got {self.condition!r}",
+                key="condition",
+            )
+        if self.step is not None:
+            number(self.step, "step", low=0.0, strict=True, owner="safety")
+
+    def at_step(self, dt: float | None) -> SafetyFilter:
+        """This filter guarding explicit Euler steps of length ``dt`` (None: no step known)."""
+        dt = None if dt is None else float(dt)
+        return self if dt == self.step else replace(self, step=dt)
+
+    @property
+    def rows_step(self) -> float:
+        """The step the rows guard: :attr:`step` under the discrete condition, else 0 (the
+        continuous rows)."""
+        return float(self.step) if self.condition == "discrete" and self.step else 0.0
 
     @property
     def enabled(self) -> bool:

@@ -2,10 +2,11 @@
 
 Wang, Ames and Egerstedt ("Safety barrier certificates for collisions-free
 multirobot systems", IEEE T-RO 33(3), 2017, section IV-B) split each pair's
-condition ``2 (q_i - q_j) . (u_i - u_j) >= -gamma h_ij^3`` into two halves, one per
-robot: robot ``i`` requires
+condition ``2 (q_i - q_j) . (u_i - u_j) >= -b(h_ij)`` (``b = gamma h^3``, capped at
+``h / dt`` under the discrete condition: :func:`~formationlab.safety.condition.barrier_bound`)
+into two halves, one per robot: robot ``i`` requires
 
-    ``-2 (q_i - q_j) . u_i <= gamma h_ij^3 / 2``                           (half responsibility)
+    ``-2 (q_i - q_j) . u_i <= b(h_ij) / 2``                                (half responsibility)
 
 and robot ``j`` the mirror condition; their sum is the pair's condition, so the
 decentralized command is feasible for the centralized QP. Obstacle rows (the
@@ -54,6 +55,7 @@ from numpy.typing import NDArray
 
 from ..errors import require_extra
 from ..neighbours.cell_grid import build_grid, neighbours_of
+from .condition import barrier_bounds
 from .config import SafetyFilter, register_filter
 from .obstacle_terms import obstacle_terms
 from .obstacles import Obstacle, obstacle_barrier_rows
@@ -70,8 +72,8 @@ __all__ = [
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _robot(t, r, q, uh, radius, dense, grid, obs, d2, gamma, speed_n, speed_b, nbr, A, b, neg,
-           owner, out):  # fmt: skip
+def _robot(t, r, q, uh, radius, dense, grid, obs, d2, gamma, step, speed_n, speed_b, nbr, A, b,
+           neg, owner, out):  # fmt: skip
     """Robot ``r`` of trial ``t``: its neighbours, then unchanged or :func:`filter_robot`.
 
     Returns ``(code, m, deg)``: the robot's code (0 unchanged, 1 solved, 2 relaxed, 4
@@ -94,12 +96,12 @@ def _robot(t, r, q, uh, radius, dense, grid, obs, d2, gamma, speed_n, speed_b, n
         deg = neighbours_of(r, qt, radius * radius, x0, y0, side, nx, ny, start, order, nbr)
     uh0 = uh[t, r, 0]
     uh1 = uh[t, r, 1]
-    if unchanged_robot(r, qt, uh0, uh1, nbr, deg, obs, d2, gamma, speed_n, speed_b):
+    if unchanged_robot(r, qt, uh0, uh1, nbr, deg, obs, d2, gamma, step, speed_n, speed_b):
         out[0] = uh0
         out[1] = uh1
         return 0, -1, deg
-    code, m = filter_robot(r, qt, uh0, uh1, nbr, deg, obs, d2, gamma, speed_n, speed_b, A, b,
-                           neg, owner, out)  # fmt: skip
+    code, m = filter_robot(r, qt, uh0, uh1, nbr, deg, obs, d2, gamma, step, speed_n, speed_b, A,
+                           b, neg, owner, out)  # fmt: skip
     return code, m, deg
 
 
@@ -120,7 +122,7 @@ def _scratch(n, obs, speed_n):
 
 
 @njit(cache=True, nogil=True)
-def _commands(q, uh, radius, dense, obs, d2, gamma, speed_n, speed_b, out_u, out_code,
+def _commands(q, uh, radius, dense, obs, d2, gamma, step, speed_n, speed_b, out_u, out_code,
               out_rows):  # fmt: skip
     """Pass 1: every robot's filtered command, code and rows (``m``, 0 when unchanged)."""
     T, n = q.shape[0], q.shape[1]
@@ -128,7 +130,7 @@ def _commands(q, uh, radius, dense, obs, d2, gamma, speed_n, speed_b, out_u, out
     for t in range(T):
         grid = _grid(q[t], radius, dense)
         for r in range(n):
-            code, m, _ = _robot(t, r, q, uh, radius, dense, grid, obs, d2, gamma, speed_n,
+            code, m, _ = _robot(t, r, q, uh, radius, dense, grid, obs, d2, gamma, step, speed_n,
                                 speed_b, nbr, A, b, neg, owner, out)  # fmt: skip
             out_u[t, r, 0] = out[0]
             out_u[t, r, 1] = out[1]
@@ -137,7 +139,8 @@ def _commands(q, uh, radius, dense, obs, d2, gamma, speed_n, speed_b, out_u, out
 
 
 @njit(cache=True, nogil=True)
-def _activity(q, uh, radius, dense, obs, d2, gamma, speed_n, speed_b, code, pairs, obstacles):
+def _activity(q, uh, radius, dense, obs, d2, gamma, step, speed_n, speed_b, code, pairs,
+              obstacles):  # fmt: skip
     """Pass 2, for the robots whose command changed: the rows holding with equality.
 
     Fills ``pairs`` ``(K, 3)`` with ``(trial, i, j)`` (robot ``i``'s half active) and
@@ -157,7 +160,7 @@ def _activity(q, uh, radius, dense, obs, d2, gamma, speed_n, speed_b, code, pair
         for r in range(n):
             if code[t, r] == 0:
                 continue
-            _, m, deg = _robot(t, r, q, uh, radius, dense, grid, obs, d2, gamma, speed_n,
+            _, m, deg = _robot(t, r, q, uh, radius, dense, grid, obs, d2, gamma, step, speed_n,
                                speed_b, nbr, A, b, neg, owner, out)  # fmt: skip
             scale = abs(out[0]) + abs(out[1]) + abs(uh[t, r, 0]) + abs(uh[t, r, 1])
             for k in range(m):
@@ -183,9 +186,10 @@ def _setup(config: SafetyFilter, q: NDArray, u_hat: NDArray, obstacles: Sequence
     fu = np.ascontiguousarray(u_hat.reshape(-1, n, 2), dtype=float)
     radius = float(config.sensing_radius)
     dense = (not math.isfinite(radius)) or n < DENSE_BELOW or not np.all(np.isfinite(fq))
-    obs = obstacle_terms(obstacles, d_obstacle=config.d_obstacle, gamma=config.gamma)
+    step = config.rows_step
+    obs = obstacle_terms(obstacles, d_obstacle=config.d_obstacle, gamma=config.gamma, step=step)
     normals, bound = config.speed_polygon()
-    args = (radius, dense, obs, float(config.distance) ** 2, float(config.gamma),
+    args = (radius, dense, obs, float(config.distance) ** 2, float(config.gamma), step,
             np.ascontiguousarray(normals, dtype=float), float(bound))  # fmt: skip
     return fq, fu, args
 
@@ -302,14 +306,16 @@ def decentralized_reference(
     for t in range(fq.shape[0]):
         pairs = sensed_pairs(fq[t], config.sensing_radius)[:, 1:]
         obs = obstacle_barrier_rows(
-            fq[t], obstacles, distance=config.d_obstacle, gamma=config.gamma
-        )
+            fq[t], obstacles, distance=config.d_obstacle, gamma=config.gamma,
+            step=config.rows_step,
+        )  # fmt: skip
         for i in range(n):
             js = np.concatenate([pairs[pairs[:, 0] == i, 1], pairs[pairs[:, 1] == i, 0]])
             w = fq[t, i] - fq[t, js]
             hp = np.sum(w * w, axis=1) - config.distance**2
             A = np.vstack([-2.0 * w, obs.a[i], normals])
-            b = np.concatenate([0.5 * config.gamma * hp**3, obs.b[i], np.full(len(normals), bound)])
+            half = 0.5 * barrier_bounds(hp, config.gamma, config.rows_step)
+            b = np.concatenate([half, obs.b[i], np.full(len(normals), bound)])
             hs = np.concatenate([hp, obs.h[i], np.ones(len(normals))])
             if np.all(A @ fu[t, i] <= b):
                 continue

@@ -9,7 +9,7 @@ the same arithmetic (so a compiled loop follows the numpy closed loop to roundin
   ``Polygon.signed_distance``: nearest edge point, crossing-number sign);
 * :func:`repel`: ``u_i -= k sum_o gamma'(s_io) grad s_io``, Khatib's repulsion on the
   clearances ``s = delta - rho_i / 2`` (``System._repelled``);
-* :func:`barrier_row`: the row ``-2 (q_i - p*) . u_i <= gamma h^3`` of one barrier
+* :func:`barrier_row`: the row ``-2 (q_i - p*) . u_i <= b(h)`` of one barrier
   piece (``obstacle_barrier_rows``);
 * :func:`swept_clearance`: the least clearance along a straight step
   (``swept_clearances``).
@@ -26,6 +26,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from ..controllers.kinds.khatib import khatib_prime
+from .condition import barrier_bound
 from .obstacles import Circle, Obstacle
 
 __all__ = [
@@ -53,6 +54,7 @@ class ObstacleTerms(NamedTuple):
     hull: NDArray[np.float64]  #: (O, 3) a disc holding the obstacle: centre, radius
     d_obstacle: float  #: D_o of the filter's rows
     gamma: float  #: the filter's gain
+    step: float  #: the Euler step its rows guard (0: the continuous rows)
     gain: float  #: the law's repulsion gain k (0: no repulsion)
     eta: float
     influence: float  #: s0
@@ -63,6 +65,7 @@ def obstacle_terms(
     *,
     d_obstacle: float = 0.0,
     gamma: float = 0.0,
+    step: float = 0.0,
     gain: float = 0.0,
     eta: float = 1.0,
     influence: float = 1.0,
@@ -85,7 +88,8 @@ def obstacle_terms(
         radius=np.array(radius, dtype=float), start=np.array(start, dtype=np.int64),
         vertices=np.ascontiguousarray(np.concatenate(verts)),
         hull=np.ascontiguousarray(np.concatenate(hull)), d_obstacle=float(d_obstacle),
-        gamma=float(gamma), gain=float(gain), eta=float(eta), influence=float(influence),
+        gamma=float(gamma), step=float(step), gain=float(gain), eta=float(eta),
+        influence=float(influence),
     )  # fmt: skip
 
 
@@ -180,7 +184,8 @@ def repel(obs: ObstacleTerms, radius: NDArray, p: NDArray, u: NDArray) -> None:
 def barrier_row(obs: ObstacleTerms, o: int, k: int, x: float, y: float):
     """``(a0, a1, b, h)`` of piece ``k`` of obstacle ``o`` (the circle, or its ``k``-th edge).
 
-    ``h = |q - p*|^2 - rho^2``, row ``-2 (q - p*) . u <= gamma h^3`` (``obstacle_barrier_rows``).
+    ``h = |q - p*|^2 - rho^2``, row ``-2 (q - p*) . u <= b(h)`` (``obstacle_barrier_rows``;
+    ``b`` is :func:`~formationlab.safety.condition.barrier_bound`).
     """
     v = obs.vertices
     s0 = obs.start[o]
@@ -197,7 +202,7 @@ def barrier_row(obs: ObstacleTerms, o: int, k: int, x: float, y: float):
     wx = x - px
     wy = y - py
     h = wx * wx + wy * wy - rho * rho
-    return -2.0 * wx, -2.0 * wy, obs.gamma * h**3, h
+    return -2.0 * wx, -2.0 * wy, barrier_bound(h, obs.gamma, obs.step), h
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..controllers.kinds.khatib import dkhatib_ds, khatib
 from ..errors import ObstacleError, require_extra
 from ..validation import COORDINATE_LIMIT
+from .condition import barrier_bounds
 
 __all__ = [
     "Circle",
@@ -333,9 +334,10 @@ class ObstacleRows(NamedTuple):
 
 
 def obstacle_barrier_rows(
-    q: ArrayLike, obstacles: Sequence[Obstacle], *, distance: float, gamma: float
-) -> ObstacleRows:
-    """Barrier rows ``-2 (q_i - p*) . u_i <= gamma h^3`` for every robot and obstacle piece.
+    q: ArrayLike, obstacles: Sequence[Obstacle], *, distance: float, gamma: float,
+    step: float = 0.0,
+) -> ObstacleRows:  # fmt: skip
+    """Barrier rows ``-2 (q_i - p*) . u_i <= b(h)`` for every robot and obstacle piece.
 
     ``h = |q_i - p*|^2 - rho^2`` (module docstring): ``p*`` the circle's centre and
     ``rho = R + D_o``, or the nearest point of a polygon edge and ``rho = D_o``, with
@@ -351,6 +353,10 @@ def obstacle_barrier_rows(
         ``D_o`` (m).
     gamma : float
         Barrier gain.
+    step : float
+        The Euler step the rows guard (0: the continuous rows); ``b`` is
+        :func:`~formationlab.safety.condition.barrier_bound`, ``gamma h^3`` capped at
+        ``h / step``.
     """
     q = np.asarray(q, dtype=float)
     nearest, rho, owner = [], [], []
@@ -371,4 +377,5 @@ def obstacle_barrier_rows(
     rho_all = np.concatenate(rho)
     w = q[..., None, :] - p
     h = np.sum(w * w, axis=-1) - rho_all**2
-    return ObstacleRows(-2.0 * w, gamma * h**3, h, np.concatenate(owner).astype(np.int64))
+    b = barrier_bounds(h, gamma, step)
+    return ObstacleRows(-2.0 * w, b, h, np.concatenate(owner).astype(np.int64))

@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from .condition import barrier_bound
 from .obstacle_terms import barrier_row, hull_distance
 
 __all__ = ["TOL", "filter_robot", "solve_rows", "unchanged_robot"]
@@ -145,13 +146,14 @@ def solve_rows(uh0: float, uh1: float, A: NDArray, b: NDArray, neg: NDArray, m: 
 
 
 @njit(cache=True, nogil=True, inline="always")
-def unchanged_robot(r, q, uh0, uh1, nbr, deg, obs, d2, gamma, speed_n, speed_b) -> bool:
+def unchanged_robot(r, q, uh0, uh1, nbr, deg, obs, d2, gamma, step, speed_n, speed_b) -> bool:
     """Whether ``u_hat_r`` satisfies every row :func:`filter_robot` would build.
 
     The same arithmetic as :func:`filter_robot` and :func:`_project`'s first test, so
     ``True`` here is exactly the case where :func:`filter_robot` returns ``u_hat_r`` (code
     0), found without building the rows; a polygon is settled by its enclosing disc when
-    that is far enough (``2 high |u_hat| < gamma (low^2 - D_o^2)^3``), else by its rows.
+    that is far enough (``2 high |u_hat| < b(low^2 - D_o^2)``, ``b`` the rows' bound, which
+    grows with ``h``), else by its rows.
     """
     x = q[r, 0]
     y = q[r, 1]
@@ -160,7 +162,7 @@ def unchanged_robot(r, q, uh0, uh1, nbr, deg, obs, d2, gamma, speed_n, speed_b) 
         dx = x - q[j, 0]
         dy = y - q[j, 1]
         h = dx * dx + dy * dy - d2
-        if -2.0 * dx * uh0 + -2.0 * dy * uh1 > 0.5 * gamma * h * h * h:
+        if -2.0 * dx * uh0 + -2.0 * dy * uh1 > 0.5 * barrier_bound(h, gamma, step):
             return False
     unorm = math.sqrt(uh0 * uh0 + uh1 * uh1)
     for o in range(obs.radius.shape[0]):
@@ -168,7 +170,7 @@ def unchanged_robot(r, q, uh0, uh1, nbr, deg, obs, d2, gamma, speed_n, speed_b) 
         if polygon:
             low, high = hull_distance(obs, o, x, y)
             rho = obs.d_obstacle
-            if low > rho and 2.0 * high * unorm < gamma * (low * low - rho * rho) ** 3:
+            if low > rho and 2.0 * high * unorm < barrier_bound(low * low - rho * rho, gamma, step):
                 continue
         pieces = obs.start[o + 1] - obs.start[o] if polygon else 1
         for k in range(pieces):
@@ -182,15 +184,15 @@ def unchanged_robot(r, q, uh0, uh1, nbr, deg, obs, d2, gamma, speed_n, speed_b) 
 
 
 @njit(cache=True, nogil=True)
-def filter_robot(r, q, uh0, uh1, nbr, deg, obs, d2, gamma, speed_n, speed_b, A, b, neg, owner,
-                 out) -> tuple[int, int]:  # fmt: skip
+def filter_robot(r, q, uh0, uh1, nbr, deg, obs, d2, gamma, step, speed_n, speed_b, A, b, neg,
+                 owner, out) -> tuple[int, int]:  # fmt: skip
     """Robot ``r``'s filtered command into ``out``: its rows built, then :func:`solve_rows`.
 
     Rows in order: its ``deg`` neighbours ``nbr[:deg]`` (half responsibility, module
     docstring), the barrier pieces of every obstacle (``obs``, an
     :class:`~formationlab.safety.obstacle_terms.ObstacleTerms`), the speed polygon.
     A polygon whose enclosing disc is so far that no command of norm ``<= |u_hat_r|`` can
-    violate its rows (``2 high |u_hat| < gamma (low^2 - D_o^2)^3``) is left out, and checked
+    violate its rows (``2 high |u_hat| < b(low^2 - D_o^2)``) is left out, and checked
     at the answer: if the answer is longer than that bound allows, the rows are built
     again in full and solved again. (The answer is the projection onto a set holding
     ``0`` when no bound is negative, so it is no longer than ``u_hat``.) ``owner[k]``: the
@@ -209,7 +211,7 @@ def filter_robot(r, q, uh0, uh1, nbr, deg, obs, d2, gamma, speed_n, speed_b, A, 
             h = dx * dx + dy * dy - d2
             A[m, 0] = -2.0 * dx
             A[m, 1] = -2.0 * dy
-            b[m] = 0.5 * gamma * h * h * h  # half of the pair's -gamma h^3
+            b[m] = 0.5 * barrier_bound(h, gamma, step)  # half of the pair's bound
             neg[m] = h < 0.0
             owner[m] = -1
             m += 1
@@ -220,7 +222,7 @@ def filter_robot(r, q, uh0, uh1, nbr, deg, obs, d2, gamma, speed_n, speed_b, A, 
                 low, high = hull_distance(obs, o, x, y)
                 rho = obs.d_obstacle
                 if low > rho:
-                    floor = gamma * (low * low - rho * rho) ** 3
+                    floor = barrier_bound(low * low - rho * rho, gamma, step)
                     if 2.0 * high * unorm < floor:
                         limit = min(limit, floor / (2.0 * high))
                         continue

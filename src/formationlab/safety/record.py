@@ -125,6 +125,8 @@ class SafetyRecord:
                 "max_speed": f.max_speed,
                 "obstacle_distance": f.d_obstacle,
                 "sensing_radius": radius,
+                "condition": f.condition,
+                "step": f.rows_step or None,
             }
         return {
             "filter": config,

@@ -29,6 +29,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from ..neighbours.cell_grid import build_grid, neighbours_of
+from .condition import barrier_bound
 from .dual_active_set import FALLBACK, NUMERICAL, centralized_command
 from .obstacle_terms import (
     barrier_row,
@@ -64,6 +65,7 @@ class FilterTerms(NamedTuple):
     kind: int  #: NONE, DECENTRALIZED or CENTRALIZED
     d2: float  #: D_s^2
     gamma: float
+    step: float  #: the Euler step the rows guard (0: the continuous rows)
     r2: float  #: sensing radius^2 (inf: every pair)
     speed_n: NDArray[np.float64]  #: (S, 2) normals of the speed polygon
     speed_b: float
@@ -96,11 +98,11 @@ class FilterScratch(NamedTuple):
 def filter_terms(safety: Any) -> FilterTerms:
     """The :class:`FilterTerms` of a :class:`~formationlab.safety.SafetyFilter` (or None)."""
     if safety is None or not safety.enabled:
-        return FilterTerms(NONE, 0.0, 0.0, 0.0, np.zeros((0, 2)), 0.0)
+        return FilterTerms(NONE, 0.0, 0.0, 0.0, 0.0, np.zeros((0, 2)), 0.0)
     normals, bound = safety.speed_polygon()
     kind = DECENTRALIZED if safety.filter == "barrier-decentralized" else CENTRALIZED
     return FilterTerms(
-        kind, float(safety.distance) ** 2, float(safety.gamma),
+        kind, float(safety.distance) ** 2, float(safety.gamma), safety.rows_step,
         float(safety.sensing_radius) ** 2, np.ascontiguousarray(normals, dtype=float),
         float(bound),
     )  # fmt: skip
@@ -133,7 +135,6 @@ def _decentralized(pq, uq, uf, obs, flt, nbr, A, bb, neg, owner, out) -> None:
     """
     n = pq.shape[0]
     d2 = flt.d2
-    half = 0.5 * flt.gamma
     speed_n = flt.speed_n
     speed_b = flt.speed_b
     n_obs = obs.radius.shape[0]
@@ -164,14 +165,15 @@ def _decentralized(pq, uq, uf, obs, flt, nbr, A, bb, neg, owner, out) -> None:
             dx = x - pq[nbr[p], 0]
             dy = y - pq[nbr[p], 1]
             h = dx * dx + dy * dy - d2
-            inside = inside and -2.0 * dx * uh0 + -2.0 * dy * uh1 <= half * h * h * h
+            bound = 0.5 * barrier_bound(h, flt.gamma, flt.step)  # (half of the pair's)
+            inside = inside and -2.0 * dx * uh0 + -2.0 * dy * uh1 <= bound
         for s in range(speed_n.shape[0]):
             inside = inside and speed_n[s, 0] * uh0 + speed_n[s, 1] * uh1 <= speed_b
-        if inside and (n_obs == 0 or unchanged_robot(r, pq, uh0, uh1, nbr, 0, obs, d2,
-                                                     flt.gamma, speed_n, speed_b)):  # fmt: skip
+        if inside and (n_obs == 0 or unchanged_robot(r, pq, uh0, uh1, nbr, 0, obs, d2, flt.gamma,
+                                                     flt.step, speed_n, speed_b)):  # fmt: skip
             continue
-        filter_robot(r, pq, uh0, uh1, nbr, deg, obs, d2, flt.gamma, speed_n, speed_b, A, bb,
-                     neg, owner, out)  # fmt: skip
+        filter_robot(r, pq, uh0, uh1, nbr, deg, obs, d2, flt.gamma, flt.step, speed_n, speed_b,
+                     A, bb, neg, owner, out)  # fmt: skip
         uf[r, 0] = out[0]
         uf[r, 1] = out[1]
 
@@ -196,7 +198,7 @@ def _centralized(pq, uq, uf, obs, flt, ri, rj, ra, rb, rh, lam, mats, vecs, act,
             rj[m] = j
             ra[m, 0] = -2.0 * wx
             ra[m, 1] = -2.0 * wy
-            rb[m] = flt.gamma * h**3
+            rb[m] = barrier_bound(h, flt.gamma, flt.step)
             rh[m] = h
             m += 1
     for i in range(n):  # obstacle rows, robot-major

@@ -342,6 +342,7 @@ class SafetyModel(BaseModel):
     speed_sides: int = 8
     sensing_radius: float | None = None
     obstacle_distance: float | None = None
+    condition: Literal["discrete", "continuous"] = "discrete"
 
     @field_validator(
         "distance", "sensing_radius", "obstacle_distance", "max_speed", "gamma", mode="before"

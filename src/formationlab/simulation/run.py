@@ -597,6 +597,7 @@ def _result(
     """The :class:`SimulationResult` of ``raw``, a run of ``system`` under ``integrator``:
     the post-processing of :func:`simulate` (V, sigma, the switching diagnostics of a
     compiled run, the safety record), slice by slice along time."""
+    system = system.at_step(getattr(integrator, "dt", None))  # (the filter the run stepped)
     formation, law, robot = system.formation, system.law, system.model
     marching, sensing, faults = system.marching, system.sensing, system.faults
     points = robot.points(raw.x)
