@@ -216,3 +216,28 @@ def test_the_api_refuses_unknown_keywords_and_warns_about_another_models_state()
     np.testing.assert_array_equal(res.q, plain.q)  # ignored: the same run
     uni = fl.simulate(f, "distance", q0, duration=0.1, model="unicycle", headings=[0.0, 1.0, 2.0])
     np.testing.assert_array_equal(uni.x[0, :, 2], [0.0, 1.0, 2.0])  # its own key is taken
+
+
+def test_the_api_refuses_runs_too_long_or_too_large_before_allocating():
+    from formationlab.errors import ParameterError
+    from formationlab.resources import available_memory
+
+    f = fl.Formation.from_distances(3, distances=1.0, diameters=0.2)
+    q0 = [[0.0, 0.0], [2.0, 0.1], [1.0, 1.5]]
+    for kw in ({"integrator": fl.Euler(dt=1e-300)}, {"duration": 1e300}):
+        with pytest.raises(ParameterError, match=r"steps, more than 1e\+13") as exc:
+            fl.simulate(f, "distance", q0, **{"duration": 1.0, **kw})
+        assert exc.value.key == "duration"
+    memory = available_memory()
+    if memory is None:
+        pytest.skip("the memory available is not known here")
+    dt = 1e-6
+    duration = 2 * memory / 56 * dt  # each saved state of 3 robots takes 56 bytes
+    with pytest.raises(ParameterError, match="keep fewer") as exc:
+        fl.simulate(f, "distance", q0, duration=duration, integrator=fl.Euler(dt=dt))
+    assert exc.value.key == "save_every"
+    every = int(str(exc.value).split("save_every = ")[-1].split(")")[0])
+    from formationlab.simulation.run import _check_size, build_system
+
+    system = build_system(f, fl.get_law("distance"), fl.SingleIntegrator(), np.asarray(q0))
+    _check_size(system, fl.Euler(dt=dt), duration, every)  # the advice is accepted

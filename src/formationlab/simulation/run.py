@@ -12,6 +12,7 @@ diagnostics.
 from __future__ import annotations
 
 import dataclasses
+import math
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -47,6 +48,7 @@ from ..outcomes.analysis import (
 )
 from ..outcomes.rigid_motion import RigidMotion
 from ..registry import resolve
+from ..resources import available_memory
 from ..safety import SafetyFilter, SafetyRecord, check_obstacle_starts
 from ..sensing import Faults, Sensing
 from ..status import Status
@@ -569,6 +571,7 @@ def run_system(
         raise ParameterError(
             f"backend must be 'auto', 'numpy' or 'numba', got {backend!r}", key="backend"
         )
+    _check_size(system, integrator, duration, save_every)
     terms = compiled_terms(system, integrator) if backend != "numpy" else None
     if backend == "numba" and terms is None:
         raise ParameterError(
@@ -589,6 +592,43 @@ def run_system(
             interruptible=interruptible,
         )  # fmt: skip
     return _result(system, integrator, raw, interruptible=interruptible)
+
+
+#: the most steps one run may take: more is a mistyped number (1e13 steps of the paper's
+#: triangle take about four months at the compiled run's 1 us per step)
+STEP_LIMIT = 1e13
+
+
+def _check_size(system: System, integrator: Integrator, duration: float, save_every: int) -> None:
+    """Refuse, before anything is allocated, a run of more than :data:`STEP_LIMIT` steps or
+    whose saved states (a state, its rates and its time each) cannot be held in the memory
+    available; the advice printed is accepted. (The commands plan more closely, figures and
+    files included, and refuse earlier: ``formationlab.cli._plan``.)"""
+    dt = getattr(integrator, "dt", None)
+    if dt is None:  # an event-driven integrator: no step count known in advance
+        return
+    steps = float(duration) / float(dt)
+    if not steps <= STEP_LIMIT:
+        raise ParameterError(
+            f"duration = {float(duration):g} s in steps of dt = {float(dt):g} s is "
+            f"{steps:.3g} steps, more than {STEP_LIMIT:.0e}: shorten the duration or "
+            f"lengthen dt (at most {STEP_LIMIT * float(dt):.3g} s at this dt)",
+            key="duration",
+        )
+    k = len(system.model.names_in(system.formation.dim))
+    per_state = 16.0 * system.formation.n * k + 8.0
+    need = (steps / save_every + 2) * per_state
+    memory = available_memory()
+    if memory is None or need <= memory:  # (beyond, the allocation would fail)
+        return
+    states = 0.25 * memory / per_state  # (room for the result's post-processing too)
+    every = max(save_every + 1, math.ceil(steps / max(states - 2, 1)))
+    raise ParameterError(
+        f"the run keeps {steps / save_every + 2:,.0f} states (save_every = {save_every}): "
+        f"~{need / 2**30:,.3g} GiB, with {memory / 2**30:,.3g} GiB of memory available; keep "
+        f"fewer (save_every = {every}), or shorten the duration or lengthen dt",
+        key="save_every",
+    )
 
 
 def _result(
