@@ -19,6 +19,12 @@ in the same run (tests/test_compiled.py, tests/test_engine_sensing.py and the li
   6.5e-10 of it, on the ten-robot example). Study trials under a switching law that chatter
   on a Filippov equilibrium for the whole run (``not-converged``) end up to 3e-2 apart
   between the paths, so there only the outcome is compared;
+* under the learned law (``law = "policy"``, docs/learning.md) the field is a network of
+  tanh units, steep where training made it so (peak speeds near 15 m/s at ``dt = 1e-3``):
+  numpy's ``tanh`` also ends a unit in the last place apart between SIMD kernels, and the
+  steep field carries that difference to the end of the run: positions within ``1e-9`` of
+  their scale (measured with numpy's SIMD dispatch off: 3.8e-12 of it on the triangle's
+  policy); another set of weights or another formula moves them by far more;
 * under the centralized safety filter (``filter = "barrier"``) the numpy driver solves each
   step's QP with Clarabel, to its tolerances (about 1e-8), and the compiled loop by its
   exact active-set method (Clarabel only when rounding defeats it): a run of one path
@@ -56,6 +62,8 @@ RUNS = sorted(
 #: positions' tolerance, relative to their scale, under a smooth and a switching law, and
 #: under the centralized filter's QP (module docstring)
 SMOOTH, SWITCHING, QP = 1e-12, 1e-7, 1e-9
+#: and under the learned law (its network's tanh, module docstring)
+NETWORK = 1e-9
 
 
 def _smooth(law: str) -> bool:
@@ -76,6 +84,8 @@ def test_example_ends_where_it_ended(name: str) -> None:
     tolerance = SMOOTH if _smooth(got["law"]) else SWITCHING
     if got["qp"] and backend != "numpy":
         tolerance = max(tolerance, QP)
+    if got["law"] == "policy":
+        tolerance = max(tolerance, NETWORK)
     np.testing.assert_allclose(x, x_ref, rtol=0, atol=tolerance * scale)
 
 
