@@ -7,7 +7,7 @@ from typing import TypeVar
 from ..registry import Registry
 from .base import RobotModel
 
-__all__ = ["MODELS", "get_model", "register_model"]
+__all__ = ["MODELS", "get_model", "initial_keys", "register_model"]
 
 #: The robot models by name; case-insensitive, with suggestions.
 MODELS: Registry[RobotModel] = Registry("robot model")
@@ -22,3 +22,13 @@ def register_model(cls: M) -> M:
 def get_model(name: str, **params: object) -> RobotModel:
     """The robot model registered as ``name`` (any case), built with ``params``."""
     return MODELS.build(name, **params)
+
+
+def initial_keys() -> dict[str, tuple[str, ...]]:
+    """Each key of a model's initial state (``headings``, ``velocities``) and the models
+    that take it, for the scenario's ``[robots]`` and :func:`formationlab.simulate` alike."""
+    owners: dict[str, list[str]] = {}
+    for name in MODELS:
+        for key in MODELS[name].initial_keys:
+            owners.setdefault(key, []).append(name)
+    return {k: tuple(v) for k, v in owners.items()}

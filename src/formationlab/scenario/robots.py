@@ -26,6 +26,7 @@ from ..errors import IgnoredKeyWarning, UserInputError
 from ..formation.spec import Formation
 from ..marching import March, Marching, MotionParameters
 from ..models import MODELS, RobotModel
+from ..models.registry import initial_keys
 from ..models.unicycle import MAPPING_KEYS
 from ..validation import line_of
 from .parts import Fail, build_entry
@@ -34,15 +35,6 @@ __all__ = ["ROBOT_FIXED", "build_marching", "build_robot_model", "initial_keys"]
 
 #: The keys of ``[robots]`` that are not a model's parameters or initial keys.
 ROBOT_FIXED = ("positions", "diameters", "model")
-
-
-def initial_keys() -> dict[str, tuple[str, ...]]:
-    """Each initial key of ``[robots]`` and the models that take it."""
-    owners: dict[str, list[str]] = {}
-    for name in MODELS:
-        for key in MODELS[name].initial_keys:
-            owners.setdefault(key, []).append(name)
-    return {k: tuple(v) for k, v in owners.items()}
 
 
 def build_robot_model(

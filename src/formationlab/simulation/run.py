@@ -33,6 +33,7 @@ from ..integrators.compiled import compiled_terms, run_euler_compiled
 from ..integrators.diagnostics import switching_diagnostics
 from ..marching import March, Marching, centroid_velocity, heading_spread
 from ..models import MODELS, RobotModel, SingleIntegrator
+from ..models.registry import initial_keys
 from ..outcomes.analysis import (
     Outcome,
     Tolerances,
@@ -702,17 +703,15 @@ def _own_initial(model: RobotModel, initial: dict[str, Any]) -> dict[str, Any]:
     own = type(model).initial_keys
     kept = {k: v for k, v in initial.items() if k in own}
     for key in sorted(set(initial) - set(own)):
-        owners = [n for n in MODELS.names() if key in MODELS[n].initial_keys]
+        owners = initial_keys().get(key, ())
         if not owners:
-            others: dict[str, list[str]] = {}
-            for n in MODELS.names():
-                for k in MODELS[n].initial_keys:
-                    others.setdefault(k, []).append(repr(n))
             raise ParameterError(
                 f"unknown keyword {key!r}: beside the named arguments, a run takes the "
                 f"robot model's initial state ({model.name!r}: "
                 f"{', '.join(own) if own else 'none'}; "
-                + ", ".join(f"{k!r} for {' and '.join(n)}" for k, n in others.items())
+                + ", ".join(
+                    f"{k!r} for {' and '.join(map(repr, n))}" for k, n in initial_keys().items()
+                )
                 + ")",
                 key=key,
             )
