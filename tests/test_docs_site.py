@@ -211,14 +211,30 @@ def test_quick_start_is_two_commands(page: str) -> None:
     assert commands[0].startswith("python3 -m venv .venv") and "formationlab paper" in commands[0]
 
 
-def test_sphinx_roles_are_shown_as_code() -> None:
+def test_sphinx_roles_become_links_resolved_as_relative_imports() -> None:
     spec = importlib.util.spec_from_file_location(
         "griffe_roles", DOCS / "_scripts" / "griffe_roles.py"
     )
     assert spec is not None and spec.loader is not None
     roles = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(roles)
-    text = ":class:`~.spec.Formation` and :mod:`.graphs`, :func:`formationlab.simulate`"
-    assert roles.strip_roles(text) == "`Formation` and `graphs`, `formationlab.simulate`"
-    assert roles.strip_roles(":py:meth:`the method <A.b>`") == "`the method`"
-    assert roles.strip_roles("no role: `x`") == "no role: `x`"
+
+    def link(text: str, owner: str | None = None) -> str:
+        return roles.link_roles(text, "formationlab.engine.loop", "formationlab.engine", owner)
+
+    assert link(":class:`~.contact.Verdict`") == (
+        '<autoref identifier="formationlab.engine.contact.Verdict" optional>'
+        "<code>Verdict</code></autoref>"
+    )
+    assert 'identifier="formationlab.models.stage.points"' in link(":func:`..models.stage.points`")
+    assert "<code>models.stage.points</code>" in link(":func:`..models.stage.points`")
+    # a bare name: the class's member first, the module's as the second choice
+    assert link(":meth:`step`", "formationlab.engine.loop.Run") == (
+        '<autoref identifier="formationlab.engine.loop.Run.step" '
+        'slug="formationlab.engine.loop.step" optional><code>step</code></autoref>'
+    )
+    # an absolute name, or one relative to the package
+    absolute = link(":func:`formationlab.simulate`")
+    assert 'identifier="formationlab.simulate" slug="formationlab.engine.formationlab.' in absolute
+    assert "<code>the method</code>" in link(":py:meth:`the method <A.b>`")
+    assert link("no role: `x`") == "no role: `x`"
