@@ -29,7 +29,6 @@ from formationlab.equilibria import (
     same_equilibrium,
     settle,
 )
-from formationlab.errors import ParameterError
 from formationlab.outcomes.analysis import chirality_agreement
 
 #: a regular tetrahedron of edge 1
@@ -184,9 +183,67 @@ def test_the_plane_ignores_the_coplanar_fraction() -> None:
     np.testing.assert_array_equal(a, b)
 
 
-def test_relative_equilibria_in_space_are_refused_by_name(tetra) -> None:
-    with pytest.raises(ParameterError, match=r"relative equilibria .* in the plane only"):
-        refine(tetra, distance_law(), TETRA, moving=True)
+def test_the_rigid_guess_in_space_recovers_a_hand_built_screw() -> None:
+    """``(v, w)`` of an exact screw field ``v + w x (q_i - q_bar)``, from the field alone."""
+    from formationlab.equilibria.relative import rigid_field, rigid_guess
+
+    q = np.random.default_rng(4).normal(size=(6, 3))
+    motion = np.array([0.3, -0.2, 0.1, 0.5, -1.5, 0.25])
+    np.testing.assert_allclose(rigid_guess(rigid_field(q, motion), q), motion, atol=1e-12)
+    np.testing.assert_allclose(rigid_field(q, motion)[0], motion[:3] + np.cross(
+        motion[3:], q[0] - q.mean(axis=0)), atol=1e-15)  # fmt: skip
+
+
+#: each robot's own desired distances of the tetrahedron: a 1 % mismatch (seed 0)
+def _mismatched(tetra):
+    from formationlab.agents.mismatch import own_distances
+    from formationlab.sensing import Sensing, local_controls, measured
+
+    law = distance_law()
+    own = own_distances(tetra, law, 0.01, [0])[0]
+
+    class Mismatched(type(law)):  # the field the robots of a mismatched run follow
+        def control(self, formation, q):
+            terms = law.sensed_terms(formation)
+            return local_controls(terms, measured(np.asarray(q, float), None), own_distance=own)
+
+    return Mismatched(), Sensing(mismatch=0.01, seed=0)
+
+
+def test_the_helix_of_mismatched_distances_is_a_relative_equilibrium_in_space(tetra) -> None:
+    """Sun, Mou, Anderson and Morse (IEEE TAC 2017): a mismatched tetrahedron ends in a
+    screw motion. Refined as a relative equilibrium (shape and screw solved for together,
+    from the run's end state and from a state of its transient), it is the screw that a
+    simulated run settles into, fitted from the run's positions (two independent paths),
+    and it is stable in the co-moving frame (3n - 6 = 6 eigenvalues, all negative)."""
+    from formationlab.outcomes.rigid_motion import rigid_motion
+
+    law, sensing = _mismatched(tetra)
+    start = TETRA * 1.3 + np.random.default_rng(1).normal(scale=0.1, size=(4, 3))
+    run = fl.simulate(tetra, distance_law(), start, duration=40.0,
+                      integrator=fl.get_integrator("rk4", dt=0.01), sensing=sensing)  # fmt: skip
+    fit = rigid_motion(run.q[-501], run.q[-1], run.t[-1] - run.t[-501])
+    assert fit.shape_rate < 1e-9 and fit.omega > 1e-2
+    for q0 in (run.q[-1], run.q[np.searchsorted(run.t, 12.0)]):
+        found = refine(tetra, law, q0, moving=True)
+        assert found.success and found.residual < 1e-12
+        assert found.omega == pytest.approx(float(fit.omega), rel=1e-9)
+        np.testing.assert_allclose(found.axis, fit.axis, atol=1e-9)
+        # the same shape as the run's, up to a rigid motion
+        assert same_equilibrium(tetra, found.q, run.q[-1], tol=1e-9)
+    eq = classify_equilibrium(tetra, law, refine(tetra, law, run.q[-1], moving=True))
+    assert eq.outcome == "rotating" and eq.stability == "stable"
+    assert eq.motion.axial_velocity == pytest.approx(float(fit.axial_velocity), rel=1e-8)
+    assert eq.eigenvalues.size == 6 and np.all(eq.eigenvalues.real < -1.0)
+    # the catalogue refines a rotating end state in space (no longer skipped) and poses it
+    # with its velocity and axis turned along: the posed screw is still the law's field
+    cat = catalogue(tetra, law, run.q[-1:], outcomes=np.array(["rotating"]))
+    (posed,) = cat.equilibria
+    assert cat.counts == [1] and not cat.skipped
+    screw = posed.velocity + posed.omega * np.cross(posed.axis, posed.q - posed.q.mean(axis=0))
+    np.testing.assert_allclose(law.control(tetra, posed.q), screw, atol=1e-12)
+    item = cat.to_dict()["equilibria"][0]
+    assert item["outcome"] == "rotating" and len(item["axis"]) == 3
 
 
 def test_the_command_finds_the_tetrahedrons_equilibria(tmp_path: Path) -> None:

@@ -6,9 +6,7 @@ refines the others with :func:`~.refine.refine`, classifies them with
 :func:`~.classify.classify_equilibrium` and merges duplicates with
 :func:`~.dedup.same_equilibrium`. Candidates whose run ended ``drifting`` or
 ``rotating`` are refined to relative equilibria (``refine(..., moving=True)``:
-shape and rigid motion together), the others to static ones. In space (positions
-``(B, n, 3)``) relative equilibria are not refined yet: those end states are counted as
-skipped, ``"moving-in-space"``.
+shape and rigid motion together; in space a screw), the others to static ones.
 """
 
 from __future__ import annotations
@@ -24,6 +22,7 @@ from ..controllers import Law
 from ..dynamics import System
 from ..formation.spec import Formation
 from ..outcomes.analysis import Tolerances
+from ..outcomes.rigid_motion import kabsch
 from .classify import Equilibrium, classify_equilibrium
 from .constrained import active_set, classify_deadlock, refine_deadlock
 from .dedup import canonical_pose, same_equilibrium
@@ -47,8 +46,7 @@ class Catalogue:
         Trials that ended at each equilibrium.
     skipped : dict of str to int
         Candidates not attributed to an equilibrium, by reason
-        (``"collision"``, ``"not-refined"``, ``"non-finite"``: the field overflows there;
-        ``"moving-in-space"``: a drifting or rotating end state of a formation in space).
+        (``"collision"``, ``"not-refined"``, ``"non-finite"``: the field overflows there).
     """
 
     formation: Formation
@@ -90,6 +88,7 @@ class Catalogue:
                     "velocity": eq.velocity.tolist(),
                     "speed": eq.speed,
                     "angular_velocity": eq.omega,
+                    "axis": None if eq.axis is None else eq.axis.tolist(),
                     "centre": None if eq.centre is None else eq.centre.tolist(),
                 }
             )
@@ -149,10 +148,6 @@ def catalogue(
         finite = np.array([bool(np.isfinite(law.control(formation, q)).all()) for q in cand])
     finite = finite.reshape(-1) if finite.size else np.zeros(0, bool)
     keep = (outs != "collision") & finite
-    if formation.dim == 3:  # relative equilibria are refined in the plane only
-        moving_in_space = keep & np.isin(outs, MOVING)
-        skipped["moving-in-space"] += int(np.sum(moving_in_space))
-        keep &= ~moving_in_space
     pending = [(q, 1, o in MOVING) for q, o, k in zip(cand, outs, keep, strict=True) if k]
     skipped["collision"] += int(np.sum(outs == "collision"))
     skipped["non-finite"] += int(np.sum((outs != "collision") & ~finite))
@@ -205,8 +200,11 @@ def _posed(eq: Equilibrium, invariance: str = "rotation") -> Equilibrium:
     """``eq`` in its canonical pose, its velocity turned with it (scaled: left as it is)."""
     if invariance == "scale":
         return replace(eq, q=canonical_pose(eq.q, "scale"))
-    if eq.q.shape[-1] == 3:  # static only in space: no velocity to turn
-        return replace(eq, q=canonical_pose(eq.q))
+    if eq.q.shape[-1] == 3:  # the velocity and the axis turned with the shape
+        posed = canonical_pose(eq.q)
+        rot, _ = kabsch(eq.q - eq.q.mean(axis=0), posed - posed.mean(axis=0))
+        axis = None if eq.axis is None else rot @ eq.axis
+        return replace(eq, q=posed, velocity=rot @ eq.velocity, axis=axis)
     d = eq.q[1] - eq.q[0]
     c, s = d / max(float(np.hypot(*d)), 1e-300)
     v = np.array(

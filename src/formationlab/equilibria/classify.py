@@ -47,9 +47,10 @@ from numpy.typing import NDArray
 from ..controllers import Law
 from ..formation.spec import Formation
 from ..outcomes.analysis import Tolerances, classify
-from ..outcomes.rigid_motion import field_motion
+from ..outcomes.rigid_motion import RigidMotion, field_motion
 from .jacobian import jacobian, reduced_eigenvalues
 from .refine import Refined
+from .relative import rigid_field
 
 __all__ = ["Equilibrium", "Stability", "classify_equilibrium", "restriction_labels"]
 
@@ -121,6 +122,7 @@ class Equilibrium:
     attractive: bool | None = None
     velocity: NDArray[np.float64] = field(default_factory=lambda: np.zeros(2))
     omega: float = 0.0
+    axis: NDArray[np.float64] | None = None
 
     @property
     def moving(self) -> bool:
@@ -130,16 +132,21 @@ class Equilibrium:
     @property
     def speed(self) -> float:
         """Largest robot speed of the rigid motion, m/s (0 for a static equilibrium)."""
-        if self.q.shape[-1] == 3:  # static only in space (refine refuses moving ones)
-            return 0.0
-        return float(field_motion(self.q, self.velocity, self.omega).speed)
+        return float(self.motion.speed)
 
     @property
     def centre(self) -> NDArray[np.float64] | None:
         """Centre of the rotation of a ``rotating`` equilibrium (None otherwise)."""
         if self.outcome != "rotating":
             return None
-        return np.asarray(field_motion(self.q, self.velocity, self.omega).centre)
+        return np.asarray(self.motion.centre)
+
+    @property
+    def motion(self) -> RigidMotion:
+        """The rigid motion of the equilibrium (:func:`~formationlab.outcomes.field_motion`)."""
+        space = self.q.shape[-1] == 3
+        axis = (np.zeros(3) if self.axis is None else self.axis) if space else None
+        return field_motion(self.q, self.velocity, self.omega, axis)
 
     constraints: tuple[str, ...] = ()
     multipliers: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
@@ -215,12 +222,12 @@ def classify_equilibrium(
     attractive: bool | None = None
     omega = float(refined.omega)
     # the co-moving frame of a rotating equilibrium turns with it: d/dq of -omega k x q
-    space = q.shape[-1] == 3  # (static only: refine refuses relative equilibria in space)
-    turn = (
-        np.zeros((q.size, q.size))
-        if space
-        else omega * np.kron(np.eye(formation.n), np.array([[0.0, -1.0], [1.0, 0.0]]))
-    )
+    # (in space of -omega a x q)
+    space = q.shape[-1] == 3
+    a = (np.zeros(3) if refined.axis is None else refined.axis) if space else np.array([0, 0, 1.0])
+    wx, wy, wz = omega * a  # the angular velocity
+    spin = np.array([[0.0, -wz, wy], [wz, 0.0, -wx], [-wy, wx, 0.0]])  # its cross product
+    turn = np.kron(np.eye(formation.n), spin if space else spin[:2, :2])
     if on:
         sliding, grad_sigma = _sliding_field(formation, law, w, on)
         jac = jacobian(sliding, q) - turn
@@ -257,13 +264,9 @@ def classify_equilibrium(
         stability = "saddle"
     else:
         stability = "stable"
-    if space:  # at rest: the outcome of a run that stops here
-        outcome = classify(formation, q, np.zeros_like(q), tolerances)
-    else:
-        motion = field_motion(q, refined.velocity, omega)
-        u = q - q.mean(axis=0)
-        u = refined.velocity + omega * np.stack([-u[:, 1], u[:, 0]], axis=-1)
-        outcome = classify(formation, q, u, tolerances, motion=motion)
+    motion = field_motion(q, refined.velocity, omega, a if space else None)
+    u = rigid_field(q, np.concatenate([refined.velocity, omega * a if space else [omega]]))
+    outcome = classify(formation, q, u, tolerances, motion=motion)
     r = np.linalg.norm(q[formation.edges[:, 1]] - q[formation.edges[:, 0]], axis=-1)
     return Equilibrium(
         q=q,
@@ -281,4 +284,5 @@ def classify_equilibrium(
         attractive=attractive,
         velocity=np.asarray(refined.velocity, dtype=float),
         omega=omega,
+        axis=a if space else None,
     )

@@ -34,9 +34,12 @@ beside the shape (and the Filippov weights): ``2n + 3 (+ |S|)`` unknowns for
 square system as for a static equilibrium, which is its case ``v = 0,
 omega = 0``. Every surface ``sigma_s`` is a function of the shape only, so a
 rigid motion keeps a state on the surfaces it lies on: the Filippov
-combination is taken as for static equilibria. Relative equilibria in space (a screw,
-``v + omega x (q_i - q_bar)``) are not solved for yet: ``moving=True`` refuses a formation
-in space by name.
+combination is taken as for static equilibria. In space the rigid motion is a screw,
+``u_i = v + w x (q_i - q_bar)`` (Chasles): six unknowns ``(v, w)`` beside the shape's
+``3n``, for ``3n`` field equations and the six of the gauge, again a square system. Its
+axis is ``w / |w|``, its rate ``omega = |w|``, its advance along the axis ``v . w / |w|``:
+the helical motion that mismatched distances drive a formation in space into (Sun, Mou,
+Anderson and Morse, IEEE Transactions on Automatic Control 62(8), 2017).
 """
 
 from __future__ import annotations
@@ -51,7 +54,6 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from ..controllers import Law
-from ..errors import ParameterError
 from ..formation.spec import Formation
 from .relative import MAX_NEAR, all_subsets, attracts, rigid_field, rigid_guess
 
@@ -81,7 +83,11 @@ class Refined:
     velocity : ndarray, shape (d,)
         Relative equilibria: velocity ``v`` of the centroid (zero for a static one).
     omega : float
-        Relative equilibria: angular velocity about the centroid, rad/s.
+        Relative equilibria: angular velocity about the centroid, rad/s (in space its
+        size, ``>= 0``, about :attr:`axis`).
+    axis : ndarray, shape (3,), or None
+        In space, the unit direction of the rotation (zero when it does not turn); None in
+        the plane, where the axis is ``k`` and ``omega`` is signed.
     """
 
     q: NDArray[np.float64]
@@ -92,6 +98,7 @@ class Refined:
     message: str
     velocity: NDArray[np.float64] = field(default_factory=lambda: np.zeros(2))
     omega: float = 0.0
+    axis: NDArray[np.float64] | None = None
 
     @property
     def filippov(self) -> bool:
@@ -188,7 +195,7 @@ def refine(
     moving : bool
         Solve for a relative equilibrium: the shape and its rigid motion ``(v, omega)``
         together (module docstring); the residual is then ``max_i |u_i - v - omega k x
-        (q_i - q_bar)|``. In the plane only: a formation in space is refused.
+        (q_i - q_bar)|`` (in space ``max_i |u_i - v - w x (q_i - q_bar)|``).
 
     Returns
     -------
@@ -196,12 +203,6 @@ def refine(
         ``success`` says whether an equilibrium was found; ``message`` why not.
     """
     q0 = np.asarray(q0, dtype=float)
-    if moving and q0.shape[-1] == 3:
-        raise ParameterError(
-            "relative equilibria (a formation that drifts or turns as a rigid body) are "
-            "refined in the plane only so far, and this formation is in space; refine its "
-            "static equilibria (moving=False)"
-        )
     band = (5e-2 if moving else 1e-2) if band is None else band
     scale = _scale(q0)
     sigma0 = np.asarray(law.switching(formation, q0), dtype=float)
@@ -297,14 +298,21 @@ def refine(
                 message=why + "; no Filippov equilibrium on the nearest surfaces either",
                 velocity=cand.velocity,
                 omega=cand.omega,
+                axis=cand.axis,
             )
     return best
 
 
 def _motion(m: NDArray | None, dim: int = 2) -> dict[str, Any]:
+    """:class:`Refined`'s motion fields from the solved rigid motion ``m`` (None: at rest)."""
+    if dim == 2:
+        return {} if m is None else {"velocity": np.array(m[:2], dtype=float), "omega": float(m[2])}
     if m is None:
-        return {} if dim == 2 else {"velocity": np.zeros(dim)}
-    return {"velocity": np.array(m[:2], dtype=float), "omega": float(m[2])}
+        return {"velocity": np.zeros(3), "axis": np.zeros(3)}
+    w = np.array(m[3:], dtype=float)
+    omega = float(np.linalg.norm(w))
+    axis = w / omega if omega > 0 else np.zeros(3)
+    return {"velocity": np.array(m[:3], dtype=float), "omega": omega, "axis": axis}
 
 
 def _residual(

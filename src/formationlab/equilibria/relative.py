@@ -1,7 +1,8 @@
 """Relative equilibria: the rigid motion of a shape, and the surfaces it slides on.
 
 Helpers of :func:`formationlab.equilibria.refine` with ``moving=True``: the rigid
-field ``v + omega k x (q_i - q_bar)`` solved for beside the shape, its first guess,
+field ``v + omega k x (q_i - q_bar)`` (in space the screw ``v + w x (q_i - q_bar)``)
+solved for beside the shape, its first guess,
 and which subsets of the surfaces near a moving end state to try (a drifting
 formation stepped by explicit Euler chatters on several at once, and several
 relative equilibria slide on subsets of them: ``docs/drifting.md``).
@@ -21,15 +22,33 @@ __all__ = ["MAX_NEAR", "all_subsets", "attracts", "rigid_field", "rigid_guess"]
 
 
 def rigid_field(q: NDArray, motion: NDArray) -> NDArray:
-    """``v + omega k x (q_i - q_bar)`` at ``q`` ``(..., n, 2)`` for ``motion = (vx, vy, omega)``."""
+    """The rigid field at ``q`` ``(..., n, d)``: ``v + omega k x (q_i - q_bar)`` in the plane
+    for ``motion = (vx, vy, omega)``; in space the screw ``v + w x (q_i - q_bar)`` for
+    ``motion = (vx, vy, vz, wx, wy, wz)`` (``w = omega a``, the angular velocity about the
+    axis ``a``)."""
     p = q - q.mean(axis=-2, keepdims=True)
-    v, omega = motion[..., None, :2], motion[..., None, 2:3]
-    return v + omega * np.stack([-p[..., 1], p[..., 0]], axis=-1)
+    d = q.shape[-1]
+    v, w = motion[..., None, :d], motion[..., None, d:]
+    if d == 3:
+        return v + np.cross(w, p)
+    return v + w * np.stack([-p[..., 1], p[..., 0]], axis=-1)
 
 
 def rigid_guess(u: NDArray, q: NDArray) -> NDArray[np.float64]:
-    """Least-squares ``(vx, vy, omega)`` of the velocities ``u`` ``(n, 2)`` at ``q``."""
+    """Least-squares rigid motion of the velocities ``u`` ``(n, d)`` at ``q``: ``(vx, vy,
+    omega)`` in the plane, ``(v, w)`` (six numbers) in space.
+
+    ``v`` is the mean velocity (the centred positions sum to zero); in space ``w`` solves
+    ``J w = sum_i p_i x u_i`` with ``J = sum_i (|p_i|^2 I - p_i p_i^T)`` (the normal
+    equations of ``min sum_i |u_i - v - w x p_i|^2``; least squares where ``J`` is singular,
+    robots on a line).
+    """
     p = q - q.mean(axis=0)
+    if q.shape[-1] == 3:
+        inertia = np.sum(p * p) * np.eye(3) - p.T @ p
+        moment = np.sum(np.cross(p, u), axis=0)
+        w = np.linalg.lstsq(inertia, moment, rcond=None)[0]
+        return np.concatenate([u.mean(axis=0), w])
     kp = np.stack([-p[:, 1], p[:, 0]], axis=-1)
     omega = float(np.sum(kp * u) / max(float(np.sum(p * p)), 1e-12))
     return np.array([*u.mean(axis=0), omega])

@@ -224,6 +224,7 @@ class EquilibriaReport:
                 "positions": [e.q.tolist() for e in b.equilibria],
                 "speed": [e.speed for e in b.equilibria],
                 "angular_velocity": [e.omega for e in b.equilibria],
+                "axis": [None if e.axis is None else e.axis.tolist() for e in b.equilibria],
                 "end": b.end,
             }
             for k, b in zip(self.ids, self.branches, strict=True)
@@ -236,11 +237,15 @@ class EquilibriaReport:
         out = []
         for k, (eq, count) in enumerate(zip(cat.equilibria, cat.counts, strict=True)):
             extra = f", {eq.unstable_directions} unstable" if eq.unstable_directions else ""
+            speed = float(np.linalg.norm(eq.velocity))
             if eq.outcome == "drifting":
-                extra += f", |v| = {float(np.hypot(*eq.velocity)):.4g} m/s"
+                extra += f", |v| = {speed:.4g} m/s"
             elif eq.outcome == "rotating":
-                speed = float(np.hypot(*eq.velocity))
                 extra += f", omega = {eq.omega:.4g} rad/s, |v| = {speed:.4g} m/s"
+                if eq.axis is not None:  # in space: a screw
+                    axis = ", ".join(f"{c:.3g}" for c in eq.axis)
+                    advance = float(eq.motion.axial_velocity)
+                    extra += f", axis ({axis}), advance {advance:.4g} m/s"
             if eq.constraints:
                 extra += f", deadlock on {', '.join(eq.constraints)}"
             out.append(

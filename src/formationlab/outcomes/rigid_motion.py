@@ -236,25 +236,35 @@ def _rigid_motion_in_space(p: NDArray, q: NDArray, t: NDArray) -> RigidMotion:
     )  # fmt: skip
 
 
-def field_motion(q: ArrayLike, velocity: ArrayLike, omega: ArrayLike) -> RigidMotion:
+def field_motion(
+    q: ArrayLike, velocity: ArrayLike, omega: ArrayLike, axis: ArrayLike | None = None
+) -> RigidMotion:
     """The :class:`RigidMotion` of the exact rigid field ``u_i = v + omega k x (q_i - q_bar)``.
 
     For a relative equilibrium found by solving for it (``formationlab.equilibria``):
     ``q`` ``(..., n, 2)``, ``velocity`` ``v`` ``(..., 2)`` of the centroid and
-    ``omega`` ``(...)``; the shape rate is 0 and the window infinite.
+    ``omega`` ``(...)``; the shape rate is 0 and the window infinite. In space ``q`` is
+    ``(..., n, 3)``, ``omega >= 0`` and ``axis`` ``(..., 3)`` the unit direction of the
+    rotation: the screw ``u_i = v + omega a x (q_i - q_bar)``, its centre the axis's point
+    nearest the centroid, ``q_bar + (a x v) / omega``.
     """
     q = np.asarray(q, dtype=float)
     v = np.asarray(velocity, dtype=float)
     w = np.asarray(omega, dtype=float)
     b = q - q.mean(axis=-2, keepdims=True)
-    move = v[..., None, :] + w[..., None, None] * perp(b)
+    a = None if axis is None else np.asarray(axis, dtype=float)
+    # the rotation's part of every robot's velocity, and what it turns the velocity into
+    turned, across = (
+        (perp(b), perp(v)) if a is None else (np.cross(a[..., None, :], b), np.cross(a, v))
+    )
+    move = v[..., None, :] + w[..., None, None] * turned
     with np.errstate(invalid="ignore", divide="ignore"):
-        centre = q.mean(axis=-2) + perp(v) / np.where(w == 0.0, np.nan, w)[..., None]
+        centre = q.mean(axis=-2) + across / np.where(w == 0.0, np.nan, w)[..., None]
     return RigidMotion(
         velocity=v, omega=w, centre=centre,
         speed=np.max(np.linalg.norm(move, axis=-1), axis=-1),
         spin=np.abs(w) * np.max(np.linalg.norm(b, axis=-1), axis=-1),
-        shape_rate=np.zeros(w.shape), window=np.full(w.shape, np.inf),
+        shape_rate=np.zeros(w.shape), window=np.full(w.shape, np.inf), axis=a,
     )  # fmt: skip
 
 

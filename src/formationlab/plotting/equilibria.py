@@ -170,11 +170,12 @@ def gallery_figure(catalogue: Any, *, columns: int = 4, title: str = "", limit: 
         elif eq.active:
             lines.append("active " + ", ".join(eq.active))
         if eq.moving:
-            secs = arrow_seconds(eq.velocity, span)
-            speed = float(np.hypot(*eq.velocity))
-            lines.append(f"|v| = {speed:.3g} m/s (arrow: {secs:.2g} s)")
+            speed = float(np.linalg.norm(eq.velocity))
+            drawn = "" if space else f" (arrow: {arrow_seconds(eq.velocity, span):.2g} s)"
+            lines.append(f"|v| = {speed:.3g} m/s{drawn}")
         if eq.outcome == "rotating":
-            lines.append(f"omega = {eq.omega:.3g} rad/s (+: centre)")
+            turn = "(+: centre)" if eq.axis is None else "(about the axis)"
+            lines.append(f"omega = {eq.omega:.3g} rad/s {turn}")
         draw = plot_equilibrium_3d if space else plot_equilibrium
         draw(catalogue.formation, eq, ax, title="\n".join(lines), span=span)
     if not eqs:
