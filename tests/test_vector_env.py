@@ -17,6 +17,7 @@ from formationlab.envs.rewards import Rewards, orientation_errors, robot_errors
 from formationlab.envs.vector import VECTOR_ENV_ID, FormationVectorEnv
 from formationlab.errors import ParameterError
 from formationlab.io.scenario import load_scenario
+from formationlab.outcomes.tolerances import OUTCOMES
 from formationlab.sensing import Channel, Faults, Sensing
 from formationlab.sensing.config import Stop
 
@@ -240,9 +241,20 @@ def test_refuses_bad_input():
 
 def test_torchrl_adapter():
     pytest.importorskip("torchrl")  # the optional 'torch' extra (not in the test extra)
-    from formationlab.envs.torchrl import torchrl_env
+    from formationlab.envs.torchrl import outcome_codes, torchrl_env
 
     env = torchrl_env(TRIANGLE, num_envs=4)
     assert tuple(env.batch_size) == (4,)
     td = env.rollout(3)
     assert tuple(td["observation"].shape) == (4, 3, 3, 8)
+    # every robot's own reward (not one per formation broadcast), (B, T, n, 1)
+    reward = td["next", "reward"].numpy()
+    assert reward.shape == (4, 3, 3, 1) and np.isfinite(reward).all()
+    assert np.any(reward[..., 0, 0] != reward[..., 1, 0])
+    # the steps chain: the next observation is the following step's (no episode ended)
+    codes = td["next", "outcome_code"].numpy()
+    assert codes.shape == (4, 3) and np.all(codes == -1)
+    np.testing.assert_array_equal(td["next", "observation"][:, :-1].numpy(),
+                                  td["observation"][:, 1:].numpy())  # fmt: skip
+    assert list(outcome_codes(np.array(["", "desired", "collision"], dtype=object))) == [
+        -1, OUTCOMES.index("desired"), OUTCOMES.index("collision")]  # fmt: skip

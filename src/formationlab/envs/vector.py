@@ -126,6 +126,8 @@ class FormationVectorEnv(VectorEnv):
         "autoreset_mode": AutoresetMode.SAME_STEP,
         "render_modes": [],
     }
+    #: as Gymnasium's own vector environments say it (TorchRL's wrapper reads the attribute)
+    autoreset_mode: ClassVar[AutoresetMode] = AutoresetMode.SAME_STEP
 
     def __init__(
         self,
