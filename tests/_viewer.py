@@ -46,8 +46,9 @@ def wait_for(predicate: Callable[[], Any], timeout: float = 10.0, what: str = ""
     pytest.fail(f"timed out after {timeout:g} s waiting for {what or predicate}")
 
 
-def launch_chromium(playwright: Any) -> Any:
-    """Debian's chromium, headless.
+def launch_chromium(playwright: Any, *, webgl: bool = False) -> Any:
+    """Debian's chromium, headless (``webgl``: with WebGL on SwiftShader, the software
+    renderer, for the view of formations in space; headless chromium has no GPU here).
 
     Without it the browser tests skip, with the reason in pytest's summary, on a user's
     machine (the README's test command installs Python packages, not Debian's), and fail
@@ -61,4 +62,5 @@ def launch_chromium(playwright: Any) -> Any:
         if os.environ.get("CI"):
             pytest.fail(why)
         pytest.skip(why)
-    return playwright.chromium.launch(executable_path=str(CHROMIUM), headless=True)
+    args = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader"] if webgl else []
+    return playwright.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=args)

@@ -4,17 +4,20 @@ from __future__ import annotations
 
 import json
 
+import httpx
 import numpy as np
 import pytest
-from _viewer import ROOT
+from _viewer import ROOT, serving
 
 import formationlab as fl
 from formationlab.cli import main
 from formationlab.io.scenario import load_scenario
 from formationlab.scenario import parse_scenario
 from formationlab.viewer import Controller, LiveSession, SessionError
+from formationlab.viewer.assets import THREE_FILES, three_module
 from formationlab.viewer.messages import decode_binary, encode_binary
 from formationlab.viewer.sources import open_session
+from formationlab.viewer.widget import Viewer
 
 SPACE = ROOT / "examples" / "space"
 TETRA = SPACE / "tetrahedron-mirror.toml"
@@ -141,3 +144,18 @@ def test_replay_of_a_run_in_space(tmp_path):
     assert s.frame().heading is None  # three numbers per robot are a position, not x, y, theta
     with pytest.raises(SessionError, match="a replay cannot move robots"):
         s.drag(1, 0.0, 0.0, 1.0)
+
+
+def test_three_js_is_served_from_the_package_and_given_to_the_widget():
+    controls = three_module("OrbitControls.js")
+    assert "from './three.module.min.js';" in controls and "from 'three';" not in controls
+    assert 'from"./three.core.min.js"' in three_module("three.module.min.js")
+    with serving(tetra_session()) as srv:
+        base = f"http://{srv.host}:{srv.port}"
+        js = httpx.get(f"{base}/three/three.core.min.js")  # no token: it carries no data
+        assert js.status_code == 200 and js.headers["content-type"].startswith("text/javascript")
+        assert "Copyright 2010-2025 Three.js Authors" in js.text
+        assert httpx.get(f"{base}/three/../server.py").status_code == 404
+        assert httpx.get(f"{base}/three/three.webgpu.js").status_code == 404
+    assert set(Viewer(load_scenario(TETRA))._three) == set(THREE_FILES)
+    assert Viewer(ROOT / "examples" / "paper-simulation-2.toml")._three == {}  # the plane
