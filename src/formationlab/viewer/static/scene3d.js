@@ -143,7 +143,7 @@ class FlvScene3D {
       let r = 0;
       for (const d of info.diameters) r = Math.max(r, d / 2);
       for (let i = 0; i < n; i++) {
-        const s = flvTextSprite(THREE, String(i + 1), "#111111", Math.max(2.2 * r, 0.12));
+        const s = flvTextSprite(THREE, String(i + 1), "#111111", Math.max(1.5 * r, 0.08));
         this.labels.push(s);
         this.group.add(s);
       }
@@ -208,7 +208,7 @@ class FlvScene3D {
     dir.normalize();
     const half = THREE.MathUtils.degToRad(this.camera.fov / 2);
     const fov = Math.min(half, Math.atan(Math.tan(half) * this.camera.aspect));
-    const dist = (1.15 * R) / Math.sin(fov);
+    const dist = (1.3 * R) / Math.sin(fov);
     this.controls.target.copy(c);
     this.camera.position.copy(c).addScaledVector(dir, dist);
     this.camera.near = dist / 200;
@@ -288,13 +288,13 @@ class FlvScene3D {
     return Math.max(big, this.info.minSpan || 1) / 2;
   }
 
-  // Whether every robot's centre is inside the camera's view.
+  // Whether every robot's centre is inside the camera's view, off its edges.
   inView(pos) {
     const v = this.tmp;
     const every = Math.max(1, Math.floor(pos.length / 3 / 1000)); // a sample of many robots
     for (let i = 0; i < pos.length / 3; i += every) {
       v.set(pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]).project(this.camera);
-      if (Math.abs(v.x) > 0.98 || Math.abs(v.y) > 0.98 || v.z > 1) return false;
+      if (Math.abs(v.x) > 0.85 || Math.abs(v.y) > 0.85 || v.z > 1) return false;
     }
     return true;
   }
