@@ -8,46 +8,28 @@ from io import BytesIO
 
 import numpy as np
 import pytest
-from _viewer import ROOT, launch_chromium, serving, wait_for
+from _viewer import ROOT, ROOT_SEL, attr, launch_chromium, pause, viewer_page, wait_for
 from PIL import Image
 from playwright.sync_api import sync_playwright
 
 from formationlab.io.scenario import load_scenario
 from formationlab.viewer import LiveSession
 
-ROOT_SEL = ".flv-root"
 TETRA = ROOT / "examples" / "space" / "tetrahedron-mirror.toml"
 
 
 @pytest.fixture(scope="module")
 def space():
     session = LiveSession(load_scenario(TETRA), seed=1)
-    with sync_playwright() as p, serving(session) as srv:
+    with sync_playwright() as p:
         browser = launch_chromium(p, webgl=True)
-        page = browser.new_page(viewport={"width": 1100, "height": 720})
-        errors: list[str] = []
-        page.on("pageerror", lambda e: errors.append(str(e)))
-        page.goto(srv.url)
-        page.wait_for_selector(f"{ROOT_SEL}[data-state=ready]", timeout=15_000)
-        yield page, session
+        with viewer_page(browser, session) as page:
+            yield page, session
         browser.close()
-        assert not errors, errors
-
-
-def attr(page, name):
-    return page.get_attribute(ROOT_SEL, f"data-{name}")
 
 
 def hook(page, call):
     return page.evaluate(f"document.querySelector('{ROOT_SEL}').flv.{call}")
-
-
-def pause(page, session):
-    """Pause from the page, and wait until it has drawn the paused state."""
-    if not session.paused:
-        page.click("button[data-role=pause]")
-        wait_for(lambda: session.paused, what="the run to pause")
-    wait_for(lambda: float(attr(page, "t")) == session.t, what="the paused state drawn")
 
 
 def test_the_scene_renders_every_robot_in_space(space):
