@@ -229,8 +229,8 @@ class FlvScene3D {
     }
     const g = new THREE.Group();
     const step = flvNiceStep((2 * R) / 6);
-    const x0 = step * Math.floor((lo[0] - 0.5 * R) / step), x1 = step * Math.ceil((hi[0] + 0.5 * R) / step);
-    const y0 = step * Math.floor((lo[1] - 0.5 * R) / step), y1 = step * Math.ceil((hi[1] + 0.5 * R) / step);
+    const x0 = step * Math.floor((lo[0] - 0.3 * R) / step), x1 = step * Math.ceil((hi[0] + 0.3 * R) / step);
+    const y0 = step * Math.floor((lo[1] - 0.3 * R) / step), y1 = step * Math.ceil((hi[1] + 0.3 * R) / step);
     const zTop = step * Math.ceil((hi[2] + 0.25 * R) / step);
     let z0 = step * Math.floor((lo[2] - 0.25 * R) / step);
     if (z0 < 0 && lo[2] >= 0) z0 = 0; // the ground, when every robot is above it
