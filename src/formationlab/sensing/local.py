@@ -51,14 +51,7 @@ from ..controllers.kinds.signed_area import area_force, area_gain, signed_area
 from ..controllers.terms import KernelTerms
 from ..formation.geometry import scatter_rows
 
-__all__ = [
-    "from_frames",
-    "local_controls",
-    "measured",
-    "rotate",
-    "to_frames",
-    "uniform_rotations",
-]
+__all__ = ["from_frames", "local_controls", "measured", "rotate", "to_frames", "uniform_rotations"]
 
 
 def rotate(v: NDArray[np.float64], angle: NDArray[np.float64]) -> NDArray[np.float64]:
