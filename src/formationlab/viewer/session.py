@@ -6,7 +6,8 @@ robot model, marching, obstacles, safety filter, sensing, faults) advanced one s
 time by the stepping driver's body (:class:`formationlab.integrators.driver.Stepping`:
 the time ``t_k = k dt``, the measurement channel, the contact rule
 ``System.step_verdict`` and its messages). From a reset, ``step(k)`` gives the states
-``simulate(..., backend="numpy")`` saves. A large formation (from
+``simulate(..., backend="numpy")`` saves, in the plane or in space (``Formation.dim``: a
+drag then takes ``z`` too). A large formation (from
 :data:`~formationlab.viewer.stepping.COMPILED_FROM` robots) that can run compiled steps in
 segments on the engine's compiled single run instead (:mod:`.stepping`: the same states,
 to rounding), so that "x1" is real time at a thousand robots; :attr:`LiveSession.reached`
