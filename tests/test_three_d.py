@@ -295,25 +295,6 @@ def test_the_distance_law_from_the_same_file_ends_at_the_mirror(tmp_path: Path) 
 
 
 @pytest.mark.parametrize(
-    "command, what",
-    [
-        (["view", "--no-browser"], "the viewer takes formations in the plane"),
-    ],
-)
-def test_commands_that_are_planar_refuse_a_run_in_space_by_name(tmp_path, command, what) -> None:
-    args = [command[0], EXAMPLES / "tetrahedron-mirror.toml", *command[1:]]
-    if command[0] != "view":
-        args += ["--out", tmp_path / "out"]
-    res = invoke(*args)
-    assert res.exit_code == 2, res.output
-    text = (EXAMPLES / "tetrahedron-mirror.toml").read_text().splitlines()
-    line = next(k for k, row in enumerate(text, 1) if row.startswith("template ="))
-    assert f"formation.template (line {line})" in res.output and what in res.output
-    assert "Traceback" not in res.output
-    assert not (tmp_path / "out").exists()
-
-
-@pytest.mark.parametrize(
     "change, key, words",
     [
         (("[0.2, 0.1, 0.3], [-3.1", "[0.2, 0.1], [-3.1"), "robots.positions",

@@ -7,14 +7,21 @@ from contextlib import contextmanager
 import numpy as np
 import pytest
 from _scenarios import lattice
-from _viewer import launch_chromium, serving, sim2_session, wait_for
+from _viewer import (
+    ROOT_SEL,
+    attr,
+    launch_chromium,
+    pause,
+    serving,
+    sim2_session,
+    viewer_page,
+    wait_for,
+)
 from playwright.sync_api import sync_playwright
 
 import formationlab as fl
 from formationlab.cli import main
 from formationlab.io.scenario import load_scenario
-
-ROOT_SEL = ".flv-root"
 
 
 @pytest.fixture(scope="module")
@@ -28,32 +35,13 @@ def browser():
 @pytest.fixture
 def live(browser):
     session = sim2_session()
-    with serving(session) as srv:
-        page = browser.new_page(viewport={"width": 1100, "height": 720}, accept_downloads=True)
-        errors: list[str] = []
-        page.on("pageerror", lambda e: errors.append(str(e)))
-        page.goto(srv.url)
-        page.wait_for_selector(f"{ROOT_SEL}[data-state=ready]", timeout=15_000)
+    with viewer_page(browser, session, accept_downloads=True) as page:
         yield page, session
-        page.close()
-        assert not errors, errors
-
-
-def attr(page, name):
-    return page.get_attribute(ROOT_SEL, f"data-{name}")
 
 
 def flv(page, what):
     """What the page's test hooks say (``axes``, ``view``, ``plots``, ``legend``)."""
     return page.evaluate(f"document.querySelector('{ROOT_SEL}').flv.{what}()")
-
-
-def pause(page, session):
-    """Pause, and wait until the page has drawn the paused state (the view, which follows
-    the formation, then stays where it is)."""
-    page.click("button[data-role=pause]")
-    wait_for(lambda: session.paused, what="the run to pause")
-    wait_for(lambda: float(attr(page, "t")) == session.t, what="the paused state drawn")
 
 
 def test_page_draws_every_robot_and_streams(live):

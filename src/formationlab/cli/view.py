@@ -18,7 +18,8 @@ __all__: list[str] = []
     "view",
     epilog=(
         "Examples:  formationlab view examples/paper-simulation-2.toml\n\n"
-        "           formationlab view runs/sim2   (replay a run folder with a time slider)"
+        "           formationlab view runs/sim2   (replay a run folder with a time slider)\n\n"
+        "           formationlab view examples/space/tetrahedron-mirror.toml   (in 3-D)"
     ),
 )
 def view(
@@ -43,7 +44,9 @@ def view(
     On the page: drag robots, pause, step, reset, change the speed, the law
     and its gains (k_c, k_a, theta), the integrator and dt, perturb the robots,
     download the state as a scenario (TOML) or a PNG. Given the folder of
-    `formationlab run`, it replays the run with a time slider. The URL holds a
+    `formationlab run`, it replays the run with a time slider. A formation in space is
+    shown in 3-D: orbit (drag), zoom (wheel), pan (right drag), and drag a robot in the
+    plane facing the camera. The URL holds a
     random token; the server writes no files. Stop it with Ctrl-C. Needs
     `pip install formationlab[view]`.
     """

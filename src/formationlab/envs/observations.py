@@ -19,7 +19,7 @@ from numpy.typing import DTypeLike, NDArray
 from ..formation.spec import Formation
 from ..models import DoubleIntegrator, RobotModel, Unicycle
 from ..models.transforms import NearIdentity, heading_vectors
-from ..sensing import rotate
+from ..sensing import to_frames
 from ..validation import positive
 
 __all__ = [
@@ -42,23 +42,25 @@ def other_robots(n: int) -> NDArray[np.intp]:
 
 
 def observation_space(formation: Formation, model: RobotModel, dtype: DTypeLike) -> spaces.Dict:
-    """The ``Dict`` of one robot's observation (its keys sorted, as ``Dict`` keeps them)."""
-    n = formation.n
+    """The ``Dict`` of one robot's observation (its keys sorted, as ``Dict`` keeps them);
+    vectors of ``formation.dim`` coordinates (3 in space)."""
+    n, dim = formation.n, formation.dim
     parts: dict[str, spaces.Space] = {
-        "relative": spaces.Box(-np.inf, np.inf, shape=(n - 1, 2), dtype=dtype),
+        "relative": spaces.Box(-np.inf, np.inf, shape=(n - 1, dim), dtype=dtype),
         "seen": spaces.MultiBinary(n - 1),
         "neighbour": spaces.MultiBinary(n - 1),
     }
     if isinstance(model, Unicycle):
         parts["heading"] = spaces.Box(-1.0, 1.0, shape=(2,), dtype=dtype)
     if isinstance(model, DoubleIntegrator):
-        parts["velocity"] = spaces.Box(-np.inf, np.inf, shape=(2,), dtype=dtype)
+        parts["velocity"] = spaces.Box(-np.inf, np.inf, shape=(dim,), dtype=dtype)
     return spaces.Dict(parts)
 
 
-def action_bound(model: RobotModel, max_command: float | None) -> NDArray[np.float64]:
-    """The bound ``(2,)`` of a robot's action box ``[-b, b]`` (module docstring of
-    :mod:`.pettingzoo`): the model's limits, else ``max_command`` (:data:`MAX_COMMAND`)."""
+def action_bound(model: RobotModel, max_command: float | None, dim: int = 2) -> NDArray[np.float64]:
+    """The bound ``(dim,)`` of a robot's action box ``[-b, b]`` (module docstring of
+    :mod:`.pettingzoo`): the model's limits, else ``max_command`` (:data:`MAX_COMMAND`);
+    ``(v, omega)`` of a unicycle (in the plane only)."""
     b = MAX_COMMAND if max_command is None else positive(max_command, "max_command")
     if isinstance(model, Unicycle):
         v = model.max_speed if model.max_speed is not None else b
@@ -72,7 +74,7 @@ def action_bound(model: RobotModel, max_command: float | None) -> NDArray[np.flo
     limit = getattr(model, "max_speed", None)
     if limit is not None and not isinstance(model, DoubleIntegrator):
         b = limit
-    return np.array([b, b], dtype=float)
+    return np.full(dim, b, dtype=float)
 
 
 def observation_parts(
@@ -90,20 +92,20 @@ def observation_parts(
     model : RobotModel
     x : ndarray, shape (B, n, k)
         The states.
-    z, seen : ndarray, shapes (B, n, n, 2) and (B, n, n)
+    z, seen : ndarray, shapes (B, n, n, d) and (B, n, n)
         The channel's measurements (:meth:`formationlab.sensing.Channel.observe`).
-    frame : ndarray, shape (B, n), or None
-        Each robot's frame angle (:meth:`~formationlab.sensing.Channel.angles`; None: the
-        common frame).
+    frame : ndarray, shape (B, n) or (B, n, 3, 3), or None
+        Each robot's frame (:meth:`~formationlab.sensing.Channel.frames`): its angle in the
+        plane, its rotation matrix in space; None: the common frame.
     others : ndarray, shape (n, n - 1)
         :func:`other_robots`.
 
     Returns
     -------
     dict
-        ``relative`` ``(B, n, n - 1, 2)`` (0 where not seen), ``seen`` ``(B, n, n - 1)``
-        bool, and ``heading`` (unicycles) or ``velocity`` (double integrators) ``(B, n, 2)``
-        in the robot's own frame.
+        ``relative`` ``(B, n, n - 1, d)`` (0 where not seen), ``seen`` ``(B, n, n - 1)``
+        bool, and ``heading`` (unicycles, ``(B, n, 2)``) or ``velocity`` (double
+        integrators, ``(B, n, d)``) in the robot's own frame.
     """
     rows = np.arange(others.shape[0])[:, None]
     sees = seen[:, rows, others]
@@ -111,11 +113,12 @@ def observation_parts(
         "relative": np.where(sees[..., None], z[:, rows, others], 0.0),
         "seen": sees,
     }
-    angle = np.zeros(x.shape[:2]) if frame is None else frame
-    if isinstance(model, Unicycle):
+    if isinstance(model, Unicycle):  # (in the plane)
+        angle = np.zeros(x.shape[:2]) if frame is None else frame
         out["heading"] = heading_vectors(x[..., 2] - angle)
     if isinstance(model, DoubleIntegrator):
-        out["velocity"] = rotate(x[..., 2:4], -angle)
+        d = z.shape[-1]
+        out["velocity"] = to_frames(x[..., d : 2 * d], frame)
     return out
 
 
@@ -138,8 +141,8 @@ def common_commands(
     x: NDArray[np.float64],
     world: Callable[[NDArray[np.float64]], NDArray[np.float64]],
 ) -> NDArray[np.float64]:
-    """The commands ``(..., n, 2)`` the closed loop takes (common frame, at the law's points)
-    of the robots' actions ``a`` ``(..., n, 2)`` at states ``x`` ``(..., n, k)``.
+    """The commands ``(..., n, d)`` the closed loop takes (common frame, at the law's points)
+    of the robots' actions ``a`` ``(..., n, d)`` at states ``x`` ``(..., n, k)``.
 
     A unicycle's ``(v, omega)`` becomes ``v h + l omega h_perp`` (the near-identity
     transform's inverse, exact); any other robot's action, a vector in its own frame, is

@@ -16,7 +16,7 @@ order, each flattened: ``heading`` or ``velocity``, ``neighbour``, ``relative`` 
 vector, 0.0 or 1.0). One slot per *other* robot, in robot-number order (robot ``i`` left
 out):
 
-``relative`` ``(n - 1, 2)``
+``relative`` ``(n - 1, d)``
     robot ``i``'s measurement of ``p_j - p_i`` in its own frame, from the measurement
     channel (:class:`~formationlab.sensing.Channel`: local frames, noise, delay, drops,
     range, as the scenario's or the given :class:`~formationlab.sensing.Sensing` says);
@@ -28,8 +28,12 @@ out):
     whether ``j`` is a neighbour of ``i`` in the formation's graph (constant);
 ``heading`` ``(2,)``, unicycles only
     ``(cos, sin)`` of robot ``i``'s heading in its own frame (``(1, 0)`` in local frames);
-``velocity`` ``(2,)``, double integrators only
+``velocity`` ``(d,)``, double integrators only
     robot ``i``'s velocity in its own frame.
+
+``d`` is the formation's dimension: 2 in the plane, 3 for a formation in space
+(``Formation.dim``, docs/three-d.md), where a robot's own frame is a rotation of SO(3)
+(``[sensing] frames = "local"``) and actions have three components.
 
 The robot's own heading and velocity are exact (proprioception); only the relative
 positions pass through the channel.
@@ -96,6 +100,7 @@ except ImportError as exc:  # pragma: no cover - the extra is installed where te
         "extra: pip install formationlab[agents]"
     ) from exc
 
+from ..controllers.terms import KernelTerms
 from ..errors import FormationError, ParameterError
 from ..io.scenario import resolve_scenario
 from ..models import Unicycle
@@ -232,9 +237,23 @@ class FormationEnv(ParallelEnv):
         self.tolerances = tolerances or Tolerances()
         self.dt = float(dt)
         self.n_steps = max(1, round(float(scenario.duration) / self.dt))
-        scenario.in_plane("the PettingZoo environment")
+        if render_mode is not None and scenario.formation.dim == 3:
+            raise ParameterError(
+                'render_mode = "rgb_array" draws formations in the plane; this one is in '
+                "space: leave render_mode None and watch it with `formationlab view`",
+                key="render_mode",
+            )
         self.system = closed_loop(scenario, sensing=sensing, faults=faults)
-        self.terms = scenario.law.compiled_terms(self.formation)  # the law's local form
+        try:  # the law's local form (the channel's and law_policy's)
+            self.terms: KernelTerms = scenario.law.sensed_terms(self.formation)
+        except ParameterError as exc:  # in space: the laws robots run on their measurements
+            which = str(exc).split(";")[0]  # (the laws that do, named by the law's check)
+            raise ParameterError(
+                f"{which}; the environment's robots observe each other through the "
+                f"measurement channel, so in space it takes those laws only, not "
+                f"{scenario.law.name!r}: choose one of them in [controller]",
+                key="controller.law",
+            ) from None
         # unicycles are driven by (v, omega): through the near-identity transform, which
         # is exactly invertible, the model's own limits and kinematics step them
         self._driven = self.system
@@ -249,7 +268,8 @@ class FormationEnv(ParallelEnv):
         rows = np.arange(n)[:, None]
         self.neighbours = self.formation.adjacency[rows, self.others].astype(np.int8)
         self._edges = self.formation.edges
-        bound = action_bound(model, max_command).astype(self.dtype)
+        dim = self.formation.dim
+        bound = action_bound(model, max_command, dim).astype(self.dtype)
         self.dict_space = observation_space(self.formation, model, self.dtype)
         flat = observation == "flat"
         self._obs_spaces = {
@@ -259,9 +279,10 @@ class FormationEnv(ParallelEnv):
             for a in self.possible_agents
         }
         self._act_spaces = {
-            a: spaces.Box(-bound, bound, shape=(2,), dtype=self.dtype) for a in self.possible_agents
+            a: spaces.Box(-bound, bound, shape=bound.shape, dtype=self.dtype)
+            for a in self.possible_agents
         }  # bound in self.dtype (a float64 bound in a float32 Box is warned about)
-        self.state_space = spaces.Box(-np.inf, np.inf, shape=(n, model.state_size()))
+        self.state_space = spaces.Box(-np.inf, np.inf, shape=(n, len(model.names_in(dim))))
         self.seed: Seed | None = None
         self._root: int | None = None
         self._episode = 0
@@ -327,7 +348,8 @@ class FormationEnv(ParallelEnv):
         )  # not the channel's
         for _ in range(_JITTER_TRIES):
             x = x0.copy()
-            x[:, :2] += self.jitter * rng.standard_normal((self.formation.n, 2))
+            dim = self.formation.dim
+            x[:, :dim] += self.jitter * rng.standard_normal((self.formation.n, dim))
             try:
                 return initial_state(self.formation, self.model, x)
             except FormationError:
@@ -393,26 +415,27 @@ class FormationEnv(ParallelEnv):
         if unknown or missing:
             what = f"unknown agents {unknown}" if unknown else f"no action for {missing}"
             raise ParameterError(f"step needs one action for each of {self.agents}: {what}")
-        out = np.empty((self.formation.n, 2))
+        size = self._act_spaces[self.possible_agents[0]].shape
+        out = np.empty((self.formation.n, *size))
         for a in self.agents:
             v = np.asarray(actions[a], dtype=float)
-            if v.shape != (2,):
+            if v.shape != size:
                 raise ParameterError(
-                    f"the action of {a} must have shape (2,) (its command in its own frame), "
+                    f"the action of {a} must have shape {size} (its command in its own frame), "
                     f"got shape {v.shape}"
                 )
             out[self.agent_index[a]] = v
         return out
 
     def _command(self, a: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The commands ``(n, 2)`` the closed loop takes (common frame, at the law's points)."""
+        """The commands ``(n, d)`` the closed loop takes (common frame, at the law's points)."""
         world = lambda v: self.channel.world(v[None], x[None], _LIVE)[0]  # noqa: E731
         return common_commands(self.model, a, x, world)
 
     def _observe(self) -> None:
         z, seen = self.channel.observe(self._x[None], _LIVE, self._k)
-        angles = self.channel.angles(self._x[None], _LIVE)
-        self._parts = observation_parts(self.model, self._x[None], z, seen, angles, self.others)
+        frames = self.channel.frames(self._x[None], _LIVE)  # angles, or rotations in space
+        self._parts = observation_parts(self.model, self._x[None], z, seen, frames, self.others)
 
     def _observations(self) -> dict[str, Any]:
         parts = self._parts

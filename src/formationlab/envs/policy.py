@@ -46,7 +46,7 @@ def law_policy(env: FormationEnv) -> Policy:
     transform = env.model.transform if isinstance(env.model, Unicycle) else None
 
     def policy(observations: Mapping[str, Mapping[str, Any]]) -> dict[str, NDArray[np.float64]]:
-        z = np.zeros((n, n, 2))
+        z = np.zeros((n, n, env.formation.dim))
         seen = np.zeros((n, n), dtype=bool)
         ids = [env.agent_index[a] for a in observations]
         parts = {a: env.as_dict(o) for a, o in observations.items()}  # "flat" or "dict"

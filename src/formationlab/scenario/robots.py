@@ -96,11 +96,13 @@ def _initial_value(key: str, value: Any, n: int, fail: Fail) -> NDArray[np.float
     if key == "velocities":
         rows: Sequence[Any] = value if value and isinstance(value[0], list) else [value]
         ok = isinstance(value, list) and all(
-            isinstance(r, list) and len(r) == 2 and all(_is_number(x) for x in r) for r in rows
-        )
+            isinstance(r, list) and len(r) in (2, 3) and all(_is_number(x) for x in r) for r in rows
+        )  # (the model checks the rows against the formation's space)
         if not ok:
             raise fail(
-                where, f"velocities must be [vx, vy] or one [vx, vy] per robot, got {value!r}"
+                where,
+                "velocities must be [vx, vy] or one [vx, vy] per robot ([vx, vy, vz] in space), "
+                f"got {value!r}",
             )
         if not all(math.isfinite(x) for r in rows for x in r):
             raise fail(where, f"velocities must be finite numbers (m/s), got {value!r}")

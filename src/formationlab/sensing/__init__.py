@@ -13,7 +13,7 @@ The closed loop (:class:`formationlab.System`) takes a :class:`Sensing` and
 
 from .channel import BLOCK, SENSING_LIMIT, Channel, Seed
 from .config import FRAMES, Faults, Sensing, Stop, delay_ring, delay_steps
-from .local import from_frames, local_controls, measured, rotate, uniform_rotations
+from .local import from_frames, local_controls, measured, rotate, to_frames, uniform_rotations
 
 __all__ = [
     "BLOCK",
@@ -30,5 +30,6 @@ __all__ = [
     "local_controls",
     "measured",
     "rotate",
+    "to_frames",
     "uniform_rotations",
 ]

@@ -51,7 +51,7 @@ from ..controllers.kinds.signed_area import area_force, area_gain, signed_area
 from ..controllers.terms import KernelTerms
 from ..formation.geometry import scatter_rows
 
-__all__ = ["from_frames", "local_controls", "measured", "rotate", "uniform_rotations"]
+__all__ = ["from_frames", "local_controls", "measured", "rotate", "to_frames", "uniform_rotations"]
 
 
 def rotate(v: NDArray[np.float64], angle: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -96,6 +96,16 @@ def from_frames(u: NDArray[np.float64], frame: NDArray[np.float64] | None) -> ND
     if u.shape[-1] == 2:
         return rotate(u, frame)
     return np.einsum("...iab,...ib->...ia", frame, u)
+
+
+def to_frames(v: NDArray[np.float64], frame: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    """``R_i^T v_i``: every robot's vector ``(..., n, d)`` from the common frame to its own
+    (the inverse of :func:`from_frames`; ``frame`` as in :func:`measured`)."""
+    if frame is None:
+        return v
+    if v.shape[-1] == 2:
+        return rotate(v, -np.asarray(frame))
+    return np.einsum("...iba,...ib->...ia", frame, v)
 
 
 def _gather(z: NDArray, obs: NDArray, tgt: NDArray) -> NDArray:

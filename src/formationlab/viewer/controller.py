@@ -121,7 +121,7 @@ class Controller:
         elif kind == "speed":
             s.set_speed(msg.value)
         elif kind == "drag":
-            s.drag(msg.robot, msg.x, msg.y)
+            s.drag(msg.robot, msg.x, msg.y, msg.z)
         elif kind == "release":
             s.release()
         elif kind == "perturb":

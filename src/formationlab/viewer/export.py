@@ -26,7 +26,7 @@ from ..scenario.parse import Scenario, parse_scenario
 __all__ = ["export_table", "finish_export", "plain"]
 
 #: The ``[robots]`` key that holds each extra state column of a model.
-STATE_KEYS = {"headings": ("theta",), "velocities": ("vx", "vy")}
+STATE_KEYS = {"headings": ("theta",), "velocities": ("vx", "vy", "vz")}
 
 
 class SessionError(UserInputError):
@@ -44,7 +44,8 @@ def plain(obj: Any) -> Any:
 
 def _model_state(scenario: Scenario, x: NDArray[np.float64]) -> dict[str, Any]:
     """The ``[robots]`` keys of the model's state beyond the positions, from ``x`` ``(n, k)``."""
-    names = tuple(type(scenario.model).state_names)
+    dim = scenario.formation.dim
+    names = tuple(scenario.model.names_in(dim))
     if x.shape[-1] != len(names):
         raise SessionError(
             f"[robots] model {scenario.model.name!r} has the state {', '.join(names)}, but only "
@@ -52,9 +53,10 @@ def _model_state(scenario: Scenario, x: NDArray[np.float64]) -> dict[str, Any]:
             "state): nothing to export the start from"
         )
     out: dict[str, Any] = {}
-    covered = {"x", "y"}
+    covered = set(names[:dim])  # the positions
     for key, cols in STATE_KEYS.items():
-        if all(c in names for c in cols):
+        cols = tuple(c for c in cols if c in names)  # (vz in space only)
+        if cols and (len(cols) == 1 or len(cols) == dim):
             idx = [names.index(c) for c in cols]
             value = x[:, idx[0]] if len(idx) == 1 else x[:, idx]
             out[key] = np.asarray(value, dtype=float).tolist()
@@ -82,7 +84,7 @@ def export_table(
     raw = copy.deepcopy(scenario.raw)
     x = np.asarray(x, dtype=float)
     robots = raw.setdefault("robots", {})
-    robots["positions"] = [[float(a), float(b)] for a, b in x[:, :2]]
+    robots["positions"] = x[:, : scenario.formation.dim].tolist()
     robots.update(_model_state(scenario, x))
     if scenario.faults is not None and "faults" in raw:
         raw["faults"]["stop"] = [

@@ -49,7 +49,8 @@ class Frame:
     ----------
     header : dict
         JSON-ready: ``t``, ``V``, error summary, active surfaces, status, ...
-    positions : ndarray of float32, shape (n, 2)
+    positions : ndarray of float32, shape (n, d)
+        Robot centres, ``d = 2`` in the plane and 3 in space.
     heading : ndarray of float32, shape (n,), optional
         Robot headings in radians, for models whose state has them.
     """
@@ -67,8 +68,8 @@ class History:
     ----------
     t : ndarray, shape (T,)
         Seconds.
-    positions : ndarray, shape (T, n, 2)
-        Robot centres at those times (robot 1 is column 0).
+    positions : ndarray, shape (T, n, d)
+        Robot centres at those times (robot 1 is column 0; ``d = 3`` in space).
     V : ndarray, shape (T,)
         The law's Lyapunov function (eq. 15 for the paper's law; NaN where unknown). It
         can be negative where the paper's V is: a held robot (a drag) is not bound by it.
@@ -83,17 +84,21 @@ class History:
     errors: NDArray[np.float64]
 
 
-def split_state(state: NDArray[np.float64], names: tuple[str, ...] = ()) -> tuple[NDArray, Any]:
-    """Positions ``(..., n, 2)`` and headings ``(..., n)`` (or None) of a state.
+def split_state(
+    state: NDArray[np.float64], names: tuple[str, ...] = (), dim: int = 2
+) -> tuple[NDArray, Any]:
+    """Positions ``(..., n, dim)`` and headings ``(..., n)`` (or None) of a state.
 
-    ``names`` are the model's ``state_names``; without them a state of three numbers
-    per robot (a saved unicycle run: x, y, heading) counts as one with headings.
+    ``names`` are the model's state columns in ``dim`` dimensions
+    (:meth:`~formationlab.models.base.RobotModel.names_in`); without them a state of three
+    numbers per robot in the plane (a saved unicycle run: x, y, heading) counts as one with
+    headings. A formation in space (``dim = 3``) has no headings.
     """
     if "theta" in names:
         return state[..., :2], state[..., names.index("theta")]
-    if not names and state.shape[-1] == 3:
+    if not names and dim == 2 and state.shape[-1] == 3:
         return state[..., :2], state[..., 2]
-    return state[..., :2], None
+    return state[..., :dim], None
 
 
 def edge_errors(formation: Formation, q: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -151,14 +156,20 @@ def finite_or_none(v: float) -> float | None:
 
 
 def static_info(formation: Formation, name: str) -> dict[str, Any]:
-    """What the page draws besides the positions: diameters, graph, switching surfaces."""
-    tris, beta, _ = formation.surfaces
+    """What the page draws besides the positions: the space (``dim``, 2 or 3), diameters,
+    graph, switching surfaces (triangles in the plane, restricted quadruples in space)."""
+    space = formation.dim == 3
+    tris, beta, _ = formation.chiral_surfaces if space else formation.surfaces
     surfaces = None
     if len(tris) <= SURFACES_MAX:
-        surfaces = {"triangles": (tris + 1).tolist(), "beta": [float(b) for b in beta]}
+        surfaces = {
+            "tetrahedra" if space else "triangles": (tris + 1).tolist(),
+            "beta": [float(b) for b in beta],
+        }
     return {
         "name": name,
         "n": formation.n,
+        "dim": formation.dim,
         "diameters": [float(d) for d in formation.diameters],
         "edges": (formation.edges + 1).tolist(),
         "distances": [float(d) for d in formation.distances],

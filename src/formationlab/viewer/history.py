@@ -50,16 +50,17 @@ class StateHistory:
         self.samples.append((float(t), np.array(x, dtype=float), system))
 
     def read(self) -> History:
-        """Times ``(T,)``, positions ``(T, n, 2)``, ``V`` ``(T,)`` (eq. 15 for the paper's
-        law, with the obstacles' repulsion) and the per-edge errors ``(T, m)`` of the states
-        kept, each by the closed loop in force when it was stepped."""
+        """Times ``(T,)``, positions ``(T, n, d)`` (``d`` the formation's dimension), ``V``
+        ``(T,)`` (eq. 15 for the paper's law, with the obstacles' repulsion) and the per-edge
+        errors ``(T, m)`` of the states kept, each by the closed loop in force when it was
+        stepped."""
         samples = self.samples
         t = np.array([s[0] for s in samples])
         if not samples:
             return History(t=t, positions=np.zeros((0, 0, 2)), V=t.copy(), errors=t[:, None])
         formation = samples[0][2].formation
         n, m = formation.n, len(formation.edges)
-        q, V, err = np.zeros((len(t), n, 2)), np.zeros(len(t)), np.zeros((len(t), m))
+        q, V, err = np.zeros((len(t), n, formation.dim)), np.zeros(len(t)), np.zeros((len(t), m))
         start = 0
         while start < len(t):  # runs of states stepped under one closed loop
             system = samples[start][2]

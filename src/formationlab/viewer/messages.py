@@ -7,14 +7,16 @@ before it is parsed. Robot numbers are 1-based.
 
 Server -> page: JSON objects (``info``, ``error``, ``notice``, ``export``) and
 frames. A frame is a JSON header plus binary buffers (positions as float32,
-``x0 y0 x1 y1 ...``; headings, when the model has them, as a second buffer).
+``x0 y0 x1 y1 ...`` in the plane, ``x0 y0 z0 x1 y1 z1 ...`` in space, where ``info``
+says ``dim = 3``; headings, when the model has them, as a second buffer).
 ``info`` describes the closed loop once (:func:`formationlab.viewer.frames.scene_info`:
 ``obstacles`` as circles ``{kind, center, radius}`` and polygons ``{kind, vertices}``,
 ``safety`` (the filter's name or null), ``marching``, ``model``, ``state_names``,
 ``sensing``, ``faults``); a frame's header carries, besides ``t``, ``V``, the errors and
 the ``active`` surfaces, ``filtered`` (the 1-based robots whose command the safety filter
 changed, null without a filter), ``filter_status`` and ``reference`` (the marching
-reference velocity ``[vx, vy]`` or null) (:func:`formationlab.viewer.frames.live_header`).
+reference velocity ``[vx, vy]``, ``[vx, vy, vz]`` in space, or null)
+(:func:`formationlab.viewer.frames.live_header`).
 On a websocket both go in one binary message, see :func:`encode_binary`; in the
 notebook widget the buffers are the widget message's own buffers.
 """
@@ -87,12 +89,14 @@ class Speed(_Msg):
 
 
 class Drag(_Msg):
-    """Hold robot ``robot`` (1-based) at ``(x, y)`` until ``release``."""
+    """Hold robot ``robot`` (1-based) at ``(x, y)`` (in the plane) or ``(x, y, z)`` (a
+    formation in space; without ``z`` the robot keeps its height) until ``release``."""
 
     type: Literal["drag"]
     robot: int = Field(ge=1, le=10_000_000)
     x: Coord
     y: Coord
+    z: Coord | None = None
 
 
 class Release(_Msg):

@@ -57,6 +57,8 @@ class ReplaySession:
         self.t = np.asarray(dataset["time"].values, dtype=float)
         self.q = np.asarray(dataset["q"].values, dtype=float)
         n = self.q.shape[1]
+        #: the space of the run: 2 (the plane) or 3 (``trajectory.nc`` with a ``z`` axis)
+        self.dim = int(self.q.shape[-1])
         #: the full states ``(T, n, k)`` when the run stored them (else the positions)
         self.x = np.asarray(dataset["x"].values, dtype=float) if "x" in dataset else self.q
         self.state_names: tuple[str, ...] = (
@@ -105,6 +107,7 @@ class ReplaySession:
             static = {
                 "name": self.name,
                 "n": self.n,
+                "dim": self.dim,
                 "diameters": self.diameters.tolist(),
                 "edges": (self.edges + 1).tolist(),
                 "distances": self.distances.tolist(),
@@ -146,7 +149,7 @@ class ReplaySession:
 
     def frame(self) -> Frame:
         k = self.index
-        pos, heading = split_state(self.x[k], self.state_names)
+        pos, heading = split_state(self.x[k], self.state_names, self.dim)
         header: dict[str, Any] = {
             "t": float(self.t[k]),
             "V": finite_or_none(self.V[k]),
@@ -212,7 +215,7 @@ class ReplaySession:
     def _read_only(self, what: str) -> SessionError:
         return SessionError(f"a replay cannot {what}; run `formationlab view SCENARIO` to steer")
 
-    def drag(self, robot: int, x: float, y: float) -> None:
+    def drag(self, robot: int, x: float, y: float, z: float | None = None) -> None:
         raise self._read_only("move robots")
 
     def release(self) -> None:

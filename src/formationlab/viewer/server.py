@@ -26,7 +26,7 @@ from starlette.responses import HTMLResponse, PlainTextResponse, Response
 from starlette.routing import Route, WebSocketRoute
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from .assets import bundle, read_asset
+from .assets import bundle, read_asset, three_module
 from .controller import Controller, RateLimiter, Reply, error_reply
 from .messages import dumps, encode_binary
 
@@ -88,6 +88,14 @@ def make_app(controller: Controller, token: str) -> Starlette:
     async def page(request: Request) -> Response:
         return Response(read_asset("page.js"), media_type="text/javascript", headers=_headers())
 
+    async def three(request: Request) -> Response:
+        try:
+            text = three_module(request.path_params["name"])
+        except KeyError:
+            return PlainTextResponse("404: no such file", status_code=404)
+        headers = {**_headers(), "Cache-Control": "max-age=86400"}  # a vendored release
+        return Response(text, media_type="text/javascript", headers=headers)
+
     async def style(request: Request) -> Response:
         name = request.url.path.lstrip("/")
         return Response(read_asset(name), media_type="text/css", headers=_headers())
@@ -141,6 +149,7 @@ def make_app(controller: Controller, token: str) -> Starlette:
             Route("/", index),
             Route("/app.js", script),
             Route("/page.js", page),
+            Route("/three/{name}", three),
             Route("/viewer.css", style),
             Route("/page.css", style),
             Route("/favicon.ico", no_icon),

@@ -6,7 +6,8 @@ robot model, marching, obstacles, safety filter, sensing, faults) advanced one s
 time by the stepping driver's body (:class:`formationlab.integrators.driver.Stepping`:
 the time ``t_k = k dt``, the measurement channel, the contact rule
 ``System.step_verdict`` and its messages). From a reset, ``step(k)`` gives the states
-``simulate(..., backend="numpy")`` saves. A large formation (from
+``simulate(..., backend="numpy")`` saves, in the plane or in space (``Formation.dim``: a
+drag then takes ``z`` too). A large formation (from
 :data:`~formationlab.viewer.stepping.COMPILED_FROM` robots) that can run compiled steps in
 segments on the engine's compiled single run instead (:mod:`.stepping`: the same states,
 to rounding), so that "x1" is real time at a thousand robots; :attr:`LiveSession.reached`
@@ -128,10 +129,6 @@ class LiveSession:
         self.step_budget_s = step_budget_s
         self.notices: list[str] = []
         self.integrator: FixedStepIntegrator = self._live_integrator(scenario.integrator)
-        try:
-            scenario.in_plane("the viewer")
-        except UserInputError as exc:  # the live view's refusal, by name
-            raise SessionError(str(exc)) from None
         self.system: System = closed_loop(scenario)
         self.speed = 1.0
         self.paused = False
@@ -167,7 +164,7 @@ class LiveSession:
 
     @property
     def positions(self) -> NDArray[np.float64]:
-        """Robot centres now, ``(n, 2)`` (robot 1 is row 0)."""
+        """Robot centres now, ``(n, d)`` (robot 1 is row 0; ``d = 3`` in space)."""
         return self.system.positions(self.state)
 
     q = positions
@@ -190,7 +187,7 @@ class LiveSession:
             self._record()
 
     def trajectory(self) -> History:
-        """What was stepped since the last reset: times ``(T,)``, positions ``(T, n, 2)``,
+        """What was stepped since the last reset: times ``(T,)``, positions ``(T, n, d)``,
         ``V`` ``(T,)`` and the per-edge errors ``(T, m)``, each state's by the law in force
         when it was stepped (:class:`~formationlab.viewer.history.StateHistory`: every
         state, thinned past its budget; a large formation on the compiled loop keeps every
@@ -316,7 +313,8 @@ class LiveSession:
     def frame(self) -> Frame:
         """The state now."""
         x = self.state
-        pos, heading = split_state(x, type(self.system.model).state_names)
+        dim = self.formation.dim
+        pos, heading = split_state(x, self.system.model.names_in(dim), dim)
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # (not finite:
             numbers = live_header(self.system, x, self.t)  # the status says so)
         header: dict[str, Any] = {
@@ -450,29 +448,36 @@ class LiveSession:
                     f"({system.obstacles[o].describe()}); drop it elsewhere"
                 )
 
-    def drag(self, robot: int, x: float, y: float) -> None:
-        """Move robot ``robot`` (1-based) to ``(x, y)`` and hold it there until :meth:`release`.
+    def drag(self, robot: int, x: float, y: float, z: float | None = None) -> None:
+        """Move robot ``robot`` (1-based) to ``(x, y)`` in the plane, or ``(x, y, z)`` in
+        space, and hold it there until :meth:`release`.
 
-        The robot's other state (heading) is kept; a double integrator's velocity is
-        set to zero while it is held.
+        In space a drag without ``z`` keeps the robot's height; a ``z`` for a formation in
+        the plane is refused. The robot's other state (heading) is kept; a double
+        integrator's (or a quadrotor's) velocity is set to zero while it is held.
         """
         i = self._robot(robot)
-        state = self.state.copy()
-        state[i, :2] = (x, y)
-        names = type(self.system.model).state_names
-        for c, name in enumerate(names):
-            if name in ("vx", "vy"):
-                state[i, c] = 0.0
         f = self.formation
+        if z is not None and f.dim == 2:
+            raise SessionError(
+                f"robot {robot}: a drag to (x, y, z) = ({x:.3g}, {y:.3g}, {z:.3g}) in a formation "
+                "in the plane; send x and y only"
+            )
+        state = self.state.copy()
+        names = self.system.model.names_in(f.dim)
+        where = (x, y) if f.dim == 2 else (x, y, state[i, 2] if z is None else z)
+        state[i, : f.dim] = where
+        for c, name in enumerate(names):
+            if name in ("vx", "vy", "vz"):
+                state[i, c] = 0.0
+        at = f"({', '.join(f'{v:.3g}' for v in where)})"
         q = self.system.positions(state)
         others = np.arange(f.n) != i
         gap = np.linalg.norm(q[others] - q[i], axis=-1) - f.contact_matrix[i, others]
         if np.min(gap) <= 0:
             j = int(np.arange(f.n)[others][np.argmin(gap)]) + 1
-            raise SessionError(
-                f"robot {robot} at ({x:.3g}, {y:.3g}) would overlap robot {j}; drop it elsewhere"
-            )
-        self._check_clear(state, f"robot {robot} at ({x:.3g}, {y:.3g})")
+            raise SessionError(f"robot {robot} at {at} would overlap robot {j}; drop it elsewhere")
+        self._check_clear(state, f"robot {robot} at {at}")
         self.pinned, self._pin_at = i, state[i].copy()
         self._moved(state)
 
@@ -484,7 +489,8 @@ class LiveSession:
         """Add a Gaussian displacement of standard deviation ``scale`` to every robot's position."""
         for _ in range(50):
             state = self.state.copy()
-            state[:, :2] += self.rng.normal(0.0, scale, size=(self.formation.n, 2))
+            dim = self.formation.dim
+            state[:, :dim] += self.rng.normal(0.0, scale, size=(self.formation.n, dim))
             if self.system.clearance(state) > 0:
                 self._moved(state)
                 return

@@ -9,7 +9,7 @@ buffers). The state a notebook user may read or set is mirrored in traitlets:
 ``status``; setting one from Python applies it to the run (and is validated
 like a message from the page), and every message from the page updates them.
 Without a browser: ``step(n)`` and ``run(seconds)`` step the run, ``t``, ``positions``
-``(n, 2)``, ``state`` ``(n, k)`` and ``history`` (times, positions, V and the per-edge
+``(n, d)``, ``state`` ``(n, k)`` and ``history`` (times, positions, V and the per-edge
 errors since the last reset) read it.
 Works in JupyterLab, Jupyter Notebook 7 and VS Code notebooks (anywidget).
 """
@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from ..errors import ParameterError
 from ..scenario.parse import Scenario
-from .assets import bundle, read_asset
+from .assets import THREE_FILES, bundle, read_asset, three_module
 from .controller import Controller, Reply
 from .frames import History
 from .session import LiveSession, SessionError
@@ -63,6 +63,9 @@ class Viewer(anywidget.AnyWidget):  # type: ignore[misc]
 
     _esm = traitlets.Unicode(bundle()).tag(sync=True)
     _css = traitlets.Unicode(read_asset("viewer.css")).tag(sync=True)
+    #: the three.js modules by file name, for a formation in space only (the front end
+    #: loads them from blobs: a notebook has no server of the package's files)
+    _three = traitlets.Dict().tag(sync=True)
 
     name = traitlets.Unicode("").tag(sync=True)
     mode = traitlets.Unicode("live").tag(sync=True)
@@ -94,6 +97,8 @@ class Viewer(anywidget.AnyWidget):  # type: ignore[misc]
         self._syncing = True
         super().__init__(**kwargs)
         self.controller = Controller(session)
+        if session.info()["dim"] == 3:
+            self._three = {name: three_module(name) for name in THREE_FILES}
         self.controller.listeners.append(self._sync)
         self.on_msg(self._on_front_end)
         self._sync()
@@ -108,11 +113,11 @@ class Viewer(anywidget.AnyWidget):  # type: ignore[misc]
 
     @property
     def positions(self) -> NDArray[np.float64]:
-        """Positions now, shape ``(n, 2)`` (robot 1 is row 0), in float64."""
+        """Positions now, shape ``(n, d)`` (robot 1 is row 0; ``d = 3`` in space), in float64."""
         s = self.session
         if isinstance(s, LiveSession):
             return np.array(s.positions)
-        return np.array(s.x[s.index, :, :2])
+        return np.array(s.q[s.index])
 
     @property
     def state(self) -> NDArray[np.float64]:
@@ -122,13 +127,13 @@ class Viewer(anywidget.AnyWidget):  # type: ignore[misc]
 
     @property
     def history(self) -> History:
-        """What the run went through: times ``(T,)``, positions ``(T, n, 2)``, ``V``
+        """What the run went through: times ``(T,)``, positions ``(T, n, d)``, ``V``
         ``(T,)`` and the per-edge errors ``(T, m)`` (:class:`History`), stepped since the
         last reset (live: :meth:`LiveSession.trajectory`) or saved (replay)."""
         s = self.session
         if isinstance(s, LiveSession):
             return s.trajectory()
-        return History(t=np.array(s.t), positions=np.array(s.x[..., :2]), V=np.array(s.V),
+        return History(t=np.array(s.t), positions=np.array(s.q), V=np.array(s.V),
                        errors=np.array(s.err))  # fmt: skip
 
     def step(self, count: int = 1) -> int:

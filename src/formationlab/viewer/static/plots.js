@@ -367,6 +367,7 @@ function flvDrawErrors(ctx, w, h, series, opts) {
   out.switches = flvPlotMarks(ctx, m, h, opts, t0, t1);
   ctx.lineWidth = 1.4;
   out.lines = shown.map((e) => opts.labels[e - 1] || `edge ${e}`);
+  out.edges = shown.slice(); // their 1-based edges, in the colours' order
   shown.forEach((e, j) => {
     ctx.strokeStyle = FLV_PALETTE[j % FLV_PALETTE.length];
     flvPolyline(ctx, t, series.cols.get(e), m.X, m.Y, (v) => isFinite(v));

@@ -54,6 +54,10 @@ function socketModel(url) {
     get() {
       return undefined;
     },
+    // where the vendored three.js modules are served (a formation in space)
+    threeUrl(name) {
+      return new URL(`three/${name}`, window.location.href).href;
+    },
   };
 }
 
@@ -82,6 +86,10 @@ function flvLayout(el) {
   const root = flvEl("div", { class: "flv-root", "data-robots": "0", "data-fps": "0",
     "data-frames": "0", "data-errors": "0", "data-state": "connecting" });
   const scene = flvEl("canvas", { class: "flv-scene", "data-role": "scene", tabindex: "0" });
+  // a formation in space: a WebGL canvas of its own (the plane's keeps its 2-D context)
+  const scene3d = flvEl("canvas", { class: "flv-scene flv-scene3d", "data-role": "scene3d",
+    tabindex: "0" });
+  scene3d.style.display = "none";
   const status = flvEl("div", { class: "flv-status", "data-role": "status" });
   const legend = flvEl("div", { class: "flv-legend", "data-role": "legend" });
   const speed = flvEl("input", { type: "range", min: "-2", max: "2", step: "0.1", value: "0",
@@ -128,9 +136,9 @@ function flvLayout(el) {
       flvEl("label", {}, [labels, " numbers"])]),
     plotV, plotE, logBox,
   ]);
-  root.append(flvEl("div", { class: "flv-main" }, [scene, legend, status]), side);
+  root.append(flvEl("div", { class: "flv-main" }, [scene, scene3d, legend, status]), side);
   el.appendChild(root);
-  return { root, scene, status, legend, speed, speedLabel, stepCount, scale, law, params, integrator,
+  return { root, scene, scene3d, status, legend, speed, speedLabel, stepCount, scale, law, params, integrator,
     dt, model, slider, lines, labels, plotV, plotE, logBox, live, replay,
     title: side.querySelector("[data-role=title]"),
     button: (role) => root.querySelector(`button[data-role=${role}]`) };
@@ -141,6 +149,8 @@ function flvLegend(box, info, frame, drawn) {
   const hd = frame.header;
   const layers = [["robots", "robots (diameters to scale)"]];
   if (info.edges.length) layers.push(["edges", "graph edges"]);
+  if (drawn.coloured) layers.push(["plotted", "edges of the error plot, in its colours"]);
+  if (drawn.trails) layers.push(["trails", "trails"]);
   if (drawn.active) layers.push(["active", "active restriction (σ ≥ 0)"]);
   if (drawn.lines) layers.push(["lines", "switching lines s (eq. 26)"]);
   if (drawn.obstacles) layers.push(["obstacles", "obstacles"]);
@@ -164,6 +174,8 @@ function render({ model, el }) {
   // the view follows the formation's extent ("now"), or stays on the start ("start")
   let fitMode = "now", startBounds = null, lastActive = null, switches = [];
   let plotInfo = { v: null, e: null };
+  // a formation in space (info.dim === 3): three.js's scene, once loaded, and the start
+  let space = false, scene3d = null, startPos = null;
   let drawMs = 0, frames = 0, fpsCount = 0, fpsStart = performance.now();
   let seriesV = new FlvSeries(1), seriesE = new FlvEdgeSeries();
   const dpr = () => window.devicePixelRatio || 1;
@@ -204,6 +216,11 @@ function render({ model, el }) {
 
   function onInfo(msg) {
     info = msg;
+    space = info.dim === 3;
+    ui.root.dataset.dim = String(info.dim || 2);
+    ui.scene.style.display = space ? "none" : "";
+    ui.scene3d.style.display = space ? "" : "none";
+    ui.lines.parentElement.lastChild.textContent = space ? " active tetrahedra" : " switching lines";
     let longest = 0, widest = 0;
     for (const d of info.distances) longest = Math.max(longest, d);
     for (const d of info.diameters) widest = Math.max(widest, d);
@@ -222,6 +239,7 @@ function render({ model, el }) {
     switches = [];
     lastActive = null;
     startBounds = null;
+    startPos = null;
     if (info.mode === "replay") {
       ui.slider.max = String(info.frames - 1);
       const s = info.series;
@@ -233,7 +251,21 @@ function render({ model, el }) {
     }
     for (const n of info.notices || []) log(n, "notice");
     needFit = true;
-    ui.root.dataset.state = "ready";
+    if (!space) {
+      ui.root.dataset.state = "ready";
+      return;
+    }
+    ui.root.dataset.state = "loading";
+    flvLoadThree(model).then((lib) => {
+      if (!scene3d) scene3d = new FlvScene3D(lib, ui.scene3d);
+      scene3d.setInfo(info);
+      needFit = true;
+      drawn = null;
+      ui.root.dataset.state = "ready";
+    }).catch((e) => {
+      ui.root.dataset.state = "failed";
+      log(`the view in space cannot start (three.js or WebGL): ${e.message || e}`, "error");
+    });
   }
 
   function onFrame(msg, buffers) {
@@ -260,7 +292,9 @@ function render({ model, el }) {
       }
       lastActive = active;
     }
-    if (!startBounds || (msg.t === 0 && !msg.index)) {
+    if (space) {
+      if (!startPos || (msg.t === 0 && !msg.index)) startPos = pos.slice();
+    } else if (!startBounds || (msg.t === 0 && !msg.index)) {
       startBounds = info ? flvBounds(pos, info.diameters, info.minSpan) : null;
     }
     ui.button("pause").textContent = msg.paused ? "Run" : "Pause";
@@ -309,7 +343,7 @@ function render({ model, el }) {
   }
   model.on("msg:custom", onMessage);
 
-  function draw() {
+  function draw2d() {
     const [w, h] = sizeCanvas(ui.scene);
     ctx.setTransform(dpr(), 0, 0, dpr(), 0, 0);
     view.resize(w, h);
@@ -331,7 +365,21 @@ function render({ model, el }) {
     }
     const theta = info.law && info.law.params && "theta" in info.law.params ? info.law.params.theta : null;
     const opts = { grid: true, lines: ui.lines.checked, labels: ui.labels.checked, theta };
-    const count = flvDrawScene(ctx, view, info, latest, opts);
+    return [flvDrawScene(ctx, view, info, latest, opts), opts];
+  }
+
+  function draw3d() {
+    const c = ui.scene3d;
+    scene3d.resize(Math.max(50, c.clientWidth), Math.max(50, c.clientHeight), dpr());
+    const opts = { lines: ui.lines.checked, labels: ui.labels.checked, trails: true,
+      fit: needFit, fitPos: fitMode === "start" ? startPos : null,
+      follow: drag === null && fitMode === "now", plotted: plotInfo.e && plotInfo.e.edges };
+    needFit = false;
+    return [scene3d.draw(info, latest, opts), opts];
+  }
+
+  function draw() {
+    const [count, opts] = space ? draw3d() : draw2d();
     ui.root.flvAxes = opts.drawn.axes;
     flvLegend(ui.legend, info, latest, opts.drawn);
     const hd = latest.header;
@@ -343,7 +391,7 @@ function render({ model, el }) {
     }
     if (hd.reference) {
       const rows = Array.isArray(hd.reference[0]) ? hd.reference : [hd.reference];
-      const txt = rows.map((v) => `(${flvFmt(v[0])}, ${flvFmt(v[1])})`).join(" ");
+      const txt = rows.map((v) => `(${v.map(flvFmt).join(", ")})`).join(" ");
       parts.push(rows.length > 1 ? `leaders' v_ref = ${txt}` : `v_ref = ${txt}`);
     }
     // a formation judged by its bearings (the bearing law) plots its bearing errors
@@ -384,7 +432,7 @@ function render({ model, el }) {
   function loop() {
     if (!alive) return;
     const now = performance.now();
-    if (latest && info && latest !== drawn) {
+    if (latest && info && latest !== drawn && (!space || scene3d)) {
       const d0 = performance.now();
       draw();
       drawMs = 0.9 * drawMs + 0.1 * (performance.now() - d0);
@@ -414,7 +462,7 @@ function render({ model, el }) {
 
   // ---- interaction
   function pointer(e) {
-    const r = ui.scene.getBoundingClientRect();
+    const r = e.currentTarget.getBoundingClientRect(); // the plane's canvas or the space's
     return [e.clientX - r.left, e.clientY - r.top];
   }
   ui.scene.addEventListener("pointerdown", (e) => {
@@ -432,15 +480,38 @@ function render({ model, el }) {
     const [x, y] = view.world(...pointer(e));
     dragSend = { type: "drag", robot: drag + 1, x, y };
   });
+  // in space: a robot is dragged in the plane facing the camera through its centre; a
+  // press elsewhere (or with shift, or another button) moves the camera (capture: before
+  // three.js's OrbitControls, which a grabbed robot switches off until the release)
+  ui.scene3d.addEventListener("pointerdown", (e) => {
+    ui.scene3d.focus({ preventScroll: true });
+    if (!scene3d || !latest || !info || info.mode !== "live" || e.button !== 0 || e.shiftKey) return;
+    const [px, py] = pointer(e);
+    const i = scene3d.pick(latest.pos, px, py);
+    if (i < 0) return;
+    drag = i;
+    scene3d.grab(latest.pos, i);
+    ui.scene3d.setPointerCapture(e.pointerId);
+    const p = scene3d.dragPoint(px, py);
+    if (p) dragSend = { type: "drag", robot: i + 1, x: p[0], y: p[1], z: p[2] };
+  }, { capture: true });
+  ui.scene3d.addEventListener("pointermove", (e) => {
+    if (drag === null || !scene3d) return;
+    const p = scene3d.dragPoint(...pointer(e));
+    if (p) dragSend = { type: "drag", robot: drag + 1, x: p[0], y: p[1], z: p[2] };
+  });
   const endDrag = () => {
+    if (scene3d) scene3d.release();
     if (drag === null) return;
     if (dragSend) model.send(dragSend);
     dragSend = null;
     drag = null;
     model.send({ type: "release" });
   };
-  ui.scene.addEventListener("pointerup", endDrag);
-  ui.scene.addEventListener("pointercancel", endDrag);
+  for (const c of [ui.scene, ui.scene3d]) {
+    c.addEventListener("pointerup", endDrag);
+    c.addEventListener("pointercancel", endDrag);
+  }
 
   ui.button("pause").addEventListener("click", () =>
     model.send({ type: "pause", paused: !(latest && latest.header.paused) }));
@@ -458,13 +529,15 @@ function render({ model, el }) {
   ui.button("fit").addEventListener("click", () => fit("now"));
   ui.button("fit-start").addEventListener("click", () => fit("start"));
   // keys on the drawing (click it first): f fits the formation now, s the start
-  ui.scene.addEventListener("keydown", (e) => {
+  const onKey = (e) => {
     if (e.ctrlKey || e.metaKey || e.altKey) return;
     if (e.key === "f" || e.key === "s") {
       fit(e.key === "f" ? "now" : "start");
       e.preventDefault();
     }
-  });
+  };
+  ui.scene.addEventListener("keydown", onKey);
+  ui.scene3d.addEventListener("keydown", onKey);
   ui.scene.addEventListener("pointerdown", () => ui.scene.focus({ preventScroll: true }));
   ui.speed.addEventListener("input", () => {
     const v = Math.pow(10, Number(ui.speed.value));
@@ -485,7 +558,7 @@ function render({ model, el }) {
   ui.button("export").addEventListener("click", () => model.send({ type: "export_scenario" }));
   ui.button("png").addEventListener("click", () => {
     const t = latest ? latest.header.t.toFixed(3) : "0";
-    ui.scene.toBlob((blob) => flvDownload(`${info ? info.name : "formation"}-t${t}.png`, blob), "image/png");
+    (space ? ui.scene3d : ui.scene).toBlob((blob) => flvDownload(`${info ? info.name : "formation"}-t${t}.png`, blob), "image/png");
   });
   ui.slider.addEventListener("input", () => model.send({ type: "seek", index: Number(ui.slider.value) }));
 
@@ -493,11 +566,17 @@ function render({ model, el }) {
   ui.root.flv = {
     switchingLine: flvSwitchingLine,
     robotPx(i) {
+      if (space) return this.worldToPage(...latest.pos.slice(3 * (i - 1), 3 * i));
       const r = ui.scene.getBoundingClientRect();
       const [x, y] = view.px(latest.pos[2 * (i - 1)], latest.pos[2 * (i - 1) + 1]);
       return [r.left + x, r.top + y];
     },
-    worldToPage(x, y) {
+    worldToPage(x, y, z) {
+      if (space) {
+        const r = ui.scene3d.getBoundingClientRect();
+        const [px, py] = scene3d.toPx(x, y, z);
+        return [r.left + px, r.top + py];
+      }
       const r = ui.scene.getBoundingClientRect();
       const [px, py] = view.px(x, y);
       return [r.left + px, r.top + py];
@@ -507,6 +586,8 @@ function render({ model, el }) {
     view: () => ({ scale: view.scale, w: view.w, h: view.h, mode: fitMode,
       start: startBounds, world: [...view.world(0, 0), ...view.world(view.w, view.h)] }),
     plots: () => plotInfo,
+    // in space: the camera (position, target, viewing direction, field of view, size)
+    camera: () => (scene3d && space ? scene3d.cameraState() : null),
     legend: () => [...ui.legend.querySelectorAll("[data-layer]")].map((e) => e.dataset.layer),
   };
 
