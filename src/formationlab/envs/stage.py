@@ -11,8 +11,10 @@ formations' states in the loop's layout ``(n, k, B)``:
     positions as it measures them, which it sees, which are its neighbours, its own part),
     written in place into the ``float32`` buffer ``(B, n, obs)``; each measurement is the
     sensing stage's (:func:`formationlab.sensing.stage.measured_pair` and
-    :func:`~formationlab.sensing.stage.within_range`: frames, frame errors, range), so the
-    observation is what :meth:`formationlab.sensing.Channel.field` gives, cast to ``float32``;
+    :func:`~formationlab.sensing.stage.within_range`: frames, frame errors, range, noise;
+    :func:`~formationlab.sensing.stage.delivery`: delay and drops), so the observation is
+    what :meth:`formationlab.sensing.Channel.field` or :meth:`~formationlab.sensing.Channel.
+    observe` gives, cast to ``float32``;
 :func:`errors`
     the reward's terms (:mod:`.rewards`): each robot's local formation error
     (:func:`~.rewards.robot_errors`, edge by edge in its order, from 0), each formation's
@@ -39,13 +41,14 @@ from numba import njit
 
 from ..controllers.kinds.restriction import triangle_product
 from ..controllers.stage import local_field
-from ..sensing.stage import measured_pair, within_range
+from ..sensing.channel import BLOCK
+from ..sensing.stage import delivery, measured_pair, within_range
 
 __all__ = ["errors", "law_commands", "observe"]
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def observe(p, x, hc, hs, which, sn, others, neighbours, at, own, obs):
+def observe(p, x, hc, hs, which, k, sn, ss, others, neighbours, at, own, obs):
     """Write the observations ``obs[b]`` ``(n, obs)`` of the formations ``b`` in ``which``.
 
     Parameters
@@ -56,22 +59,29 @@ def observe(p, x, hc, hs, which, sn, others, neighbours, at, own, obs):
         ``cos`` and ``sin`` of the headings (the frames of robots measuring in them).
     which : ndarray of int, shape (L,)
         The formations observed.
-    sn : SensingTerms
-        The sensing (:func:`formationlab.sensing.stage.sensing_terms` of the channel of all
-        ``B`` formations, a function of the state: no noise, delay or drops).
+    k : ndarray of int, shape (B,)
+        Each formation's step (with noise, delay or drops: each observes its steps in
+        order, once each).
+    sn, ss : SensingTerms, SensingState or None
+        The sensing stage's terms of the ``B`` formations
+        (:func:`formationlab.sensing.stage.sensing_terms`) and, with noise, delay or drops,
+        their state (delay ring, held measurements; the noise and loss blocks of step
+        ``k`` filled); None: the measurements are a function of the state.
     others, neighbours : ndarray, shape (n, n - 1)
         :func:`.observations.other_robots` and whether each is a neighbour (int8).
     at : ndarray of int64, shape (4,)
         Where ``neighbour``, ``relative``, ``seen`` and the robot's own part (heading or
         velocity; -1: none) start in the flat vector.
     own : ndarray, shape (B, n, 2), or (1, 1, 2)
-        The own part, in the robot's frame (:func:`.observations.observation_parts`).
+        The own part, in the robot's frame (:func:`.observations.own_part`).
     obs : ndarray of float32, shape (B, n, obs)
         Written in place.
     """
     n = p.shape[0]
     for w in range(which.shape[0]):
         b = which[w]
+        kb = k[b]
+        row = kb % BLOCK
         for i in range(n):
             c = 1.0  # (cos, sin)(-a_i): robot i's turn into its own frame
             s = 0.0
@@ -80,13 +90,35 @@ def observe(p, x, hc, hs, which, sn, others, neighbours, at, own, obs):
                 s = -hs[i, b] if sn.headed else sn.sin_in[b, i]
             for m in range(n - 1):
                 j = others[i, m]
+                wx = wy = 0.0
+                if sn.noise > 0:
+                    wx = sn.noise_block[b, row, i, j, 0]
+                    wy = sn.noise_block[b, row, i, j, 1]
                 zx, zy = measured_pair(
-                    p[j, 0, b] - p[i, 0, b], p[j, 1, b] - p[i, 1, b], sn.local, c, s, 0.0, 0.0,
-                    0.0,
+                    p[j, 0, b] - p[i, 0, b], p[j, 1, b] - p[i, 1, b], sn.local, c, s, sn.noise,
+                    wx, wy,
                 )  # fmt: skip
                 inside = within_range(
                     x[j, 0, b] - x[i, 0, b], x[j, 1, b] - x[i, 1, b], sn.ranged, sn.range2
                 )
+                if ss is not None:  # taken now, used when it arrives (after the delay)
+                    slots = ss.ring_z.shape[1]
+                    slot = kb % slots
+                    back = (kb - (slots - 1)) % slots
+                    ss.ring_z[b, slot, i, j, 0] = zx
+                    ss.ring_z[b, slot, i, j, 1] = zy
+                    ss.ring_in[b, slot, i, j] = inside
+                    take, has = delivery(
+                        kb >= slots - 1 and ss.ring_in[b, back, i, j],
+                        sn.drop > 0 and sn.drop_block[b, row, i, j] < sn.drop,
+                        ss.has[b, i, j],
+                    )
+                    if take:
+                        ss.held[b, i, j, 0] = ss.ring_z[b, back, i, j, 0]
+                        ss.held[b, i, j, 1] = ss.ring_z[b, back, i, j, 1]
+                    ss.has[b, i, j] = has
+                    zx, zy = ss.held[b, i, j, 0], ss.held[b, i, j, 1]
+                    inside = has
                 obs[b, i, at[0] + m] = neighbours[i, m]
                 obs[b, i, at[1] + 2 * m] = zx if inside else 0.0
                 obs[b, i, at[1] + 2 * m + 1] = zy if inside else 0.0

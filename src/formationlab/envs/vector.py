@@ -23,11 +23,14 @@ are the PettingZoo environment's (:mod:`.pettingzoo`, :mod:`.observations`,
 Each formation's step is the engine's: its robots' model turns the commands into rates with
 the model's limits and the Euler step is judged by the contact rule, in compiled code
 (:mod:`formationlab.engine.commanded`, the batch loop's stages); faults stop robots. The
-measurements come from the sensing's channel (:class:`formationlab.sensing.Channel`): one
-channel over all formations when it is a function of the state (the paper's sensing,
-local frames, frame errors, range, mismatch), renewed row by row when a formation starts an
-episode; one channel per formation, observed one by one, with noise, delay or drops (a
-formation's draws then follow its own steps).
+observations, the reward's errors and ends are computed for every robot of every formation
+in compiled loops (:mod:`.stage`), the measurements by the sensing stage's formulas
+(:mod:`formationlab.sensing.stage`: frames, frame errors, range, noise, delay, drops); one
+measurement channel (:class:`formationlab.sensing.Channel`) over all formations holds their
+seeds and draws, renewed row by row when a formation starts an episode. With noise, delay
+or drops each formation carries its delay ring and held measurements, and its noise and
+losses are drawn from its own generators, a block of :data:`~formationlab.sensing.BLOCK`
+steps at a time as its steps reach it (its draws follow its own steps).
 
 Episodes and seeds: ``reset(seed=s)`` gives formation ``b`` the seed ``s + b`` (a list of
 ``B`` seeds gives each its own); formation ``b``'s episode ``e`` (0, 1, ...) is trial
@@ -73,8 +76,8 @@ from ..models.transforms import NearIdentity
 from ..outcomes.analysis import Tolerances, bearings_met
 from ..outcomes.batch import classify_batch
 from ..scenario import Scenario
-from ..sensing import Channel, Faults, Seed, Sensing
-from ..sensing.stage import sensing_terms
+from ..sensing import BLOCK, Channel, Faults, Seed, Sensing
+from ..sensing.stage import sensing_arrays, sensing_terms
 from ..studies.config import GaussianInitial, parse_study
 from ..studies.sampling import SEED_BLOCK, model_initial_states, trial_initial_states
 from ..validation import seed as check_seed
@@ -82,8 +85,6 @@ from ..validation import whole
 from .observations import (
     action_bound,
     common_commands,
-    flat_observations,
-    observation_parts,
     observation_space,
     other_robots,
     own_key,
@@ -249,9 +250,9 @@ class FormationVectorEnv(VectorEnv):
         self._edges = (edges[:, 0].astype(np.int64), edges[:, 1].astype(np.int64))
         self._hand = isinstance(model, Unicycle) and model.mapping == NearIdentity.name
         self._headed = model.has_heading and self.sensing.frames == "local"
-        self._channel: Channel | None = None  # one for all formations (a field of the state)
-        self._sn: Any = None  # its sensing stage's terms (the observations' kernel)
-        self._channels: list[Channel] = []  # or one per formation (noise, delay, drops)
+        self._channel: Channel | None = None  # the formations' seeds and draws
+        self._sn: Any = None  # the sensing stage's terms of the formations
+        self._ss: Any = None  # and what they carry from step to step (noise, delay, drops)
         self._all = np.arange(B)
 
     # ------------------------------------------------------------------ episodes
@@ -273,7 +274,7 @@ class FormationVectorEnv(VectorEnv):
         self.seeds[:] = seeds
         self.episodes[:] = 0
         self._block[:] = -1
-        self._channel, self._channels, self._sn = None, [], None
+        self._channel = self._sn = self._ss = None
         self._begin(self._all)
         return self._out(), self._infos(np.zeros(B, bool), self._score().copy())
 
@@ -307,39 +308,38 @@ class FormationVectorEnv(VectorEnv):
 
     def _begin(self, which: NDArray[np.intp]) -> None:
         """Formations ``which`` start their current episode: start, channel, observation."""
-        f, model = self.formation, self.model
         self._xt[:, :, which] = self._first_states(which).transpose(1, 2, 0)
         self._k[which] = 0
         seeds: list[Seed] = [(int(self.seeds[b]), int(self.episodes[b])) for b in which]
-        law, dt = self.scenario.law, self.dt
-        if self.sensing.sampled:  # one channel per formation: its draws follow its steps
-            if not self._channels:
-                self._channels = [None] * self.num_envs  # type: ignore[list-item]
-            for b, s in zip(which, seeds, strict=True):
-                self._channels[b] = Channel(self.sensing, f, law, model, [s], dt)
-        elif self._channel is None:
-            self._channel = Channel(self.sensing, f, law, model, seeds, dt)
-            self._sn = self._sensing_terms(self._all)
-        elif self._drawn(self._channel):  # its frames or mismatch: drawn from the new seeds
-            self._channel.renew(which, seeds)
-            new = self._sensing_terms(which)
+        ch = self._channel
+        if ch is None:
+            f, law, model = self.formation, self.scenario.law, self.model
+            ch = self._channel = Channel(self.sensing, f, law, model, seeds, self.dt)
+            headed = model.has_heading and ch.fixed_angles is None
+            if self.sensing.sampled:  # the measurements each formation carries: compiled
+                self._sn, self._ss = sensing_arrays(ch, self._all, self._stop_at, headed)
+            else:
+                self._sn, self._ss = sensing_terms(ch, self._all, self._stop_at, headed), None
+        elif self._drawn(ch):  # frames, mismatch or noise: drawn from the new seeds
+            ch.renew(which, seeds, draws_only=True)
+            headed = self.model.has_heading and ch.fixed_angles is None
+            new = sensing_terms(ch, which, self._stop_at, headed)
             for key in ("cos_in", "sin_in", "cos_out", "sin_out", "own_distance"):
                 if getattr(self._sn, key).shape[0] == self.num_envs:
                     getattr(self._sn, key)[which] = getattr(new, key)
+            if self._ss is not None:  # nothing measured, nothing held yet
+                for held in self._ss[:4]:
+                    held[which] = 0
         self._observe(which)
 
-    @staticmethod
-    def _drawn(channel: Channel) -> bool:
-        """Whether a channel that is a function of the state draws anything per trial that
-        its measurements use (frames, frame errors, mismatch)."""
-        return channel.fixed_angles is not None or channel.own_distance is not None
-
-    def _sensing_terms(self, which: NDArray[np.intp]) -> Any:
-        """The sensing stage's terms of formations ``which`` of the common channel."""
-        ch = self._channel
-        assert ch is not None
-        headed = self.model.has_heading and ch.fixed_angles is None
-        return sensing_terms(ch, which, self._stop_at, headed)
+    def _drawn(self, channel: Channel) -> bool:
+        """Whether the channel draws anything per formation that its measurements use
+        (frames, frame errors, mismatch, noise, drops)."""
+        return (
+            self.sensing.sampled
+            or channel.fixed_angles is not None
+            or channel.own_distance is not None
+        )
 
     def _points(self) -> tuple[NDArray[np.float64], ...]:
         """The law's points ``(n, 2, B)`` and the headings' ``cos`` and ``sin`` ``(n, B)``
@@ -358,28 +358,25 @@ class FormationVectorEnv(VectorEnv):
         return p, hc, hs
 
     def _observe(self, which: NDArray[np.intp], at: tuple | None = None) -> None:
-        """The observations of formations ``which`` at their current states (``at``: the
-        law's points and headings of :meth:`_points`, if known)."""
-        if self._channel is not None:  # a function of the state: compiled, every robot
-            p, hc, hs = self._points() if at is None else at
-            if own_key(self.model) is not None:
-                x = self._x[which]
-                self._own[which] = own_part(self.model, x, self._channel.angles(x, which))
-            observe(p, self._xt, hc, hs, which, self._sn, self.others, self.neighbours,
-                    self._at, self._own, self._obs)  # fmt: skip
-            return
-        x = self._x[which]
-        one = np.zeros(1, dtype=np.intp)
-        got = [
-            self._channels[b].observe(x[r : r + 1], one, int(self._k[b]))
-            for r, b in enumerate(which)
-        ]
-        z = np.concatenate([g[0] for g in got])
-        seen = np.concatenate([g[1] for g in got])
-        frames = [self._channels[b].angles(x[r : r + 1], one) for r, b in enumerate(which)]
-        angles = None if frames[0] is None else np.concatenate(frames)  # type: ignore[arg-type]
-        parts = observation_parts(self.model, x, z, seen, angles, self.others)
-        self._obs[which] = flat_observations(self.dict_space, parts, self.neighbours, np.float32)
+        """The observations of formations ``which`` at their current states, every robot's in
+        one compiled loop (:func:`.stage.observe`; ``at``: the law's points and headings of
+        :meth:`_points`, if known). With noise or drops, the formations whose step begins a
+        block of :data:`~formationlab.sensing.BLOCK` steps draw the block's (each from its
+        own generator, as its own channel would)."""
+        ch, sn = self._channel, self._sn
+        assert ch is not None
+        if self.sensing.sampled:
+            due = which[self._k[which] % BLOCK == 0]
+            if due.size and self.sensing.noise > 0:
+                sn.noise_block[due] = ch.block("noise", due)
+            if due.size and self.sensing.drop > 0:
+                sn.drop_block[due] = ch.block("drop", due)
+        p, hc, hs = self._points() if at is None else at
+        if own_key(self.model) is not None:
+            x = self._x[which]
+            self._own[which] = own_part(self.model, x, ch.angles(x, which))
+        observe(p, self._xt, hc, hs, which, self._k, sn, self._ss, self.others,
+                self.neighbours, self._at, self._own, self._obs)  # fmt: skip
 
     def _score(self, at: tuple | None = None) -> NDArray[np.float64]:
         """Each robot's local formation error ``(B, n)`` now; ``_worst`` and ``_wrong`` too
@@ -401,19 +398,7 @@ class FormationVectorEnv(VectorEnv):
     def own_distance(self) -> NDArray[np.float64] | None:
         """Each formation's robots' own desired distances ``(B, E, 2)`` (None: the
         formation's), with ``[sensing] mismatch``."""
-        if self._channel is not None:
-            return self._channel.own_distance
-        if self._channels and self._channels[0].own_distance is not None:
-            return np.concatenate([c.own_distance for c in self._channels])  # type: ignore[misc]
-        return None
-
-    def _world(self, a: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.float64]:
-        if self._channel is not None:
-            return self._channel.world(a, x, self._all)
-        one = np.zeros(1, dtype=np.intp)
-        return np.concatenate(
-            [c.world(a[b : b + 1], x[b : b + 1], one) for b, c in enumerate(self._channels)]
-        )
+        return None if self._channel is None else self._channel.own_distance
 
     # ------------------------------------------------------------------ steps
 
@@ -421,7 +406,7 @@ class FormationVectorEnv(VectorEnv):
         self, actions: Any
     ) -> tuple[NDArray[np.float32], NDArray, NDArray[np.bool_], NDArray[np.bool_], dict]:
         """Step every formation with its robots' actions ``(B, n, 2)`` (module docstring)."""
-        if self._channel is None and not self._channels:
+        if self._channel is None:
             raise RuntimeError("call reset() before step()")
         a = np.asarray(actions, dtype=float)
         B, n = self.num_envs, self.formation.n
@@ -431,10 +416,10 @@ class FormationVectorEnv(VectorEnv):
                 f"(each robot's command in its own frame), got shape {a.shape}",
                 key="actions",
             )
-        xt, xn, f, code = self._xt, self._xn, self._f, self._code
+        xt, xn, f, code, ch = self._xt, self._xn, self._f, self._code, self._channel
         x0 = self._x
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            u = common_commands(self.model, a, x0, lambda v: self._world(v, x0))
+            u = common_commands(self.model, a, x0, lambda v: ch.world(v, x0, self._all))
             commanded_rates(xt, np.ascontiguousarray(u.transpose(1, 2, 0)), f, self._model_terms)
             stopped = self._k[None, :] * self.dt >= self._stop_at[:, None]  # (n, B)
             if stopped.any():  # robots stopped by a fault (System._faulty)

@@ -44,6 +44,7 @@ from .channel import BLOCK
 __all__ = [
     "SensingState",
     "SensingTerms",
+    "delivery",
     "halt",
     "informed",
     "measured_pair",
@@ -106,6 +107,19 @@ def within_range(cx, cy, ranged, range2):
     return (not ranged) or cx * cx + cy * cy <= range2
 
 
+@formula
+def delivery(arrived, lost, had):
+    """``(take, has)`` of a measurement delivered at step ``k`` (step 2): whether the robot
+    takes it (it ``arrived``: taken at ``k - m >= 0`` within range, and is not ``lost``) and
+    whether the robot then holds one (a lost one leaves the last one received, if it
+    ``had`` one; one out of range, or none yet, leaves nothing)."""
+    if not arrived:
+        return False, False
+    if lost:
+        return False, had
+    return True, True
+
+
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
 def sensed_field(p, x, hc, hs, u, ul, nact, ids, k, terms, sn, ss):
     """``u`` ``(n, 2, C)``: every robot's command from its own measurements (steps 1-3).
@@ -145,16 +159,15 @@ def sensed_field(p, x, hc, hs, u, ul, nact, ids, k, terms, sn, ss):
                 )
         for i in range(n):  # 2. deliver what was taken at k - m
             for j in range(n):
-                if k < m:  # nothing has arrived yet
-                    ss.has[g, i, j] = False
-                elif not ss.ring_in[g, back, i, j]:
-                    ss.has[g, i, j] = False  # out of range when taken: nothing held
-                elif sn.drop > 0 and i != j and sn.drop_block[g, row, i, j] < sn.drop:
-                    pass  # lost: the last one received (if any) is kept
-                else:
+                take, has = delivery(
+                    k >= m and ss.ring_in[g, back, i, j],
+                    sn.drop > 0 and i != j and sn.drop_block[g, row, i, j] < sn.drop,
+                    ss.has[g, i, j],
+                )
+                ss.has[g, i, j] = has
+                if take:
                     ss.held[g, i, j, 0] = ss.ring_z[g, back, i, j, 0]
                     ss.held[g, i, j, 1] = ss.ring_z[g, back, i, j, 1]
-                    ss.has[g, i, j] = True
         local_field(ss.held[g], ss.has[g], sn.own_distance[g], terms, ul)  # 3.
         for i in range(n):
             ux = ul[i, 0]
