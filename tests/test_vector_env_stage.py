@@ -16,7 +16,7 @@ from formationlab.envs.policy import law_actions
 from formationlab.envs.rewards import Rewards, edge_errors, orientation_errors, robot_errors
 from formationlab.envs.vector import FormationVectorEnv
 from formationlab.io.scenario import load_scenario
-from formationlab.sensing import Sensing
+from formationlab.sensing import BLOCK, Channel, Sensing
 from formationlab.studies.sampling import model_initial_states, trial_initial_states
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -112,3 +112,36 @@ def test_copy_false_returns_the_buffer():
     second, *_ = copied.step(np.zeros((3, 3, 2)))
     assert second is not first
     np.testing.assert_array_equal(second, again)
+
+
+def test_noise_delay_drops_are_the_channels_observations():
+    """With noise, delay and drops each formation's observations are those of its own
+    channel (Channel.observe, seeded as the study seeds the trial), step after step and
+    across a block of draws (BLOCK steps)."""
+    sensing = Sensing(frames="local", noise=0.01, delay=0.004, drop=0.3, mismatch=0.02)
+    sc = load_scenario(TRIANGLE)
+    B = 3
+    env = FormationVectorEnv(sc, num_envs=B, sensing=sensing)
+    obs, _ = env.reset(seed=[4, 7, 9])
+    channels = [
+        Channel(sensing, sc.formation, sc.law, sc.model, [(s, 0)], env.dt) for s in (4, 7, 9)
+    ]
+    one = np.zeros(1, dtype=np.intp)
+    rng = np.random.default_rng(1)
+    k = np.zeros(B, dtype=int)
+    rejected = np.zeros(B, dtype=bool)
+    for _ in range(BLOCK + 5):
+        x = env.state()
+        for b, ch in enumerate(channels):
+            if not rejected[b]:
+                z, seen = ch.observe(x[b : b + 1], one, int(k[b]))
+                parts = observation_parts(sc.model, x[b : b + 1], z, seen, None, env.others)
+                ref = flat_observations(env.dict_space, parts, env.neighbours, np.float32)
+                np.testing.assert_array_equal(obs[b : b + 1], ref)
+        obs, _, _, _, info = env.step(rng.uniform(-0.2, 0.2, (B, 3, 2)))
+        rejected = info["rejected"]
+        k += ~rejected
+    assert k.min() > BLOCK  # (a second block of draws was used)
+    np.testing.assert_array_equal(
+        env.own_distance[:, None], np.stack([c.own_distance for c in channels])
+    )
