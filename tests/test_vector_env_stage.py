@@ -92,13 +92,13 @@ def test_starts_follow_the_seed_blocks():
     initial = env.initial
     for e in (0, 63, 64, 130, 1):
         env.episodes[:] = e
-        got = env._first_states(np.arange(2))
+        got = env.starts.states(env.seeds, env.episodes, np.arange(2))
         for b, s in enumerate([5, 8]):
             q = trial_initial_states(sc.formation, initial, s, [e])
             np.testing.assert_array_equal(
                 got[b], model_initial_states(sc.formation, sc.model, q, s, [e])[0]
             )
-    assert list(env._block) == [0, 0]  # back to block 0 for episode 1
+    assert list(env.starts.block) == [0, 0]  # back to block 0 for episode 1
 
 
 def test_copy_false_returns_the_buffer():

@@ -79,7 +79,6 @@ from ..scenario import Scenario
 from ..sensing import BLOCK, Channel, Faults, Seed, Sensing
 from ..sensing.stage import sensing_arrays, sensing_terms
 from ..studies.config import GaussianInitial, parse_study
-from ..studies.sampling import SEED_BLOCK, model_initial_states, trial_initial_states
 from ..validation import seed as check_seed
 from ..validation import whole
 from .observations import (
@@ -92,6 +91,7 @@ from .observations import (
 )
 from .rewards import Rewards, orientation_errors, robot_errors
 from .stage import errors, observe
+from .starts import EpisodeStarts
 
 __all__ = ["VECTOR_ENV_ID", "FormationVectorEnv"]
 
@@ -131,6 +131,9 @@ class FormationVectorEnv(VectorEnv):
         ``parts[key]`` is the slice of the flat vector that holds part ``key``.
     seeds : ndarray of int, shape (B,)
         Each formation's seed; ``episodes`` ``(B,)`` the number of its current episode.
+    starts : EpisodeStarts
+        Where episodes start (:mod:`.starts`: the study's trials, a seed block kept per
+        formation; ``B x 64`` states).
     """
 
     metadata: ClassVar[dict[str, Any]] = {
@@ -229,9 +232,7 @@ class FormationVectorEnv(VectorEnv):
         self._xn = np.zeros((n, k, B))  # the other buffer: the next states, then the last
         self._f = np.zeros((n, k, B))
         self._code = np.zeros(B, dtype=np.int8)
-        # each formation's seed block of starts: trials 64 c ... 64 c + 63 of its study
-        self._starts = np.zeros((B, SEED_BLOCK, n, k))
-        self._block = np.full(B, -1, dtype=np.int64)
+        self.starts = EpisodeStarts(self.formation, model, self.initial, self._center, B)
         self._obs = np.zeros((B, n, size), dtype=np.float32)
         self._own = np.zeros((B, n, 2) if own_key(model) else (1, 1, 2))
         key = own_key(model)
@@ -273,7 +274,7 @@ class FormationVectorEnv(VectorEnv):
                 raise ParameterError(f"reset takes {B} seeds (one per formation), got {len(seeds)}")
         self.seeds[:] = seeds
         self.episodes[:] = 0
-        self._block[:] = -1
+        self.starts.forget()
         self._channel = self._sn = self._ss = None
         self._begin(self._all)
         return self._out(), self._infos(np.zeros(B, bool), self._score().copy())
@@ -286,29 +287,11 @@ class FormationVectorEnv(VectorEnv):
         """The states ``(B, n, k)``: a view of the loop's layout."""
         return self._xt.transpose(2, 0, 1)
 
-    def _first_states(self, which: NDArray[np.intp]) -> NDArray[np.float64]:
-        """The first states ``(L, n, k)`` of the current episodes of formations ``which``.
-
-        Formation ``b``'s episode ``e`` is trial ``e`` of a study with seed ``s_b``, drawn
-        with the other trials of its seed block (``SEED_BLOCK`` trials from one generator,
-        :mod:`formationlab.studies.sampling`): the block is drawn once and kept, so a new
-        episode's start is a row of it, and a formation draws again once every
-        ``SEED_BLOCK`` episodes.
-        """
-        f, model = self.formation, self.model
-        e = self.episodes[which]
-        block = e // SEED_BLOCK
-        for b, c in zip(which[self._block[which] != block], block[self._block[which] != block],
-                        strict=True):  # fmt: skip
-            s, trials = int(self.seeds[b]), np.arange(c * SEED_BLOCK, (c + 1) * SEED_BLOCK)
-            q0 = trial_initial_states(f, self.initial, s, trials, center=self._center)
-            self._starts[b] = model_initial_states(f, model, q0, s, trials)
-            self._block[b] = c
-        return self._starts[which, e % SEED_BLOCK]
-
     def _begin(self, which: NDArray[np.intp]) -> None:
         """Formations ``which`` start their current episode: start, channel, observation."""
-        self._xt[:, :, which] = self._first_states(which).transpose(1, 2, 0)
+        self._xt[:, :, which] = self.starts.states(self.seeds, self.episodes, which).transpose(
+            1, 2, 0
+        )
         self._k[which] = 0
         seeds: list[Seed] = [(int(self.seeds[b]), int(self.episodes[b])) for b in which]
         ch = self._channel
