@@ -30,6 +30,8 @@ __all__ = [
     "observation_parts",
     "observation_space",
     "other_robots",
+    "own_key",
+    "own_part",
 ]
 
 #: the action bound (m/s, or m/s^2 for double integrators) of a model without a limit
@@ -113,13 +115,36 @@ def observation_parts(
         "relative": np.where(sees[..., None], z[:, rows, others], 0.0),
         "seen": sees,
     }
+    own = own_part(model, x, frame)
+    if own is not None:
+        out[own_key(model)] = own  # type: ignore[index]
+    return out
+
+
+def own_key(model: RobotModel) -> str | None:
+    """The key of a robot's observation of itself: ``heading`` (unicycles), ``velocity``
+    (double integrators), else None."""
+    if isinstance(model, Unicycle):
+        return "heading"
+    if isinstance(model, DoubleIntegrator):
+        return "velocity"
+    return None
+
+
+def own_part(
+    model: RobotModel, x: NDArray[np.float64], frame: NDArray[np.float64] | None
+) -> NDArray[np.float64] | None:
+    """Each robot's observation of itself ``(B, n, d)`` in its own frame (``frame`` as in
+    :func:`observation_parts`: angles ``(B, n)`` in the plane, rotations ``(B, n, 3, 3)`` in
+    space, or None), at states ``x`` ``(B, n, k)``: its heading ``(cos, sin)`` (unicycles, in
+    the plane) or its velocity (:func:`own_key`); None for other models."""
     if isinstance(model, Unicycle):  # (in the plane)
         angle = np.zeros(x.shape[:2]) if frame is None else frame
-        out["heading"] = heading_vectors(x[..., 2] - angle)
+        return heading_vectors(x[..., 2] - angle)
     if isinstance(model, DoubleIntegrator):
-        d = z.shape[-1]
-        out["velocity"] = to_frames(x[..., d : 2 * d], frame)
-    return out
+        d = (x.shape[-1]) // 2
+        return to_frames(x[..., d : 2 * d], frame)
+    return None
 
 
 def flat_observations(

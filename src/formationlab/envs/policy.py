@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from ..controllers.terms import KernelTerms
 from ..models import RobotModel, Unicycle
 from ..sensing import local_controls
+from .stage import law_commands
 
 if TYPE_CHECKING:
     from .pettingzoo import FormationEnv
@@ -84,6 +85,15 @@ def law_actions(
     u = local_controls(terms, z, seen=seen, own_distance=own)
     if ids is not None:
         u = u[:, np.asarray(ids, dtype=np.intp)]
+    return as_actions(model, u, heading)
+
+
+def as_actions(
+    model: RobotModel, u: NDArray[np.float64], heading: NDArray[np.float64] | None
+) -> NDArray[np.float64]:
+    """The actions ``(B, m, 2)`` of the law's commands ``u`` ``(B, m, 2)`` in the robots'
+    frames: ``u`` itself, or ``(v_i, omega_i)`` through the model's transform at the
+    observed headings ``(cos, sin)`` ``heading`` ``(B, m, 2)`` for unicycles."""
     if isinstance(model, Unicycle):
         assert heading is not None
         v, omega = model.transform.commands(u, np.arctan2(heading[..., 1], heading[..., 0]))
@@ -96,21 +106,23 @@ def vector_law_policy(env: FormationVectorEnv) -> Callable[[NDArray], NDArray[np
     every formation of a :class:`~formationlab.envs.vector.FormationVectorEnv`.
 
     ``observations`` ``(B, n, obs)`` (flat, as the environment gives them) become each
-    robot's measurements and its actions ``(B, n, 2)`` are :func:`law_actions` of them: one
-    array computation for all formations, each row from that robot's observation only.
+    robot's measurements and its actions ``(B, n, 2)`` are :func:`law_actions` of them,
+    computed by one compiled loop over all robots (:func:`.stage.law_commands`: the same
+    terms in the same order, so the same numbers), each from that robot's observation only.
     """
-    n, others = env.formation.n, env.others
-    rows = np.arange(n)[:, None]
     at = env.parts  # where each part of the observation is in the flat vector
+    relative, seen = at["relative"].start, at["seen"].start
+    others = env.others.astype(np.int64)
+    E = env.terms.edge_i.size
+    formation_own = np.broadcast_to(env.terms.edge_distance[None, :, None], (1, E, 2)).copy()
 
     def policy(observations: NDArray) -> NDArray[np.float64]:
-        o = np.asarray(observations, dtype=float)
-        B = o.shape[0]
-        z = np.zeros((B, n, n, 2))
-        seen = np.zeros((B, n, n), dtype=bool)
-        z[:, rows, others] = o[..., at["relative"]].reshape(B, n, n - 1, 2)
-        seen[:, rows, others] = o[..., at["seen"]] != 0
-        heading = o[..., at["heading"]] if "heading" in at else None
-        return law_actions(env.terms, env.model, z, seen, env.own_distance, heading)
+        o = np.ascontiguousarray(observations, dtype=np.float64)
+        u = np.empty((*o.shape[:2], 2))
+        own = env.own_distance
+        law_commands(o, others, relative, seen, formation_own if own is None else own,
+                     env.terms, u)  # fmt: skip
+        heading = o[..., at["heading"]].astype(float) if "heading" in at else None
+        return as_actions(env.model, u, heading)
 
     return policy

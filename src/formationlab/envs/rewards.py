@@ -108,18 +108,21 @@ class Rewards:
     def of(
         self,
         formation: Formation,
-        p: NDArray[np.float64],
+        p: NDArray[np.float64] | None,
         u: NDArray[np.float64],
         rejected: NDArray[np.bool_],
         errors: NDArray[np.float64] | None = None,
+        wrong: NDArray[np.float64] | None = None,
     ) -> NDArray[np.float64]:
         """Every robot's reward ``(B, n)`` at the law's points ``p`` ``(B, n, 2)`` (the state
         after the step, or before it where the step was ``rejected`` ``(B,)``), under the
-        commands ``u`` ``(B, n, 2)``; ``errors``: :func:`robot_errors` of ``p`` if known."""
+        commands ``u`` ``(B, n, 2)``; ``errors``: :func:`robot_errors` of ``p`` and ``wrong``:
+        :func:`orientation_errors` of ``p``, if known (then ``p`` may be None)."""
         e = robot_errors(formation, p) if errors is None else errors
         r = -self.distance * e
         if self.orientation:
-            r = r - self.orientation * orientation_errors(formation, p)
+            o = orientation_errors(formation, p) if wrong is None else wrong
+            r = r - self.orientation * o
         if self.effort:
             r = r - self.effort * np.sum(u * u, axis=-1)
         return r - np.where(rejected, self.collision, 0.0)[:, None]

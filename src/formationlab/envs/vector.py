@@ -23,11 +23,14 @@ are the PettingZoo environment's (:mod:`.pettingzoo`, :mod:`.observations`,
 Each formation's step is the engine's: its robots' model turns the commands into rates with
 the model's limits and the Euler step is judged by the contact rule, in compiled code
 (:mod:`formationlab.engine.commanded`, the batch loop's stages); faults stop robots. The
-measurements come from the sensing's channel (:class:`formationlab.sensing.Channel`): one
-channel over all formations when it is a function of the state (the paper's sensing,
-local frames, frame errors, range, mismatch), renewed row by row when a formation starts an
-episode; one channel per formation, observed one by one, with noise, delay or drops (a
-formation's draws then follow its own steps).
+observations, the reward's errors and ends are computed for every robot of every formation
+in compiled loops (:mod:`.stage`), the measurements by the sensing stage's formulas
+(:mod:`formationlab.sensing.stage`: frames, frame errors, range, noise, delay, drops); one
+measurement channel (:class:`formationlab.sensing.Channel`) over all formations holds their
+seeds and draws, renewed row by row when a formation starts an episode. With noise, delay
+or drops each formation carries its delay ring and held measurements, and its noise and
+losses are drawn from its own generators, a block of :data:`~formationlab.sensing.BLOCK`
+steps at a time as its steps reach it (its draws follow its own steps).
 
 Episodes and seeds: ``reset(seed=s)`` gives formation ``b`` the seed ``s + b`` (a list of
 ``B`` seeds gives each its own); formation ``b``'s episode ``e`` (0, 1, ...) is trial
@@ -67,24 +70,28 @@ from ..engine.commanded import commanded_rates, commanded_step
 from ..errors import ParameterError
 from ..io.scenario import resolve_scenario
 from ..models import Unicycle
+from ..models.stage import headings, points
 from ..models.terms import model_terms
 from ..models.transforms import NearIdentity
-from ..outcomes.analysis import Tolerances, bearings_met, classify
+from ..outcomes.analysis import Tolerances, bearings_met
+from ..outcomes.batch import classify_batch
 from ..scenario import Scenario
-from ..sensing import Channel, Faults, Seed, Sensing
+from ..sensing import BLOCK, Channel, Faults, Seed, Sensing
+from ..sensing.stage import sensing_arrays, sensing_terms
 from ..studies.config import GaussianInitial, parse_study
-from ..studies.sampling import model_initial_states, trial_initial_states
 from ..validation import seed as check_seed
 from ..validation import whole
 from .observations import (
     action_bound,
     common_commands,
-    flat_observations,
-    observation_parts,
     observation_space,
     other_robots,
+    own_key,
+    own_part,
 )
-from .rewards import Rewards, edge_errors, robot_errors
+from .rewards import Rewards, orientation_errors, robot_errors
+from .stage import errors, observe
+from .starts import EpisodeStarts
 
 __all__ = ["VECTOR_ENV_ID", "FormationVectorEnv"]
 
@@ -109,6 +116,10 @@ class FormationVectorEnv(VectorEnv):
         The action bound of a model without a limit (:func:`.observations.action_bound`).
     tolerances : Tolerances, optional
         When the formation counts as reached.
+    copy : bool
+        Whether ``reset`` and ``step`` return a copy of the observations (default, as
+        Gymnasium's vector environments) or the environment's own buffer, which the next
+        step overwrites in place.
 
     Attributes
     ----------
@@ -120,6 +131,9 @@ class FormationVectorEnv(VectorEnv):
         ``parts[key]`` is the slice of the flat vector that holds part ``key``.
     seeds : ndarray of int, shape (B,)
         Each formation's seed; ``episodes`` ``(B,)`` the number of its current episode.
+    starts : EpisodeStarts
+        Where episodes start (:mod:`.starts`: the study's trials, a seed block kept per
+        formation; ``B x 64`` states).
     """
 
     metadata: ClassVar[dict[str, Any]] = {
@@ -139,6 +153,7 @@ class FormationVectorEnv(VectorEnv):
         rewards: Rewards | None = None,
         max_command: float | None = None,
         tolerances: Tolerances | None = None,
+        copy: bool = True,
     ) -> None:
         sc = resolve_scenario(scenario)
         self.num_envs = B = whole(num_envs, "num_envs")
@@ -210,13 +225,37 @@ class FormationVectorEnv(VectorEnv):
         self.single_action_space = spaces.Box(-bound, bound, dtype=np.float32)
         self.observation_space = batch_space(self.single_observation_space, B)
         self.action_space = batch_space(self.single_action_space, B)
+        self.copy = bool(copy)
         self.seeds = np.zeros(B, dtype=np.int64)
         self.episodes = np.zeros(B, dtype=np.int64)
         self._k = np.zeros(B, dtype=np.int64)
-        self._x = np.zeros((B, n, model.state_size()))
+        k = model.state_size()
+        self._xt = np.zeros((n, k, B))  # the states in the loop's layout, formations innermost
+        self._xn = np.zeros((n, k, B))  # the other buffer: the next states, then the last
+        self._f = np.zeros((n, k, B))
+        self._code = np.zeros(B, dtype=np.int8)
+        self.starts = EpisodeStarts(self.formation, model, self.initial, self._center, B)
         self._obs = np.zeros((B, n, size), dtype=np.float32)
-        self._channel: Channel | None = None  # one for all formations (a field of the state)
-        self._channels: list[Channel] = []  # or one per formation (noise, delay, drops)
+        self._own = np.zeros((B, n, 2) if own_key(model) else (1, 1, 2))
+        key = own_key(model)
+        self._at = np.array(
+            [self.parts[p].start for p in ("neighbour", "relative", "seen")]
+            + [self.parts[key].start if key else -1],
+            dtype=np.int64,
+        )
+        self._err = np.zeros((B, n))
+        self._worst = np.zeros(B)
+        halves = self.formation.restricted_halves
+        self._wrong = np.zeros((B, n))
+        self._halves = np.ascontiguousarray(halves, dtype=np.int64).reshape(-1, 3)
+        self._want = -np.sign(self.formation.half_alpha()) if len(halves) else np.zeros(0)
+        edges = self.formation.edges
+        self._edges = (edges[:, 0].astype(np.int64), edges[:, 1].astype(np.int64))
+        self._hand = isinstance(model, Unicycle) and model.mapping == NearIdentity.name
+        self._headed = model.has_heading and self.sensing.frames == "local"
+        self._channel: Channel | None = None  # the formations' seeds and draws
+        self._sn: Any = None  # the sensing stage's terms of the formations
+        self._ss: Any = None  # and what they carry from step to step (noise, delay, drops)
         self._all = np.arange(B)
 
     # ------------------------------------------------------------------ episodes
@@ -237,69 +276,114 @@ class FormationVectorEnv(VectorEnv):
                 raise ParameterError(f"reset takes {B} seeds (one per formation), got {len(seeds)}")
         self.seeds[:] = seeds
         self.episodes[:] = 0
-        self._channel, self._channels = None, []
+        self.starts.forget()
+        self._channel = self._sn = self._ss = None
         self._begin(self._all)
-        return self._obs.copy(), self._infos(np.zeros(B, bool))
+        return self._out(), self._infos(np.zeros(B, bool), self._score().copy())
+
+    def _out(self) -> NDArray[np.float32]:
+        return self._obs.copy() if self.copy else self._obs
+
+    @property
+    def _x(self) -> NDArray[np.float64]:
+        """The states ``(B, n, k)``: a view of the loop's layout."""
+        return self._xt.transpose(2, 0, 1)
 
     def _begin(self, which: NDArray[np.intp]) -> None:
         """Formations ``which`` start their current episode: start, channel, observation."""
-        f, model = self.formation, self.model
-        for b in which:  # trial e of a study with seed s (each formation its own)
-            s, e = int(self.seeds[b]), int(self.episodes[b])
-            q0 = trial_initial_states(f, self.initial, s, [e], center=self._center)
-            self._x[b] = model_initial_states(f, model, q0, s, [e])[0]
+        self._xt[:, :, which] = self.starts.states(self.seeds, self.episodes, which).transpose(
+            1, 2, 0
+        )
         self._k[which] = 0
         seeds: list[Seed] = [(int(self.seeds[b]), int(self.episodes[b])) for b in which]
-        law, dt = self.scenario.law, self.dt
-        if self.sensing.sampled:  # one channel per formation: its draws follow its steps
-            if not self._channels:
-                self._channels = [None] * self.num_envs  # type: ignore[list-item]
-            for b, s in zip(which, seeds, strict=True):
-                self._channels[b] = Channel(self.sensing, f, law, model, [s], dt)
-        elif self._channel is None:
-            self._channel = Channel(self.sensing, f, law, model, seeds, dt)
-        else:
-            self._channel.renew(which, seeds)
+        ch = self._channel
+        if ch is None:
+            f, law, model = self.formation, self.scenario.law, self.model
+            ch = self._channel = Channel(self.sensing, f, law, model, seeds, self.dt)
+            headed = model.has_heading and ch.fixed_angles is None
+            if self.sensing.sampled:  # the measurements each formation carries: compiled
+                self._sn, self._ss = sensing_arrays(ch, self._all, self._stop_at, headed)
+            else:
+                self._sn, self._ss = sensing_terms(ch, self._all, self._stop_at, headed), None
+        elif self._drawn(ch):  # frames, mismatch or noise: drawn from the new seeds
+            ch.renew(which, seeds, draws_only=True)
+            headed = self.model.has_heading and ch.fixed_angles is None
+            new = sensing_terms(ch, which, self._stop_at, headed)
+            for key in ("cos_in", "sin_in", "cos_out", "sin_out", "own_distance"):
+                if getattr(self._sn, key).shape[0] == self.num_envs:
+                    getattr(self._sn, key)[which] = getattr(new, key)
+            if self._ss is not None:  # nothing measured, nothing held yet
+                for held in self._ss[:4]:
+                    held[which] = 0
         self._observe(which)
 
-    def _observe(self, which: NDArray[np.intp]) -> None:
-        """The observations of formations ``which`` at their current states."""
-        x = self._x[which]
-        if self._channel is not None:
-            z, seen = self._channel.field(x, which)
-            if seen is None:
-                seen = np.ones(z.shape[:-1], dtype=bool)
-            angles = self._channel.angles(x, which)
-        else:
-            one = np.zeros(1, dtype=np.intp)
-            got = [
-                self._channels[b].observe(x[r : r + 1], one, int(self._k[b]))
-                for r, b in enumerate(which)
-            ]
-            z = np.concatenate([g[0] for g in got])
-            seen = np.concatenate([g[1] for g in got])
-            frames = [self._channels[b].angles(x[r : r + 1], one) for r, b in enumerate(which)]
-            angles = None if frames[0] is None else np.concatenate(frames)  # type: ignore[arg-type]
-        parts = observation_parts(self.model, x, z, seen, angles, self.others)
-        self._obs[which] = flat_observations(self.dict_space, parts, self.neighbours, np.float32)
+    def _drawn(self, channel: Channel) -> bool:
+        """Whether the channel draws anything per formation that its measurements use
+        (frames, frame errors, mismatch, noise, drops)."""
+        return (
+            self.sensing.sampled
+            or channel.fixed_angles is not None
+            or channel.own_distance is not None
+        )
+
+    def _points(self) -> tuple[NDArray[np.float64], ...]:
+        """The law's points ``(n, 2, B)`` and the headings' ``cos`` and ``sin`` ``(n, B)``
+        (``(1, 1)`` for a model without headings) of every formation, by the loop's model
+        stage (:func:`formationlab.models.stage.points`)."""
+        xt = self._xt
+        n, B = xt.shape[0], xt.shape[2]
+        if not self.model.has_heading:
+            return np.ascontiguousarray(xt[:, :2, :]), np.zeros((1, 1)), np.zeros((1, 1))
+        hc, hs = np.empty((n, B)), np.empty((n, B))
+        headings(xt, hc, hs, np.empty((n, B)), np.empty((n, B)), B)
+        if not self._hand:
+            return np.ascontiguousarray(xt[:, :2, :]), hc, hs
+        p = np.empty((n, 2, B))
+        points(xt, hc, hs, p, B, self._model_terms)
+        return p, hc, hs
+
+    def _observe(self, which: NDArray[np.intp], at: tuple | None = None) -> None:
+        """The observations of formations ``which`` at their current states, every robot's in
+        one compiled loop (:func:`.stage.observe`; ``at``: the law's points and headings of
+        :meth:`_points`, if known). With noise or drops, the formations whose step begins a
+        block of :data:`~formationlab.sensing.BLOCK` steps draw the block's (each from its
+        own generator, as its own channel would)."""
+        ch, sn = self._channel, self._sn
+        assert ch is not None
+        if self.sensing.sampled:
+            due = which[self._k[which] % BLOCK == 0]
+            if due.size and self.sensing.noise > 0:
+                sn.noise_block[due] = ch.block("noise", due)
+            if due.size and self.sensing.drop > 0:
+                sn.drop_block[due] = ch.block("drop", due)
+        p, hc, hs = self._points() if at is None else at
+        if own_key(self.model) is not None:
+            x = self._x[which]
+            self._own[which] = own_part(self.model, x, ch.angles(x, which))
+        observe(p, self._xt, hc, hs, which, self._k, sn, self._ss, self.others,
+                self.neighbours, self._at, self._own, self._obs)  # fmt: skip
+
+    def _score(self, at: tuple | None = None) -> NDArray[np.float64]:
+        """Each robot's local formation error ``(B, n)`` now; ``_worst`` and ``_wrong`` too
+        (``at``: as in :meth:`_observe`)."""
+        f = self.formation
+        if f.bearings is not None:  # judged by its bearings (numpy)
+            p = self.model.points(self._x)
+            self._err = robot_errors(f, p)
+            if self.rewards.orientation:
+                self._wrong = orientation_errors(f, p)
+            return self._err
+        p = (self._points() if at is None else at)[0]
+        halves = self._halves if self.rewards.orientation else self._halves[:0]
+        errors(p, *self._edges, f.distances, halves, self._want, self._err, self._worst,
+               self._wrong)  # fmt: skip
+        return self._err
 
     @property
     def own_distance(self) -> NDArray[np.float64] | None:
         """Each formation's robots' own desired distances ``(B, E, 2)`` (None: the
         formation's), with ``[sensing] mismatch``."""
-        if self._channel is not None:
-            return self._channel.own_distance
-        if self._channels and self._channels[0].own_distance is not None:
-            return np.concatenate([c.own_distance for c in self._channels])  # type: ignore[misc]
-        return None
-
-    def _world(self, a: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.float64]:
-        if self._channel is not None:
-            return self._channel.world(a, x, self._all)
-        one = np.zeros(1, dtype=np.intp)
-        return np.concatenate(
-            [c.world(a[b : b + 1], x[b : b + 1], one) for b, c in enumerate(self._channels)]
-        )
+        return None if self._channel is None else self._channel.own_distance
 
     # ------------------------------------------------------------------ steps
 
@@ -307,7 +391,7 @@ class FormationVectorEnv(VectorEnv):
         self, actions: Any
     ) -> tuple[NDArray[np.float32], NDArray, NDArray[np.bool_], NDArray[np.bool_], dict]:
         """Step every formation with its robots' actions ``(B, n, 2)`` (module docstring)."""
-        if self._channel is None and not self._channels:
+        if self._channel is None:
             raise RuntimeError("call reset() before step()")
         a = np.asarray(actions, dtype=float)
         B, n = self.num_envs, self.formation.n
@@ -317,41 +401,38 @@ class FormationVectorEnv(VectorEnv):
                 f"(each robot's command in its own frame), got shape {a.shape}",
                 key="actions",
             )
+        xt, xn, f, code, ch = self._xt, self._xn, self._f, self._code, self._channel
         x0 = self._x
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            u = common_commands(self.model, a, x0, lambda v: self._world(v, x0))
-            xt = np.ascontiguousarray(x0.transpose(1, 2, 0))  # the loop's (n, k, B)
-            f = np.empty_like(xt)
+            u = common_commands(self.model, a, x0, lambda v: ch.world(v, x0, self._all))
             commanded_rates(xt, np.ascontiguousarray(u.transpose(1, 2, 0)), f, self._model_terms)
             stopped = self._k[None, :] * self.dt >= self._stop_at[:, None]  # (n, B)
             if stopped.any():  # robots stopped by a fault (System._faulty)
                 f.transpose(0, 2, 1)[stopped] = 0.0
-            xn = np.empty_like(xt)
-            code = np.zeros(B, dtype=np.int8)
             commanded_step(xt, f, xn, self.dt, self._terms, code)
         rejected = code != 0
-        x1 = xn.transpose(2, 0, 1)
-        self._x = x = np.where(rejected[:, None, None], x0, x1)
-        self._k += ~rejected
-        moved = np.flatnonzero(~rejected)
-        self._observe(moved)
-        p = self.model.points(x)
-        e = edge_errors(self.formation, p)
-        err = robot_errors(self.formation, p, e)
         done = rejected.copy()
-        candidates = moved[self._met(p[moved], e[moved])]
+        moved = np.flatnonzero(~rejected)
+        self._k += ~rejected
+        cut = ~done & (self._k >= self.n_steps)
+        if rejected.any():  # the state stays the last accepted one
+            xn[:, :, rejected] = xt[:, :, rejected]
+        self._xt, self._xn = xn, xt  # (the states before the step stay in _xn until the next)
+        at = self._points()
+        self._observe(moved, at)
+        err = self._score(at).copy()
         outcome = np.full(B, "", dtype=object)
         outcome[rejected] = "collision"
-        for b in candidates:  # (rare: the shape is met; classify decides)
-            w = self.model.point_rates(x0[b], (x1[b] - x0[b]) / self.dt)
-            got = classify(self.formation, p[b], w, self.tolerances)
-            if got == "desired":
-                done[b], outcome[b] = True, got
-        cut = ~done & (self._k >= self.n_steps)
-        for b in np.flatnonzero(cut):
-            w = self.model.point_rates(x0[b], (x1[b] - x0[b]) / self.dt)
-            outcome[b] = classify(self.formation, p[b], w, self.tolerances)
-        rewards = self.rewards.of(self.formation, p, u, rejected, err)
+        candidates = moved[self._met(moved)]
+        if candidates.size:  # (rare: the shape is met; classify decides)
+            desired = self._classify(candidates) == "desired"
+            done[candidates[desired]] = True
+            outcome[candidates[desired]] = "desired"
+        cut &= ~done
+        if cut.any():
+            outcome[cut] = self._classify(np.flatnonzero(cut))
+        wrong = self._wrong if self.rewards.orientation else None
+        rewards = self.rewards.of(self.formation, None, u, rejected, err, wrong)
         infos = self._infos(rejected, err)
         ended = np.flatnonzero(done | cut)
         infos["outcome"], infos["_outcome"] = outcome, done | cut
@@ -360,20 +441,23 @@ class FormationVectorEnv(VectorEnv):
             infos["_final_obs"] = done | cut
             self.episodes[ended] += 1
             self._begin(ended)
-        return self._obs.copy(), rewards, done, cut, infos
+        return self._out(), rewards, done, cut, infos
 
-    def _met(self, p: NDArray[np.float64], e: NDArray[np.float64]) -> NDArray[np.bool_]:
-        """Whether the shape is met at points ``p`` ``(L, n, 2)`` with edge errors ``e``
-        ``(L, E)`` (``classify``'s first test)."""
+    def _classify(self, which: NDArray[np.intp]) -> NDArray[np.str_]:
+        """The outcomes of formations ``which`` after an accepted step
+        (:func:`formationlab.outcomes.batch.classify_batch`, the rates of the step)."""
+        x0, x1 = self._xn.transpose(2, 0, 1)[which], self._x[which]
+        w = self.model.point_rates(x0, (x1 - x0) / self.dt)
+        return classify_batch(self.formation, self.model.points(x1), w, self.tolerances)
+
+    def _met(self, which: NDArray[np.intp]) -> NDArray[np.bool_]:
+        """Whether the shape is met in formations ``which`` (``classify``'s first test)."""
         if self.formation.bearings is not None:
+            p = self.model.points(self._x[which])
             return bearings_met(self.formation, p, self.tolerances)
-        return np.max(e, axis=-1) <= self.tolerances.distance
+        return self._worst[which] <= self.tolerances.distance
 
-    def _infos(
-        self, rejected: NDArray[np.bool_], err: NDArray[np.float64] | None = None
-    ) -> dict[str, Any]:
-        if err is None:
-            err = robot_errors(self.formation, self.model.points(self._x))
+    def _infos(self, rejected: NDArray[np.bool_], err: NDArray[np.float64]) -> dict[str, Any]:
         return {"t": self._k * self.dt, "seed": self.seeds.copy(), "episode": self.episodes.copy(),
                 "error": err, "rejected": rejected}  # fmt: skip
 

@@ -151,15 +151,19 @@ class Channel:
             angles, rotations, own,
         )  # fmt: skip
 
-    def renew(self, trials: NDArray[np.intp], seeds: Sequence[Seed]) -> None:
+    def renew(
+        self, trials: NDArray[np.intp], seeds: Sequence[Seed], *, draws_only: bool = False
+    ) -> None:
         """Give ``trials`` new seeds: their frames, mismatch and generators become those a
         channel made with ``seeds`` draws (formations of a vectorised environment that start
         a new episode, :mod:`formationlab.envs.vector`).
 
         Only for a channel that is a function of the state (no noise, delay or drops:
-        :meth:`field`), whose trials carry no measurements from step to step.
+        :meth:`field`), whose trials carry no measurements from step to step, or
+        (``draws_only``) one whose caller keeps its trials' measurements itself (a compiled
+        sensing stage) and asks the channel only for the draws (:meth:`block`).
         """
-        if self.sensing.sampled:
+        if self.sensing.sampled and not draws_only:
             raise ParameterError(
                 "a channel with noise, delay or drops carries its trials' measurements from "
                 "step to step: make a new Channel for the new seeds",

@@ -37,10 +37,21 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from .._jit import formula
 from ..controllers.stage import local_field
 from .channel import BLOCK
 
-__all__ = ["SensingState", "SensingTerms", "halt", "informed", "sensed_field"]
+__all__ = [
+    "SensingState",
+    "SensingTerms",
+    "delivery",
+    "halt",
+    "informed",
+    "measured_pair",
+    "sensed_field",
+    "sensing_terms",
+    "within_range",
+]
 
 
 class SensingTerms(NamedTuple):
@@ -73,6 +84,42 @@ class SensingState(NamedTuple):
     seen_c: NDArray[np.bool_]  #: (B,) whether every robot saw its neighbours at the last check
 
 
+@formula
+def measured_pair(dx, dy, local, c, s, noise, wx, wy):
+    """``(z_x, z_y)``: a measurement ``z_ij = R(-a_i) (p_j - p_i) + noise`` (step 1) of the
+    relative position ``(dx, dy) = p_j - p_i``, turned by ``(c, s) = (cos, sin)(-a_i)``
+    when robots measure in their own frames (``local``), plus ``noise`` times the standard
+    normals ``(wx, wy)``."""
+    zx, zy = dx, dy
+    if local:
+        zx = c * dx - s * dy
+        zy = s * dx + c * dy
+    if noise > 0:
+        zx = zx + noise * wx
+        zy = zy + noise * wy
+    return zx, zy
+
+
+@formula
+def within_range(cx, cy, ranged, range2):
+    """Whether a robot at ``(cx, cy)`` from another (centre to centre) is within the range
+    ``sqrt(range2)`` (always, when not ``ranged``): it is seen (step 1)."""
+    return (not ranged) or cx * cx + cy * cy <= range2
+
+
+@formula
+def delivery(arrived, lost, had):
+    """``(take, has)`` of a measurement delivered at step ``k`` (step 2): whether the robot
+    takes it (it ``arrived``: taken at ``k - m >= 0`` within range, and is not ``lost``) and
+    whether the robot then holds one (a lost one leaves the last one received, if it
+    ``had`` one; one out of range, or none yet, leaves nothing)."""
+    if not arrived:
+        return False, False
+    if lost:
+        return False, had
+    return True, True
+
+
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
 def sensed_field(p, x, hc, hs, u, ul, nact, ids, k, terms, sn, ss):
     """``u`` ``(n, 2, C)``: every robot's command from its own measurements (steps 1-3).
@@ -97,37 +144,30 @@ def sensed_field(p, x, hc, hs, u, ul, nact, ids, k, terms, sn, ss):
                 c = hc[i, b] if sn.headed else sn.cos_in[g, i]
                 s = -hs[i, b] if sn.headed else sn.sin_in[g, i]
             for j in range(n):
-                dx = p[j, 0, b] - p[i, 0, b]
-                dy = p[j, 1, b] - p[i, 1, b]
-                zx, zy = dx, dy
-                if sn.local:
-                    zx = c * dx - s * dy
-                    zy = s * dx + c * dy
-                if sn.noise > 0:
-                    wx = 0.0 if i == j else sn.noise_block[g, row, i, j, 0]
-                    wy = 0.0 if i == j else sn.noise_block[g, row, i, j, 1]
-                    zx = zx + sn.noise * wx
-                    zy = zy + sn.noise * wy
+                wx = wy = 0.0
+                if sn.noise > 0 and i != j:
+                    wx = sn.noise_block[g, row, i, j, 0]
+                    wy = sn.noise_block[g, row, i, j, 1]
+                zx, zy = measured_pair(
+                    p[j, 0, b] - p[i, 0, b], p[j, 1, b] - p[i, 1, b], sn.local, c, s, sn.noise,
+                    wx, wy,
+                )  # fmt: skip
                 ss.ring_z[g, slot, i, j, 0] = zx
                 ss.ring_z[g, slot, i, j, 1] = zy
-                inside = True
-                if sn.ranged:
-                    cx = x[j, 0, b] - x[i, 0, b]
-                    cy = x[j, 1, b] - x[i, 1, b]
-                    inside = cx * cx + cy * cy <= sn.range2
-                ss.ring_in[g, slot, i, j] = inside
+                ss.ring_in[g, slot, i, j] = within_range(
+                    x[j, 0, b] - x[i, 0, b], x[j, 1, b] - x[i, 1, b], sn.ranged, sn.range2
+                )
         for i in range(n):  # 2. deliver what was taken at k - m
             for j in range(n):
-                if k < m:  # nothing has arrived yet
-                    ss.has[g, i, j] = False
-                elif not ss.ring_in[g, back, i, j]:
-                    ss.has[g, i, j] = False  # out of range when taken: nothing held
-                elif sn.drop > 0 and i != j and sn.drop_block[g, row, i, j] < sn.drop:
-                    pass  # lost: the last one received (if any) is kept
-                else:
+                take, has = delivery(
+                    k >= m and ss.ring_in[g, back, i, j],
+                    sn.drop > 0 and i != j and sn.drop_block[g, row, i, j] < sn.drop,
+                    ss.has[g, i, j],
+                )
+                ss.has[g, i, j] = has
+                if take:
                     ss.held[g, i, j, 0] = ss.ring_z[g, back, i, j, 0]
                     ss.held[g, i, j, 1] = ss.ring_z[g, back, i, j, 1]
-                    ss.has[g, i, j] = True
         local_field(ss.held[g], ss.has[g], sn.own_distance[g], terms, ul)  # 3.
         for i in range(n):
             ux = ul[i, 0]
@@ -161,10 +201,10 @@ def informed(g, terms, ss):
     return True
 
 
-def sensing_arrays(
+def sensing_terms(
     channel, ids: NDArray[np.intp], stop_at: NDArray[np.float64], headed: bool
-) -> tuple[SensingTerms, SensingState]:
-    """The terms and a fresh state of the trials ``ids`` of ``channel`` (a group of a run).
+) -> SensingTerms:
+    """The terms of the trials ``ids`` of ``channel`` (``ids``' rows, in their order).
 
     The noise and loss blocks are left to fill (:meth:`Channel.block`) at the start of
     each block of steps.
@@ -181,7 +221,7 @@ def sensing_arrays(
         else np.broadcast_to(terms.edge_distance[None, :, None], (G, E, 2)).copy()
     )
     noisy, lossy = s.noise > 0, s.drop > 0
-    sn = SensingTerms(
+    return SensingTerms(
         measured=not s.ideal, local=s.frames == "local" or channel.fixed_angles is not None,
         headed=headed, cos_in=np.cos(-a),
         sin_in=np.sin(-a), cos_out=np.cos(a), sin_out=np.sin(a), own_distance=own,
@@ -190,13 +230,21 @@ def sensing_arrays(
         noise_block=np.zeros((G, BLOCK, n, n, 2) if noisy else (1, 1, 1, 1, 2)),
         drop_block=np.zeros((G, BLOCK, n, n) if lossy else (1, 1, 1, 1)),
     )  # fmt: skip
+
+
+def sensing_arrays(
+    channel, ids: NDArray[np.intp], stop_at: NDArray[np.float64], headed: bool
+) -> tuple[SensingTerms, SensingState]:
+    """The terms (:func:`sensing_terms`) and a fresh state of the trials ``ids`` of
+    ``channel`` (a group of a run)."""
+    n, G = channel.n, ids.size
     M = channel.m + 1
     ss = SensingState(
         ring_z=np.zeros((G, M, n, n, 2)), ring_in=np.zeros((G, M, n, n), dtype=bool),
         held=np.zeros((G, n, n, 2)), has=np.zeros((G, n, n), dtype=bool),
         seen_c=np.ones(G, dtype=bool),
     )  # fmt: skip
-    return sn, ss
+    return sensing_terms(channel, ids, stop_at, headed), ss
 
 
 def trial_bytes(channel) -> int:
