@@ -26,8 +26,8 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .obstacles import Circle, Obstacle, Polygon
-from .solids import Box, Sphere, segment_box_distance
+from .obstacles import Obstacle, Polygon
+from .solids import Ball, Box, segment_box_distance
 
 __all__ = ["segment_distances", "swept_clearances"]
 
@@ -92,7 +92,7 @@ def swept_clearances(
     radii = np.asarray(radii, dtype=float)
     out = np.empty((*q0.shape[:-1], len(obstacles)))
     for o, ob in enumerate(obstacles):
-        if isinstance(ob, Circle | Sphere):
+        if isinstance(ob, Ball):  # a circle or a sphere
             out[..., o] = _point_segment(ob.center, q0, q1) - ob.radius
             continue
         sd0, sd1 = ob.signed_distance(q0)[0], ob.signed_distance(q1)[0]

@@ -100,22 +100,23 @@ def workspace(
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _dot_x(ra, k, x, at):
+    """``a_k . x[at : at + dim]`` and ``|a_k| . |x[at : at + dim]|``."""
+    v = ra[k, 0] * x[at]
+    size = abs(ra[k, 0]) * abs(x[at])
+    for c in range(1, ra.shape[1]):
+        v += ra[k, c] * x[at + c]
+        size += abs(ra[k, c]) * abs(x[at + c])
+    return v, size
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _row_x(ri, rj, ra, k, x):
     """``g_k . x`` and ``|g_k| . |x|`` for the stacked ``x`` ``(d,)``."""
     dim = ra.shape[1]
-    i = dim * ri[k]
-    v = ra[k, 0] * x[i]
-    size = abs(ra[k, 0]) * abs(x[i])
-    for c in range(1, dim):
-        v += ra[k, c] * x[i + c]
-        size += abs(ra[k, c]) * abs(x[i + c])
+    v, size = _dot_x(ra, k, x, dim * ri[k])
     if rj[k] >= 0:
-        j = dim * rj[k]
-        w = ra[k, 0] * x[j]
-        wsize = abs(ra[k, 0]) * abs(x[j])
-        for c in range(1, dim):
-            w += ra[k, c] * x[j + c]
-            wsize += abs(ra[k, c]) * abs(x[j + c])
+        w, wsize = _dot_x(ra, k, x, dim * rj[k])
         v -= w
         size += wsize
     return v, size

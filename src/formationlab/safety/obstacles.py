@@ -40,15 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..controllers.kinds.khatib import dkhatib_ds, khatib
 from ..errors import ObstacleError, require_extra
 from .condition import barrier_bounds
-from .solids import (
-    Box,
-    Sphere,
-    ball_distance,
-    ball_pieces,
-    ball_radius,
-    finite_point,
-    within_limit,
-)  # fmt: skip
+from .solids import Ball, Box, Sphere, within_limit
 
 __all__ = [
     "Circle",
@@ -66,8 +58,8 @@ __all__ = [
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
-class Circle:
-    """A disc obstacle.
+class Circle(Ball):
+    """A disc obstacle: the ball of :mod:`.solids` in the plane.
 
     Parameters
     ----------
@@ -77,37 +69,8 @@ class Circle:
         Radius ``R > 0`` (m).
     """
 
-    center: NDArray[np.float64]
-    radius: float
-
     dim: ClassVar[int] = 2
-
-    def __post_init__(self) -> None:
-        c = finite_point(self.center, "circle center")
-        r = ball_radius(self.radius, "circle")
-        within_limit(np.append(c, r), "circle")
-        c.setflags(write=False)
-        object.__setattr__(self, "center", c)
-        object.__setattr__(self, "radius", float(r))
-
-    def describe(self) -> str:
-        """``"circle at (0, 0) of radius 0.5"``."""
-        return f"circle at ({self.center[0]:g}, {self.center[1]:g}) of radius {self.radius:g}"
-
-    def scenario(self) -> dict[str, object]:
-        """The scenario-file form ``{"circle": {"center": [x, y], "radius": R}}``."""
-        return {"circle": {"center": self.center.tolist(), "radius": float(self.radius)}}
-
-    def signed_distance(self, q: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """``delta = |q - c| - R`` and its gradient ``(q - c) / |q - c|``; ``(..., 2) -> (...)``
-        (:func:`~formationlab.safety.solids.ball_distance`, the sphere's formula too)."""
-        return ball_distance(q, self.center, self.radius)
-
-    def pieces(
-        self, q: NDArray[np.float64], distance: float
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Barrier pieces: the centre ``(..., 1, 2)`` with radius ``R + D_o`` ``(1,)``."""
-        return ball_pieces(q, self.center, self.radius, distance)
+    kind: ClassVar[str] = "circle"
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -245,7 +208,7 @@ def obstacle_from_mapping(spec: Mapping[str, object], *, dim: int | None = None)
     kind = next(iter(keys)) if len(keys) == 1 else ""
     if kind not in KINDS:
         forms = " or ".join(_FORMS[k] for k in KINDS if dim is None or KINDS[k] == dim)
-        raise ObstacleError(f"an obstacle is {forms}, got keys {sorted(keys)}")
+        raise ObstacleError(f"an obstacle is either {forms}, got keys {sorted(keys)}")
     if dim is not None and KINDS[kind] != dim:
         other = [k for k in KINDS if KINDS[k] == dim]
         where = {2: "the plane", 3: "space (3-D)"}

@@ -38,10 +38,10 @@ from ..errors import ObstacleError
 from ..validation import COORDINATE_LIMIT
 
 __all__ = [
+    "Ball",
     "Box",
     "Sphere",
     "ball_distance",
-    "ball_pieces",
     "ball_radius",
     "box_distance",
     "finite_point",
@@ -92,14 +92,6 @@ def ball_distance(
     dist = np.sqrt(np.sum(w * w, axis=-1))
     grad = w / np.where(dist > 0, dist, 1.0)[..., None]
     return dist - radius, grad
-
-
-def ball_pieces(
-    q: NDArray[np.float64], center: NDArray[np.float64], radius: float, distance: float
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """A ball's one barrier piece: its centre ``(..., 1, d)`` for every point of ``q``
-    ``(..., d)``, with radius ``R + D_o`` ``(1,)`` (``D_o = distance``)."""
-    return np.broadcast_to(center, q.shape)[..., None, :], np.array([radius + distance])
 
 
 def box_distance(
@@ -160,7 +152,57 @@ def segment_box_distance(
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
-class Sphere:
+class Ball:
+    """A ball obstacle in ``dim`` dimensions: :class:`~formationlab.safety.Circle` in the
+    plane, :class:`Sphere` in space (one formula, module docstring).
+
+    Parameters
+    ----------
+    center : array_like, shape (dim,)
+        Centre ``c`` (m).
+    radius : float
+        Radius ``R > 0`` (m).
+    """
+
+    center: NDArray[np.float64]
+    radius: float
+
+    dim: ClassVar[int] = 3
+    kind: ClassVar[str] = "ball"
+
+    def __post_init__(self) -> None:
+        c = finite_point(self.center, f"{self.kind} center", self.dim)
+        r = ball_radius(self.radius, self.kind)
+        within_limit(np.append(c, r), self.kind)
+        c.setflags(write=False)
+        object.__setattr__(self, "center", c)
+        object.__setattr__(self, "radius", r)
+
+    def describe(self) -> str:
+        """``"sphere at (0, 0, 1) of radius 0.5"``, ``"circle at (0, 0) of radius 0.5"``."""
+        at = ", ".join(f"{x:g}" for x in self.center)
+        return f"{self.kind} at ({at}) of radius {self.radius:g}"
+
+    def scenario(self) -> dict[str, object]:
+        """The scenario-file form ``{kind: {"center": [...], "radius": R}}``."""
+        return {self.kind: {"center": self.center.tolist(), "radius": float(self.radius)}}
+
+    def signed_distance(self, q: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """:func:`ball_distance`; ``(..., dim) -> (...)``, gradient ``(..., dim)``."""
+        return ball_distance(q, self.center, self.radius)
+
+    def pieces(
+        self, q: NDArray[np.float64], distance: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Barrier pieces: the centre ``(..., 1, dim)`` for every point of ``q``, with radius
+        ``R + D_o`` ``(1,)`` (``D_o = distance``)."""
+        return np.broadcast_to(self.center, q.shape)[..., None, :], np.array(
+            [self.radius + distance]
+        )
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Sphere(Ball):
     """A ball obstacle in space.
 
     Parameters
@@ -171,37 +213,8 @@ class Sphere:
         Radius ``R > 0`` (m).
     """
 
-    center: NDArray[np.float64]
-    radius: float
-
     dim: ClassVar[int] = 3
-
-    def __post_init__(self) -> None:
-        c = finite_point(self.center, "sphere center", 3)
-        r = ball_radius(self.radius, "sphere")
-        within_limit(np.append(c, r), "sphere")
-        c.setflags(write=False)
-        object.__setattr__(self, "center", c)
-        object.__setattr__(self, "radius", r)
-
-    def describe(self) -> str:
-        """``"sphere at (0, 0, 1) of radius 0.5"``."""
-        x, y, z = self.center
-        return f"sphere at ({x:g}, {y:g}, {z:g}) of radius {self.radius:g}"
-
-    def scenario(self) -> dict[str, object]:
-        """The scenario-file form ``{"sphere": {"center": [...], "radius": R}}``."""
-        return {"sphere": {"center": self.center.tolist(), "radius": self.radius}}
-
-    def signed_distance(self, q: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """:func:`ball_distance`; ``(..., 3) -> (...)``, gradient ``(..., 3)``."""
-        return ball_distance(q, self.center, self.radius)
-
-    def pieces(
-        self, q: NDArray[np.float64], distance: float
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Barrier pieces: the centre ``(..., 1, 3)`` with radius ``R + D_o`` ``(1,)``."""
-        return ball_pieces(q, self.center, self.radius, distance)
+    kind: ClassVar[str] = "sphere"
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
