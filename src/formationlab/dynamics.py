@@ -83,7 +83,9 @@ class System:
     :class:`~formationlab.marching.MotionParameters`) adds to the law's control.
 
     ``obstacles`` are static :class:`~formationlab.safety.Circle` and
-    :class:`~formationlab.safety.Polygon` obstacles; ``safety`` a
+    :class:`~formationlab.safety.Polygon` obstacles in the plane,
+    :class:`~formationlab.safety.Sphere` and :class:`~formationlab.safety.Box` in space;
+    ``safety`` a
     :class:`~formationlab.safety.SafetyFilter` (None or ``filter = "none"``: commands
     unchanged). The filter's ``D_s`` and ``D_o`` are checked against the contact
     distances when the system is built.
