@@ -224,7 +224,7 @@ def test_configuration_errors():
         SafetyFilter(filter="barrier", distance=0.25).apply(
             np.zeros((3, 2)), np.zeros((3, 2)), contact=f.contact_matrix
         )
-    with pytest.raises(ParameterError, match=r"shape \(\.\.\., n, 2\)"):
+    with pytest.raises(ParameterError, match=r"shape \(\.\.\., n, d\) with d = 2 or 3"):
         SafetyFilter(filter="barrier").apply(np.zeros((3, 2)), np.zeros((2, 2)))
 
 

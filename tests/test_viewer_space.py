@@ -162,3 +162,20 @@ def test_three_js_is_served_from_the_package_and_given_to_the_widget():
         assert httpx.get(f"{base}/three/three.webgpu.js").status_code == 404
     assert set(Viewer(load_scenario(TETRA))._three) == set(THREE_FILES)
     assert Viewer(ROOT / "examples" / "paper-simulation-2.toml")._three == {}  # the plane
+
+
+def test_spheres_and_boxes_reach_the_page():
+    """The obstacles in space as the page draws them: a sphere's centre has three
+    coordinates, a box has its centre and size (the scenario's numbers)."""
+    sc = load_scenario(ROOT / "examples" / "space" / "tetrahedron-spheres.toml")
+    shapes = LiveSession(sc, seed=1).info()["obstacles"]
+    assert len(shapes) == len(sc.obstacles)
+    for shape, ob in zip(shapes, sc.obstacles, strict=True):
+        np.testing.assert_array_equal(shape["center"], ob.center)
+        assert len(shape["center"]) == 3
+        if shape["kind"] == "circle":
+            assert shape["radius"] == ob.radius
+        else:
+            assert shape["kind"] == "box"
+            np.testing.assert_array_equal(shape["size"], ob.size)
+    assert {s["kind"] for s in shapes} == {"circle", "box"}

@@ -83,7 +83,9 @@ class System:
     :class:`~formationlab.marching.MotionParameters`) adds to the law's control.
 
     ``obstacles`` are static :class:`~formationlab.safety.Circle` and
-    :class:`~formationlab.safety.Polygon` obstacles; ``safety`` a
+    :class:`~formationlab.safety.Polygon` obstacles in the plane,
+    :class:`~formationlab.safety.Sphere` and :class:`~formationlab.safety.Box` in space;
+    ``safety`` a
     :class:`~formationlab.safety.SafetyFilter` (None or ``filter = "none"``: commands
     unchanged). The filter's ``D_s`` and ``D_o`` are checked against the contact
     distances when the system is built.
@@ -119,14 +121,16 @@ class System:
             self.safety.check_model(self.model)
             self.safety.check_diameters(self.formation.diameters)
         if self.obstacles:
+            self._check_obstacles()
             self.law.obstacle_repulsion()  # a law without one refuses obstacles now
 
     def _check_space(self) -> None:
         """Refuse, by name, what the closed loop cannot do yet for a formation in space.
 
         Sensing (local frames as rotations of SO(3), noise on each coordinate, range, delay,
-        losses, mismatch) and faults run in space; a frame error, an angle in the plane,
-        does not, nor do marching, obstacles and the safety filters.
+        losses, mismatch), faults, marching, obstacles in space (spheres, boxes) and the
+        safety filters run in space; a frame error, an angle in the plane, does not, nor do
+        the plane's obstacles (circles, polygons) or the filter's speed polygon.
         """
         dim = self.formation.dim
         self.model.check_space(dim)
@@ -137,17 +141,23 @@ class System:
                 '(frames = "local" gives every robot a random rotation in space)',
                 key="sensing.frame_error",
             )
-        parts = {
-            "marching": self.marching is not None,
-            "obstacles": bool(self.obstacles),
-            "safety": self.filtered,
-        }
-        refused = [name for name, used in parts.items() if used]
-        if refused:
-            raise ParameterError(
-                f"a formation in space ({dim}-D) runs without {', '.join(refused)} so far "
-                "(they are planar); remove them from the run"
-            )
+        if self.filtered:
+            assert self.safety is not None
+            self.safety.check_space(dim)
+
+    def _check_obstacles(self) -> None:
+        """Every obstacle lives in the formation's dimension (circles and polygons in the
+        plane, spheres and boxes in space)."""
+        dim = self.formation.dim
+        for k, ob in enumerate(self.obstacles):
+            if ob.dim != dim:
+                where = {2: "the plane", 3: "space (3-D)"}
+                instead = "a sphere or a box" if dim == 3 else "a circle or a polygon"
+                raise ParameterError(
+                    f"obstacle {k + 1} ({ob.describe()}) is an obstacle in {where[ob.dim]}, and "
+                    f"the formation is in {where[dim]}: use {instead}",
+                    key="obstacles",
+                )
 
     @property
     def time_dependent(self) -> bool:

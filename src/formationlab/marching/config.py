@@ -2,7 +2,7 @@
 
 Three ways to make a formation march, each a frozen dataclass whose
 ``command(formation, p, u, t)`` adds to (or replaces) the law's control ``u``
-``(..., n, 2)`` at the law's points ``p`` and time ``t``:
+``(..., n, d)`` at the law's points ``p`` and time ``t``:
 
 * :class:`Marching` without a leader: every robot is given the reference
   velocity ``v_ref(t)``, ``u_i + v_ref(t)``. A law whose controls sum to zero
@@ -31,8 +31,12 @@ Three ways to make a formation march, each a frozen dataclass whose
   parameters were designed on (:meth:`MotionParameters.design`), so they turn
   with the formation.
 
-A time-dependent ``v_ref`` reaches the closed loop through ``System.rhs(x, t)``
-(docs/architecture.md). Metrics: :func:`centroid_velocity` and :func:`heading_spread`.
+In space (a formation of ``dim = 3``) a reference velocity and leaders are the same
+formulas with ``v_ref = [vx, vy, vz]`` (:meth:`Marching.check` holds it to the
+formation's dimension); motion parameters are designed in the plane only (the scenario
+refuses them in space). A time-dependent ``v_ref`` reaches the closed loop through
+``System.rhs(x, t)`` (docs/architecture.md). Metrics: :func:`centroid_velocity` and
+:func:`heading_spread`.
 """
 
 from __future__ import annotations
@@ -63,15 +67,18 @@ Velocity = Callable[[float], ArrayLike]
 
 
 def _vector(value: Any, what: str, rows: int = 0) -> NDArray[np.float64]:
-    """``value`` as a finite ``[vx, vy]``, or (``rows`` > 1) as ``rows`` of them."""
+    """``value`` as a finite ``[vx, vy]`` (or ``[vx, vy, vz]`` in space), or (``rows`` > 1)
+    as ``rows`` of them."""
     try:
         v = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         v = np.full(0, np.nan)
-    if v.shape not in ((2,), (rows, 2) if rows > 1 else (2,)) or not np.all(np.isfinite(v)):
+    shapes = [(d,) for d in (2, 3)] + ([(rows, d) for d in (2, 3)] if rows > 1 else [])
+    if v.shape not in shapes or not np.all(np.isfinite(v)):
         each = f", or one per leader ({rows} rows)" if rows > 1 else ""
         raise ParameterError(
-            f"{what} must be a finite [vx, vy] in m/s{each}, got {value!r}", key="velocity"
+            f"{what} must be a finite [vx, vy] (in space [vx, vy, vz]) in m/s{each}, got {value!r}",
+            key="velocity",
         )
     v.setflags(write=False)
     return v
@@ -83,10 +90,12 @@ class Marching:
 
     Parameters
     ----------
-    velocity : array_like of shape (2,) or (l, 2), or callable
+    velocity : array_like of shape (d,) or (l, d), or callable
         ``v_ref`` in m/s, constant, or a function of the time ``t`` (seconds)
-        returning ``[vx, vy]``; with ``l >= 2`` leaders, one row per leader may be
-        given instead (in the order of ``leader``): each leader moves with its own.
+        returning ``[vx, vy]`` (``[vx, vy, vz]`` for a formation in space: ``d`` is the
+        formation's dimension, checked by :meth:`check`); with ``l >= 2`` leaders, one row
+        per leader may be given instead (in the order of ``leader``): each leader moves
+        with its own.
     leader : int or sequence of int, optional
         The 1-based robot (or robots) that alone are given ``v_ref`` (and ignore the
         law); None: every robot is given it, on top of its law.
@@ -131,17 +140,26 @@ class Marching:
 
     @property
     def per_leader(self) -> bool:
-        """Whether each leader is given a velocity of its own (``velocity`` ``(l, 2)``)."""
-        return np.shape(self.reference(0.0)) != (2,)
+        """Whether each leader is given a velocity of its own (``velocity`` ``(l, d)``)."""
+        return np.ndim(self.reference(0.0)) == 2
 
     def reference(self, t: float) -> NDArray[np.float64]:
-        """``v_ref(t)``, shape ``(2,)``, or ``(l, 2)``: each leader's."""
+        """``v_ref(t)``, shape ``(d,)``, or ``(l, d)``: each leader's."""
         if callable(self.velocity):
             return np.asarray(self.velocity(float(t)), dtype=float)
         return np.asarray(self.velocity)
 
     def check(self, formation: Formation) -> None:
-        """The leaders are robots of the formation."""
+        """The leaders are robots of the formation, and ``v_ref`` has its dimension."""
+        d = np.shape(self.reference(0.0))[-1]
+        if d != formation.dim:
+            given = "[vx, vy, vz]" if d == 3 else "[vx, vy]"
+            wanted = "[vx, vy, vz] (space)" if formation.dim == 3 else "[vx, vy] (the plane)"
+            raise ParameterError(
+                f"velocity {given} has {d} components and the formation is {formation.dim}-D: "
+                f"give {wanted}",
+                key="velocity",
+            )
         for r in self.leaders:
             if r > formation.n:
                 raise ParameterError(
@@ -158,7 +176,7 @@ class Marching:
         t: float,
         gain: float = 1.0,
     ) -> NDArray[np.float64]:
-        """The controls ``(..., n, 2)`` with ``gain v_ref(t)`` added (or the leaders' replaced,
+        """The controls ``(..., n, d)`` with ``gain v_ref(t)`` added (or the leaders' replaced,
         each by its own row when :attr:`per_leader`).
 
         ``gain`` is the robot model's ``velocity_gain`` (the command that holds a

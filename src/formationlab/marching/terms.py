@@ -38,7 +38,7 @@ class MarchTerms(NamedTuple):
     kind: int
     gain: float  #: the robot model's velocity_gain
     leaders: NDArray[np.int64]  #: the leaders' numbers in the loop (0-based; none: empty)
-    #: (S, m, 2) v_ref of steps k0 .. k0 + S - 1 (S = 1: constant); m = 1, or one row per
+    #: (S, m, d) v_ref of steps k0 .. k0 + S - 1 (S = 1: constant); m = 1, or one row per
     #: leader (in the order of ``leaders``)
     v: NDArray[np.float64]
     k0: int  #: the step of the table's first row
@@ -67,7 +67,7 @@ def march_terms(
     if perm is not None and len(perm):
         where[np.asarray(perm)] = np.arange(n)
     if isinstance(march, Marching):
-        v = np.array(march.reference(0.0), dtype=float).reshape(1, -1, 2)
+        v = np.array(march.reference(0.0), dtype=float).reshape(1, -1, formation.dim)
         if march.time_dependent:  # (tabulated block by block: with_references)
             v = np.zeros_like(v)
         leaders = where[np.array(march.leaders, dtype=np.int64) - 1].astype(np.int64)
@@ -91,4 +91,4 @@ def with_references(
     if not (isinstance(march, Marching) and march.time_dependent):
         return terms
     v = np.array([march.reference(k * dt) for k in range(k0, k1 + 1)], dtype=float)
-    return terms._replace(v=v.reshape(k1 - k0 + 1, -1, 2), k0=int(k0))
+    return terms._replace(v=v.reshape(k1 - k0 + 1, -1, v.shape[-1]), k0=int(k0))

@@ -111,10 +111,11 @@ def animate_run(
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     diameters = np.asarray(diameters, dtype=float)
     if q.ndim == 3 and q.shape[-1] == 3 and q.shape[0] == t.shape[0]:
-        _planar_only(q, headings, points, obstacles, active, active_pairs)
+        _planar_only(q, headings, points)
         return animate_space(
             t, q, edges=edges, diameters=diameters, max_frames=max_frames, fps=fps,
-            trail=trail, title=title, size=size, dpi=dpi, stops=stops,
+            trail=trail, title=title, size=size, dpi=dpi, stops=stops, obstacles=obstacles,
+            active=active,
         )  # fmt: skip
     if q.ndim != 3 or q.shape[-1] != 2 or q.shape[0] != t.shape[0]:
         raise ValueError(f"q must have shape (T, n, 2) or (T, n, 3) with T = len(t), got {q.shape}")
@@ -191,27 +192,19 @@ def animate_run(
 
 
 def _planar_only(
-    q: NDArray[np.float64],
-    headings: ArrayLike | None,
-    points: ArrayLike | None,
-    obstacles: Sequence[Any],
-    active: ArrayLike | None,
-    active_pairs: ArrayLike | None,
+    q: NDArray[np.float64], headings: ArrayLike | None, points: ArrayLike | None
 ) -> None:
     """Refuse, by name, what a run in space cannot have: headings (no robot model in space
-    has one), hand points apart from the centres, obstacles and a safety filter."""
+    has one) and hand points apart from the centres."""
     planar = {
         "headings": headings is not None,
         "points": points is not None and not np.array_equal(np.asarray(points, float), q),
-        "obstacles": len(obstacles) > 0,
-        "active": active is not None,
-        "active_pairs": active_pairs is not None,
     }
     given = [name for name, on in planar.items() if on]
     if given:
         raise ValueError(
             f"{', '.join(given)} belong to runs in the plane; an animation in space (q of shape "
-            "(T, n, 3)) draws robots, edges, trails and stops only"
+            "(T, n, 3)) draws robots, edges, trails, stops, obstacles and active constraints"
         )
 
 

@@ -25,6 +25,7 @@ from .colors import robot_colors
 from .fonts import displayable, font_context
 from .frames import frame_indices, play, stop_times
 from .many import COLLECTION_LIMIT, LABEL_LIMIT, broken_line, segments
+from .safety import ACTIVE_COLOR, draw_solids, solid_bounds
 
 __all__ = ["AZIMUTH", "AZIMUTH_STEP", "ELEVATION", "animate_space"]
 
@@ -60,6 +61,8 @@ def animate_space(
     dpi: int = 90,
     stops: Sequence[tuple[int, float]] = (),
     turn: float = AZIMUTH_STEP,
+    obstacles: Sequence[Any] = (),
+    active: ArrayLike | None = None,
 ) -> FuncAnimation:
     """An animation of a run in space, on 3-D axes.
 
@@ -78,6 +81,11 @@ def animate_space(
         As :func:`formationlab.plotting.animation.animate_run`.
     turn : float
         Degrees the camera's azimuth advances per frame (0: a still camera).
+    obstacles : sequence
+        Spheres and boxes (objects of :mod:`formationlab.safety` or their scenario form),
+        drawn grey and numbered (:func:`~formationlab.plotting.safety.draw_solids`).
+    active : array_like of bool, shape (T, n), optional
+        Robots with an active safety constraint at each saved state: a red rim.
 
     Returns
     -------
@@ -98,7 +106,10 @@ def animate_space(
     with font_context():
         fig = Figure(figsize=(size, size), dpi=dpi, layout="constrained")
         ax: Any = fig.add_subplot(projection="3d")
-    side = _cube(ax, q, float(diameters.max()))
+    held = np.concatenate([q.reshape(-1, 3), solid_bounds(obstacles)])[None]
+    side = _cube(ax, held, float(diameters.max()))
+    draw_solids(ax, obstacles)
+    ring = np.zeros((len(t), n), bool) if active is None else np.asarray(active, bool)
     points_per_metre = _CUBE_SHARE * size * 72.0 / side
     graph = _Lines3D(ax, len(edges), colors="0.3", linewidth=0.5 if many else 1.0)
     robots = _Robots3D(ax, diameters * points_per_metre, label=not many)
@@ -109,7 +120,7 @@ def animate_space(
         now = q[idx]
         graph.set(np.stack([now[edges[:, 0]], now[edges[:, 1]]], axis=1))
         ax.view_init(elev=ELEVATION, azim=AZIMUTH + turn * k)
-        drawn = robots.draw(q[sel], t[idx] >= stop_at)
+        drawn = robots.draw(q[sel], t[idx] >= stop_at, ring[idx])
         return [graph.artist, *drawn]
 
     return play(
@@ -159,9 +170,12 @@ class _Robots3D:
         )  # fmt: skip
         self.labels = [ax.text(0.0, 0.0, 0.0, f" {i + 1}", fontsize=8) for i in range(n * label)]
 
-    def draw(self, trail: NDArray[np.float64], dead: NDArray[np.bool_]) -> list[Any]:
+    def draw(
+        self, trail: NDArray[np.float64], dead: NDArray[np.bool_], ring: NDArray[np.bool_]
+    ) -> list[Any]:
         """Draw the states ``trail`` ``(k, n, 3)`` (the last one now) with the robots
-        ``dead`` grey; returns the artists."""
+        ``dead`` grey and those with an active safety constraint (``ring``) rimmed red;
+        returns the artists."""
         now = trail[-1]
         self.trails.set(np.swapaxes(trail, 0, 1))
         self.points.set_offsets(now[:, :2])
@@ -170,9 +184,10 @@ class _Robots3D:
         face[dead] = _STOPPED
         edge = self.colors.copy()
         edge[dead] = (0.0, 0.0, 0.0, 1.0)
+        edge[ring] = to_rgba_array(ACTIVE_COLOR)[0]
         self.points.set_facecolor(face)
         self.points.set_edgecolor(edge)
-        self.points.set_linewidth(np.where(dead, 1.5, 0.5))
+        self.points.set_linewidth(np.where(dead | ring, 1.5, 0.5))
         for i, text in enumerate(self.labels):
             text.set_position_3d(now[i])
         return [self.trails.artist, self.points, *self.labels]

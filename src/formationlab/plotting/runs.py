@@ -30,7 +30,7 @@ from .many import (
     draw_paths,
     segments,
 )
-from .safety import draw_safety, plot_filter_activity
+from .safety import draw_safety, draw_solids, plot_filter_activity, solid_bounds
 
 __all__ = [
     "plot_bearing_errors",
@@ -188,7 +188,8 @@ def plot_trajectories_3d(
     As :func:`plot_trajectories`: the graph dashed at the start and solid at the end, each
     path in its robot's colour with a hollow circle at its start and a dot at its end;
     beyond :data:`~formationlab.plotting.many.LABEL_LIMIT` robots the starts and ends only,
-    coloured by number. The axes share one scale (a cube of data is a cube on the page).
+    coloured by number. The axes share one scale (a cube of data is a cube on the page);
+    a run's spheres and boxes are drawn grey (:func:`~formationlab.plotting.safety.draw_solids`).
     ``ax`` must be a 3-D axes (``fig.add_subplot(projection="3d")``); None makes one.
     """
     from mpl_toolkits.mplot3d.art3d import Line3DCollection
@@ -214,7 +215,12 @@ def plot_trajectories_3d(
             artists += ax.plot(*q[0, i, :, None], "o", mfc="none", mec=colors[i], ms=7)
             artists += ax.plot(*q[-1, i, :, None], "o", color=colors[i], ms=6)
             artists.append(ax.text(*q[0, i], f" {i + 1}"))
-    lo, hi = q.reshape(-1, 3).min(axis=0), q.reshape(-1, 3).max(axis=0)
+    held = q.reshape(-1, 3)
+    rec = getattr(result, "safety", None)
+    if rec is not None and rec.obstacles:  # the obstacles in space, within the axes
+        artists += draw_solids(ax, rec.obstacles)
+        held = np.concatenate([held, solid_bounds(rec.obstacles)])
+    lo, hi = held.min(axis=0), held.max(axis=0)
     centre, half = 0.5 * (lo + hi), 0.5 * max(float(np.max(hi - lo)), 1e-9)
     ax.set_xlim(centre[0] - half, centre[0] + half)
     ax.set_ylim(centre[1] - half, centre[1] + half)

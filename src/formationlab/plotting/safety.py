@@ -2,7 +2,8 @@
 
 :func:`draw_obstacles` draws circle and polygon obstacles (objects of
 :mod:`formationlab.safety`, or their scenario form ``{"circle": {...}}`` /
-``{"polygon": [...]}`` as stored in ``trajectory.nc``); :func:`plot_filter_activity`
+``{"polygon": [...]}`` as stored in ``trajectory.nc``), :func:`draw_solids` the spheres
+and boxes of a run in space on 3-D axes; :func:`plot_filter_activity`
 is the figure of when each robot had an active constraint, with the least pair
 distance against the filter's ``D_s`` and the least obstacle clearance.
 """
@@ -15,6 +16,7 @@ from typing import Any
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.patches import Circle, Polygon
+from numpy.typing import NDArray
 
 from .colors import robot_colors
 
@@ -22,8 +24,10 @@ __all__ = [
     "ACTIVE_COLOR",
     "draw_obstacles",
     "draw_safety",
+    "draw_solids",
     "obstacle_shapes",
     "plot_filter_activity",
+    "solid_bounds",
 ]
 
 #: Colour of active constraints (robot rings, pair lines, activity raster).
@@ -31,20 +35,55 @@ ACTIVE_COLOR = "crimson"
 
 
 def obstacle_shapes(obstacles: Iterable[Any]) -> list[tuple[str, Any]]:
-    """``("circle", (center, radius))`` / ``("polygon", vertices)`` of objects or mappings."""
+    """``("circle", (center, radius))`` / ``("polygon", vertices)`` in the plane,
+    ``("sphere", (center, radius))`` / ``("box", (center, size))`` in space, of objects or
+    of their scenario form (mappings)."""
     out: list[tuple[str, Any]] = []
     for ob in obstacles:
-        if isinstance(ob, dict):
-            if "circle" in ob:
-                c = ob["circle"]
-                out.append(("circle", (np.asarray(c["center"], float), float(c["radius"]))))
-            else:
-                out.append(("polygon", np.asarray(ob["polygon"], float)))
-        elif hasattr(ob, "radius"):
-            out.append(("circle", (np.asarray(ob.center, float), float(ob.radius))))
-        else:
-            out.append(("polygon", np.asarray(ob.vertices, float)))
+        spec = ob if isinstance(ob, dict) else ob.scenario()
+        kind = next(iter(spec))
+        if kind == "polygon":
+            out.append(("polygon", np.asarray(spec["polygon"], float)))
+            continue
+        table = spec[kind]
+        second = float(table["radius"]) if "radius" in table else np.asarray(table["size"], float)
+        out.append((kind, (np.asarray(table["center"], float), second)))
     return out
+
+
+def draw_solids(ax: Any, obstacles: Iterable[Any], *, label: bool = True) -> list[Any]:
+    """Draw obstacles in space on the 3-D axes ``ax``: spheres as grey surfaces, boxes as
+    grey faces, numbered from 1; returns the artists."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # (3-D axes only)
+
+    artists: list[Any] = []
+    for k, (kind, (center, second)) in enumerate(obstacle_shapes(obstacles)):
+        if kind == "sphere":
+            u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 25), np.linspace(0, np.pi, 13))
+            unit = np.stack([np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v)])
+            surface = center[:, None, None] + second * unit
+            artists.append(ax.plot_surface(*surface, color="0.6", alpha=0.35, linewidth=0.0))
+        else:
+            lo, hi = center - 0.5 * second, center + 0.5 * second
+            corner = np.array([[a, b, c] for a in (0, 1) for b in (0, 1) for c in (0, 1)])
+            pts = lo + corner * (hi - lo)
+            faces = [[0, 1, 3, 2], [4, 5, 7, 6], [0, 1, 5, 4], [2, 3, 7, 6], [0, 2, 6, 4],
+                     [1, 3, 7, 5]]  # fmt: skip
+            box = Poly3DCollection([pts[f] for f in faces], facecolor="0.6", edgecolor="0.3",
+                                   alpha=0.35, linewidth=0.5)  # fmt: skip
+            artists.append(ax.add_collection3d(box))
+        if label:
+            artists.append(ax.text(*center, f"O{k + 1}", ha="center", va="center"))
+    return artists
+
+
+def solid_bounds(obstacles: Iterable[Any]) -> NDArray[np.float64]:
+    """The corners ``(2 O, 3)`` of boxes holding the obstacles in space (axes' limits)."""
+    out = [np.zeros((0, 3))]
+    for kind, (center, second) in obstacle_shapes(obstacles):
+        half = second if kind == "sphere" else 0.5 * second
+        out.append(np.stack([center - half, center + half]))
+    return np.concatenate(out)
 
 
 def draw_obstacles(ax: Axes, obstacles: Iterable[Any], *, label: bool = True) -> list[Any]:

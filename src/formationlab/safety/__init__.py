@@ -3,8 +3,9 @@
 The barrier certificate of Wang, Ames and Egerstedt ("Safety barrier certificates
 for collisions-free multirobot systems", IEEE Transactions on Robotics 33(3), 2017),
 centralized (one sparse QP, Clarabel) and decentralized (each robot half the
-responsibility per pair, exact 2-D projection in numba); static circle and polygon
-obstacles with clearances, Khatib repulsion and barrier rows; the near-identity
+responsibility per pair, exact 2-D projection in numba; in space each robot's 3-D QP by
+the dual active set); static circle and polygon obstacles in the plane, sphere and box
+obstacles in space, with clearances, Khatib repulsion and barrier rows; the near-identity
 point of unicycles. See ``docs/safety.md``.
 
 This package depends on ``potentials`` and ``errors`` only, so laws and models can use it.
@@ -43,6 +44,7 @@ from .obstacles import (
 from .pairs import neighbour_lists, sensed_pairs
 from .record import SafetyRecord, describe_obstacle
 from .result import FilterResult, FilterStatus
+from .solids import Box, Sphere
 from .unicycle import (
     point_safety_distance,
     point_to_unicycle,
@@ -65,6 +67,7 @@ __all__ = [
     "CONDITIONS",
     "FILTERS",
     "BarrierConstraints",
+    "Box",
     "Circle",
     "FilterResult",
     "FilterStatus",
@@ -73,6 +76,7 @@ __all__ = [
     "QPSolution",
     "SafetyFilter",
     "SafetyRecord",
+    "Sphere",
     "barrier_bound",
     "barrier_bounds",
     "barrier_constraints",

@@ -88,7 +88,7 @@ def pair_barrier_rows(
 
     Parameters
     ----------
-    q : ndarray, shape (n, 2)
+    q : ndarray, shape (n, d)
     pairs : ndarray of int, shape (m, 2)
         0-based ``(i, j)``.
     distance, gamma : float
@@ -98,7 +98,7 @@ def pair_barrier_rows(
 
     Returns
     -------
-    a : ndarray, shape (m, 2)
+    a : ndarray, shape (m, d)
         ``-2 (q_i - q_j)``.
     b : ndarray, shape (m,)
         :func:`~formationlab.safety.condition.barrier_bound` of ``h_ij``: ``gamma h_ij^3``,
@@ -117,7 +117,7 @@ class BarrierConstraints:
 
     Parameters
     ----------
-    G : scipy.sparse.csr_matrix, shape (M, 2 n)
+    G : scipy.sparse.csr_matrix, shape (M, d n)
     bound : ndarray, shape (M,)
     barrier : ndarray, shape (M,)
         The row's ``h`` (``inf`` for speed rows).
@@ -126,7 +126,7 @@ class BarrierConstraints:
     index : ndarray of int64, shape (M, 2)
         ``(i, j)`` for a pair row, ``(robot, obstacle)`` for an obstacle row,
         ``(robot, side)`` for a speed row (0-based).
-    coef : ndarray, shape (M, 2)
+    coef : ndarray, shape (M, d)
         The row's coefficients ``a`` on its first robot (a pair row has ``-a`` on ``j``).
     """
 
@@ -149,12 +149,14 @@ def barrier_constraints(
     obstacles: Sequence[Obstacle] = (),
     pairs: NDArray[np.int64] | None = None,
 ) -> BarrierConstraints:
-    """Assemble the sparse constraints of the centralized QP at positions ``q`` of shape ``(n, 2)``.
+    """Assemble the sparse constraints of the centralized QP at positions ``q`` ``(n, d)``.
 
     ``pairs`` (``(m, 2)``, 0-based) defaults to the pairs within ``config.sensing_radius``.
+    Robot ``i``'s command is ``x[d i : d i + d]``.
     """
     q = np.asarray(q, dtype=float)
-    n = q.shape[0]
+    n, d = q.shape
+    span = np.arange(d)
     if pairs is None:
         pairs = sensed_pairs(q, config.sensing_radius)[:, 1:]
     step = config.rows_step
@@ -164,24 +166,23 @@ def barrier_constraints(
         q, obstacles, distance=config.d_obstacle, gamma=config.gamma, step=step
     )
     k = obs.b.shape[1]
-    normals, vmax = config.speed_polygon()
+    normals, vmax = config.speed_polygon(d)
     s = len(normals)
     robots = np.arange(n)
     # pair rows: +a on robot i's columns, -a on robot j's
-    rows = [np.repeat(np.arange(m), 4)]
-    cols = [np.column_stack([2 * pairs[:, 0], 2 * pairs[:, 0] + 1, 2 * pairs[:, 1],
-                             2 * pairs[:, 1] + 1]).ravel()]  # fmt: skip
+    rows = [np.repeat(np.arange(m), 2 * d)]
+    cols = [np.column_stack([d * pairs[:, :1] + span, d * pairs[:, 1:] + span]).ravel()]
     vals = [np.column_stack([a, -a]).ravel()]
     # obstacle rows (robot-major), then speed rows (robot-major)
     r0 = m
-    for count, coef in ((k, obs.a.reshape(-1, 2)), (s, np.tile(normals, (n, 1)))):
+    for count, coef in ((k, obs.a.reshape(-1, d)), (s, np.tile(normals, (n, 1)))):
         who = np.repeat(robots, count)
-        rows.append(np.repeat(r0 + np.arange(n * count), 2))
-        cols.append(np.column_stack([2 * who, 2 * who + 1]).ravel())
+        rows.append(np.repeat(r0 + np.arange(n * count), d))
+        cols.append((d * who[:, None] + span).ravel())
         vals.append(coef.ravel())
         r0 += n * count
     G = sp.csr_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(r0, 2 * n)
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(r0, d * n)
     )
     bound = np.concatenate([b, obs.b.ravel(), np.full(n * s, vmax)])
     barrier = np.concatenate([h, obs.h.ravel(), np.full(n * s, np.inf)])
@@ -193,7 +194,7 @@ def barrier_constraints(
             np.column_stack([np.repeat(robots, s), np.tile(np.arange(s), n)]),
         ]
     ).astype(np.int64)
-    coef = np.concatenate([a.reshape(-1, 2), obs.a.reshape(-1, 2), np.tile(normals, (n, 1))])
+    coef = np.concatenate([a.reshape(-1, d), obs.a.reshape(-1, d), np.tile(normals, (n, 1))])
     return BarrierConstraints(
         G=G, bound=bound, barrier=barrier, kind=kind.astype(np.int8), index=index, coef=coef
     )
@@ -202,7 +203,7 @@ def barrier_constraints(
 class QPSolution(NamedTuple):
     """A solve of :func:`solve_barrier_qp`.
 
-    ``u`` ``(n, 2)``; ``multipliers`` ``(M,)`` (``z >= 0`` with ``u - u_hat + G' z = 0``);
+    ``u`` ``(n, d)``; ``multipliers`` ``(M,)`` (``z >= 0`` with ``u - u_hat + G' z = 0``);
     ``bound`` ``(M,)`` the bounds actually imposed (relaxed rows at 0); ``status``.
     """
 
@@ -261,7 +262,7 @@ def solve_barrier_qp(constraints: BarrierConstraints, u_hat: NDArray[np.float64]
     Parameters
     ----------
     constraints : BarrierConstraints
-    u_hat : ndarray, shape (n, 2)
+    u_hat : ndarray, shape (n, d)
 
     Returns
     -------
@@ -362,7 +363,7 @@ def _maybe_violated(
         lhs_o = np.sum(rows.a * u[:, :, None, :], axis=-1)
         size_o = np.abs(rows.b) + np.sum(np.abs(rows.a) * np.abs(u[:, :, None, :]), axis=-1)
         out |= np.any(lhs_o > rows.b - tol * size_o, axis=(-2, -1))
-    normals, vmax = config.speed_polygon()
+    normals, vmax = config.speed_polygon(q.shape[-1])
     if len(normals):
         lhs_s = u @ normals.T
         out |= np.any(lhs_s > vmax - tol * (vmax + np.abs(u).sum(-1, keepdims=True)), axis=(-2, -1))
@@ -380,8 +381,9 @@ def barrier_filter(
     Parameters
     ----------
     config : SafetyFilter
-    q, u_hat : ndarray, shape (..., n, 2)
-    obstacles : sequence of Circle or Polygon
+    q, u_hat : ndarray, shape (..., n, d)
+        ``d`` = 2 in the plane, 3 in space.
+    obstacles : sequence of Circle or Polygon (plane), Sphere or Box (space)
 
     Returns
     -------
@@ -389,8 +391,8 @@ def barrier_filter(
     """
     q = np.asarray(q, dtype=float)
     u_hat = np.asarray(u_hat, dtype=float)
-    batch, n = q.shape[:-2], q.shape[-2]
-    fq, fu = q.reshape(-1, n, 2), u_hat.reshape(-1, n, 2)
+    batch, n, d = q.shape[:-2], q.shape[-2], q.shape[-1]
+    fq, fu = q.reshape(-1, n, d), u_hat.reshape(-1, n, d)
     trials = fq.shape[0]
     all_pairs = sensed_pairs(fq, config.sensing_radius)
     starts = np.searchsorted(all_pairs[:, 0], np.arange(trials + 1))
@@ -411,7 +413,7 @@ def barrier_filter(
         _, label = connected_components(graph, directed=False)
         chosen = np.isin(label, np.unique(label[c.robots[violated]]))
         keep = chosen[c.robots]
-        cols = np.flatnonzero(np.repeat(chosen, 2))
+        cols = np.flatnonzero(np.repeat(chosen, d))
         sub = BarrierConstraints(
             G=c.G[keep][:, cols], bound=c.bound[keep], barrier=c.barrier[keep],
             kind=c.kind[keep], index=c.index[keep], coef=c.coef[keep],

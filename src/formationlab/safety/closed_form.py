@@ -23,7 +23,8 @@ are active (or the rows are infeasible) and the caller solves the QP.
 Rows act on one or two robots: ``a . (u_i - u_j) <= b`` for a pair (``j >= 0``),
 ``a . u_i <= b`` for an obstacle piece or a side of the speed polygon (``j = -1``), so
 ``g_k . g_l`` is a sum over the robots two rows share. Rows: ``(M,)`` arrays ``ri``,
-``rj``, ``rb`` and ``ra`` ``(M, 2)``; commands ``(n, 2)``.
+``rj``, ``rb`` and ``ra`` ``(M, d)``; commands ``(n, d)``, ``d`` = 2 in the plane and 3 in
+space (the components in order, so the plane's sums are those of before, bit for bit).
 """
 
 from __future__ import annotations
@@ -43,19 +44,27 @@ def _value(ri, rj, ra, k, u):
     """``g_k . x`` and the size ``|g_k| . |x|`` of its terms."""
     i = ri[k]
     j = rj[k]
-    a0 = ra[k, 0]
-    a1 = ra[k, 1]
     if j < 0:
-        return a0 * u[i, 0] + a1 * u[i, 1], abs(a0) * abs(u[i, 0]) + abs(a1) * abs(u[i, 1])
-    v = a0 * (u[i, 0] - u[j, 0]) + a1 * (u[i, 1] - u[j, 1])
-    size = abs(a0) * (abs(u[i, 0]) + abs(u[j, 0])) + abs(a1) * (abs(u[i, 1]) + abs(u[j, 1]))
+        v = ra[k, 0] * u[i, 0]
+        size = abs(ra[k, 0]) * abs(u[i, 0])
+        for c in range(1, ra.shape[1]):
+            v += ra[k, c] * u[i, c]
+            size += abs(ra[k, c]) * abs(u[i, c])
+        return v, size
+    v = ra[k, 0] * (u[i, 0] - u[j, 0])
+    size = abs(ra[k, 0]) * (abs(u[i, 0]) + abs(u[j, 0]))
+    for c in range(1, ra.shape[1]):
+        v += ra[k, c] * (u[i, c] - u[j, c])
+        size += abs(ra[k, c]) * (abs(u[i, c]) + abs(u[j, c]))
     return v, size
 
 
 @njit(cache=True, nogil=True, inline="always")
 def _gram(ri, rj, ra, k, m):
     """``g_k . g_m``: the robots the two rows share (``+a`` on ``i``, ``-a`` on ``j``)."""
-    dot = ra[k, 0] * ra[m, 0] + ra[k, 1] * ra[m, 1]
+    dot = ra[k, 0] * ra[m, 0]
+    for e in range(1, ra.shape[1]):
+        dot += ra[k, e] * ra[m, e]
     c = 0.0
     if ri[k] == ri[m]:
         c += 1.0
@@ -72,12 +81,19 @@ def _gram(ri, rj, ra, k, m):
 def _shift(ri, rj, ra, k, lam, u):
     """``u -= lam g_k``."""
     i = ri[k]
-    u[i, 0] -= lam * ra[k, 0]
-    u[i, 1] -= lam * ra[k, 1]
     j = rj[k]
-    if j >= 0:
-        u[j, 0] += lam * ra[k, 0]
-        u[j, 1] += lam * ra[k, 1]
+    for c in range(ra.shape[1]):
+        u[i, c] -= lam * ra[k, c]
+        if j >= 0:
+            u[j, c] += lam * ra[k, c]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _copy(src, out):
+    """``out[:] = src`` for commands ``(n, d)``."""
+    for i in range(src.shape[0]):
+        for c in range(src.shape[1]):
+            out[i, c] = src[i, c]
 
 
 @njit(cache=True, nogil=True)
@@ -92,17 +108,14 @@ def _feasible(ri, rj, ra, rb, u, uh) -> bool:
 
 @njit(cache=True, nogil=True)
 def closed_form(ri, rj, ra, rb, uh, out, lam):
-    """The QP's solution into ``out`` ``(n, 2)`` when at most two rows are active.
+    """The QP's solution into ``out`` ``(n, d)`` when at most two rows are active.
 
     Returns 0 (``u_hat`` feasible: ``out = u_hat`` bit for bit), 1 (solved; ``lam``
     ``(M,)`` holds the multipliers, non-zero on at most two rows) or -1 (no solution
     with one or two active rows: solve the QP; ``out`` and ``lam`` are then undefined).
     """
     m = rb.shape[0]
-    n = uh.shape[0]
-    for i in range(n):
-        out[i, 0] = uh[i, 0]
-        out[i, 1] = uh[i, 1]
+    _copy(uh, out)
     for k in range(m):
         lam[k] = 0.0
     resid = np.empty(m)
@@ -141,15 +154,11 @@ def closed_form(ri, rj, ra, rb, uh, out, lam):
             _shift(ri, rj, ra, k, l1, trial)
             _shift(ri, rj, ra, j, l2, trial)
             if _feasible(ri, rj, ra, rb, trial, uh):
-                for i in range(n):
-                    out[i, 0] = trial[i, 0]
-                    out[i, 1] = trial[i, 1]
+                _copy(trial, out)
                 lam[k] = max(l1, 0.0)
                 lam[j] = max(l2, 0.0)
                 return 1
-        for i in range(n):  # back to u_hat for the next k
-            out[i, 0] = uh[i, 0]
-            out[i, 1] = uh[i, 1]
+        _copy(uh, out)  # back to u_hat for the next k
     return -1
 
 

@@ -183,18 +183,31 @@ class SafetyFilter:
         """``D_o``: the given ``obstacle_distance``, or ``distance / 2``."""
         return self.distance / 2 if self.obstacle_distance is None else self.obstacle_distance
 
-    def speed_polygon(self) -> tuple[NDArray[np.float64], float]:
-        """Outward normals ``(S, 2)`` and bound ``c`` of the speed limit ``n_k . u <= c``.
+    def speed_polygon(self, dim: int = 2) -> tuple[NDArray[np.float64], float]:
+        """Outward normals ``(S, dim)`` and bound ``c`` of the speed limit ``n_k . u <= c``.
 
         Empty when there is no limit. The polygon is inscribed in the disc of radius
-        ``max_speed`` (vertices on the circle), so ``c = max_speed cos(pi / S)``.
+        ``max_speed`` (vertices on the circle), so ``c = max_speed cos(pi / S)``. In space
+        (``dim = 3``) there is no polygon: :meth:`check_space` refuses a ``max_speed``.
         """
         if self.max_speed is None:
-            return np.zeros((0, 2)), 0.0
+            return np.zeros((0, dim)), 0.0
+        self.check_space(dim)
         s = self.speed_sides
         angle = 2.0 * np.pi * np.arange(s) / s
         normals = np.column_stack([np.cos(angle), np.sin(angle)])
         return normals, self.max_speed * math.cos(math.pi / s)
+
+    def check_space(self, dim: int) -> None:
+        """Refuse what the filter does in the plane only, for robots in ``dim`` dimensions:
+        the speed limit (a polygon in the plane of velocities)."""
+        if dim != 2 and self.enabled and self.max_speed is not None:
+            raise ParameterError(
+                f"safety.max_speed limits the speed by a polygon of velocities in the plane; "
+                f"a formation in space ({dim}-D) has none: remove max_speed (a drone's speed "
+                'limit is the quadrotor model\'s max_speed, [robots] model = "quadrotor")',
+                key="max_speed",
+            )
 
     def check_model(self, model: RobotModel) -> None:
         """Whether the filter's certificate holds for ``model``.
@@ -274,7 +287,7 @@ class SafetyFilter:
     def command(
         self, q: ArrayLike, u_hat: ArrayLike, *, obstacles: Sequence[Obstacle] = ()
     ) -> NDArray[np.float64]:
-        """The filtered command alone, ``(..., n, 2)``: :meth:`apply`'s ``u``.
+        """The filtered command alone, ``(..., n, d)``: :meth:`apply`'s ``u``.
 
         What the closed loop needs at every step; the decentralized filter then skips its
         statuses and active set.
@@ -282,7 +295,7 @@ class SafetyFilter:
         if self.filter == "barrier-decentralized":
             q_arr = np.asarray(q, dtype=float)
             u_arr = np.asarray(u_hat, dtype=float)
-            if q_arr.shape == u_arr.shape and q_arr.ndim >= 2 and q_arr.shape[-1] == 2:
+            if q_arr.shape == u_arr.shape and q_arr.ndim >= 2 and q_arr.shape[-1] in (2, 3):
                 return _FILTERS[self.filter].commands(self, q_arr, u_arr, obstacles)  # type: ignore[misc]
         return self.apply(q, u_hat, obstacles=obstacles).u
 
@@ -298,9 +311,10 @@ class SafetyFilter:
 
         Parameters
         ----------
-        q, u_hat : array_like, shape (n, 2) or (..., n, 2)
-            Positions and the law's commands, batch axes leading.
-        obstacles : sequence of Circle or Polygon
+        q, u_hat : array_like, shape (n, d) or (..., n, d)
+            Positions and the law's commands, batch axes leading; ``d`` = 2 (the plane) or 3
+            (space).
+        obstacles : sequence of Circle or Polygon (plane), Sphere or Box (space)
             Static obstacles.
         contact : array_like, shape (n, n), optional
             The formation's contact distances; when given, :meth:`check_contact` runs first.
@@ -308,16 +322,18 @@ class SafetyFilter:
         Returns
         -------
         FilterResult
-            The filtered command (``(..., n, 2)``), a status per trial and the active set.
+            The filtered command (``(..., n, d)``), a status per trial and the active set.
         """
         if contact is not None:
             self.check_contact(contact)
         q_arr = np.asarray(q, dtype=float)
         u_arr = np.asarray(u_hat, dtype=float)
-        if q_arr.shape != u_arr.shape or q_arr.ndim < 2 or q_arr.shape[-1] != 2:
+        if q_arr.shape != u_arr.shape or q_arr.ndim < 2 or q_arr.shape[-1] not in (2, 3):
             raise ParameterError(
-                f"q and u_hat must both have shape (..., n, 2), got {q_arr.shape} and {u_arr.shape}"
+                f"q and u_hat must both have shape (..., n, d) with d = 2 or 3, got "
+                f"{q_arr.shape} and {u_arr.shape}"
             )
+        self.check_space(q_arr.shape[-1])
         if self.filter == "none":
             return unchanged(u_arr)
         return _FILTERS[self.filter].apply(self, q_arr, u_arr, obstacles)

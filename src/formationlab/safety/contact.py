@@ -6,7 +6,7 @@ contact while both ends are clear. Between robots that is the closest approach o
 points moving on straight lines; for obstacles it is, for each robot centre moving from
 ``q0`` to ``q1``:
 
-* a **circle** (centre ``c``, radius ``R``): the distance from ``c`` to the segment
+* a **circle** or a **sphere** (centre ``c``, radius ``R``): the distance from ``c`` to the segment
   ``[q0, q1]`` (the nearest point at ``s* = clip(-(q0 - c).(q1 - q0) / |q1 - q0|^2, 0, 1)``),
   minus ``R``;
 * a **polygon**: the distance from the segment to the polygon as a closed set, which is
@@ -26,7 +26,8 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .obstacles import Circle, Obstacle
+from .obstacles import Obstacle, Polygon
+from .solids import Ball, Box, segment_box_distance
 
 __all__ = ["segment_distances", "swept_clearances"]
 
@@ -38,7 +39,7 @@ def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64
 def _point_segment(
     p: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """Distance from points ``p`` to segments ``[a, b]`` (broadcast over ``(..., 2)``)."""
+    """Distance from points ``p`` to segments ``[a, b]`` (broadcast over ``(..., d)``)."""
     e = b - a
     ee = np.sum(e * e, axis=-1)
     s = np.clip(np.sum((p - a) * e, axis=-1) / np.where(ee > 0, ee, 1.0), 0.0, 1.0)
@@ -73,11 +74,11 @@ def swept_clearances(
 
     Parameters
     ----------
-    q0, q1 : array_like, shape (..., n, 2)
+    q0, q1 : array_like, shape (..., n, d)
         Robot centres at the start and the end of the step.
     radii : array_like, shape (n,)
         Robot radii ``rho_i / 2``.
-    obstacles : sequence of Circle or Polygon
+    obstacles : sequence of Circle, Polygon, Sphere or Box
         ``O`` obstacles.
 
     Returns
@@ -91,11 +92,16 @@ def swept_clearances(
     radii = np.asarray(radii, dtype=float)
     out = np.empty((*q0.shape[:-1], len(obstacles)))
     for o, ob in enumerate(obstacles):
-        if isinstance(ob, Circle):
+        if isinstance(ob, Ball):  # a circle or a sphere
             out[..., o] = _point_segment(ob.center, q0, q1) - ob.radius
             continue
+        sd0, sd1 = ob.signed_distance(q0)[0], ob.signed_distance(q1)[0]
+        if isinstance(ob, Box):
+            dist = segment_box_distance(q0, q1, *ob.corners)
+            out[..., o] = np.where((sd0 < 0) | (sd1 < 0), np.minimum(sd0, sd1), dist)
+            continue
+        assert isinstance(ob, Polygon)
         a, b = ob.edges
         dist = segment_distances(q0[..., None, :], q1[..., None, :], a, b).min(axis=-1)
-        sd0, sd1 = ob.signed_distance(q0)[0], ob.signed_distance(q1)[0]
         out[..., o] = np.where((sd0 < 0) | (sd1 < 0), np.minimum(sd0, sd1), dist)
     return out - radii[:, None]

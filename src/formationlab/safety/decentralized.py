@@ -44,19 +44,16 @@ Clarabel, for the tests.
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
-import scipy.sparse as sp
 from numba import njit
 from numpy.typing import NDArray
 
-from ..errors import require_extra
 from ..neighbours.cell_grid import build_grid, neighbours_of
 from .condition import barrier_bounds
 from .config import SafetyFilter, register_filter
+from .decentralized_space import robot_clarabel, space_filter
 from .obstacle_terms import obstacle_terms
 from .obstacles import Obstacle, obstacle_barrier_rows
 from .pairs import DENSE_BELOW, sensed_pairs
@@ -206,6 +203,8 @@ def decentralized_commands(
     """
     q = np.asarray(q, dtype=float)
     u_hat = np.asarray(u_hat, dtype=float)
+    if q.shape[-1] != 2:  # in space: each robot's QP over its 3-D command
+        return space_filter(config, q, u_hat, obstacles)[0]
     fq, fu, args = _setup(config, q, u_hat, obstacles)
     out_u = np.empty_like(fu)
     code = np.empty(fu.shape[:2], np.int8)
@@ -238,6 +237,14 @@ def decentralized_filter(
     q = np.asarray(q, dtype=float)
     u_hat = np.asarray(u_hat, dtype=float)
     batch, n = q.shape[:-2], q.shape[-2]
+    if q.shape[-1] != 2:  # in space: each robot's QP over its 3-D command
+        u, code, robot_active, active_pairs, active_obs = space_filter(config, q, u_hat, obstacles)
+        status = code.max(axis=1, initial=0).astype(np.int8)
+        return FilterResult(
+            u=u, status=status.reshape(batch), active=robot_active.reshape((*batch, n)),
+            active_pairs=active_pairs, active_obstacles=active_obs,
+            message=f"barrier-decentralized: {summarise(status)}",
+        )  # fmt: skip
     fq, fu, args = _setup(config, q, u_hat, obstacles)
     trials = fq.shape[0]
     out_u = np.empty_like(fu)
@@ -267,18 +274,6 @@ def decentralized_filter(
     )
 
 
-def _clarabel(P, c, G, h) -> NDArray[np.float64] | None:  # type: ignore[no-untyped-def]
-    qpsolvers: Any = require_extra("safety", ("qpsolvers", "clarabel"), "safety filters")
-    problem = qpsolvers.Problem(P, c, G, h)
-    with warnings.catch_warnings():
-        # qpsolvers warns on a non-solved status; the caller reads sol.found
-        warnings.filterwarnings("ignore", message="Clarabel.rs terminated", category=UserWarning)
-        sol = qpsolvers.solve_problem(
-            problem, solver="clarabel", tol_feas=1e-11, tol_gap_abs=1e-11, tol_gap_rel=1e-11
-        )
-    return np.asarray(sol.x) if sol.found else None
-
-
 def decentralized_reference(
     config: SafetyFilter,
     q: NDArray[np.float64],
@@ -288,21 +283,22 @@ def decentralized_reference(
     """Plain reference of :func:`decentralized_filter`: each robot's QP solved by Clarabel.
 
     The same rows (half responsibility per pair, full per obstacle, speed polygon),
-    assembled robot by robot in numpy, and each robot's 2-variable QP handed to
-    qpsolvers. Slow; for tests.
+    assembled robot by robot in numpy, and each robot's QP (2 variables in the plane, 3 in
+    space) handed to qpsolvers (:func:`~.decentralized_space.robot_clarabel`). Slow; for
+    tests.
 
     Returns
     -------
-    u : ndarray, shape (..., n, 2)
+    u : ndarray, shape (..., n, d)
     code : ndarray of int8, shape (..., n)
         Per robot: 0 unchanged, 1 solved, 2 relaxed, 4 failed.
     """
     q = np.asarray(q, dtype=float)
     u_hat = np.asarray(u_hat, dtype=float)
-    n = q.shape[-2]
-    fq, fu = q.reshape(-1, n, 2), u_hat.reshape(-1, n, 2)
+    n, d = q.shape[-2:]
+    fq, fu = q.reshape(-1, n, d), u_hat.reshape(-1, n, d)
     out, codes = fu.copy(), np.zeros(fu.shape[:2], np.int8)
-    normals, bound = config.speed_polygon()
+    normals, bound = config.speed_polygon(d)
     for t in range(fq.shape[0]):
         pairs = sensed_pairs(fq[t], config.sensing_radius)[:, 1:]
         obs = obstacle_barrier_rows(
@@ -317,18 +313,7 @@ def decentralized_reference(
             half = 0.5 * barrier_bounds(hp, config.gamma, config.rows_step)
             b = np.concatenate([half, obs.b[i], np.full(len(normals), bound)])
             hs = np.concatenate([hp, obs.h[i], np.ones(len(normals))])
-            if np.all(A @ fu[t, i] <= b):
-                continue
-            x = _clarabel(sp.identity(2, format="csc"), -fu[t, i], sp.csc_matrix(A), b)
-            code = 1
-            if x is None:
-                x = _clarabel(
-                    sp.identity(2, format="csc"), -fu[t, i], sp.csc_matrix(A),
-                    np.where(hs < 0, np.maximum(b, 0.0), b),
-                )  # fmt: skip
-                code = 2 if x is not None else 4
-            out[t, i] = x if x is not None else 0.0
-            codes[t, i] = code
+            out[t, i], codes[t, i] = robot_clarabel(A, b, hs, fu[t, i])
     return out.reshape(u_hat.shape), codes.reshape(u_hat.shape[:-1])
 
 

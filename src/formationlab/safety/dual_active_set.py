@@ -1,7 +1,8 @@
 """The centralized barrier QP solved exactly in numba for any number of active rows.
 
 The QP of :mod:`.barrier`, ``min 1/2 |x - x_hat|^2`` s.t. ``g_k . x <= b_k``
-(``x = (u_1x, u_1y, u_2x, ...)``, ``d = 2 n`` unknowns, rows as in :mod:`.closed_form`:
+(``x = (u_1x, u_1y, u_2x, ...)``, ``d = 2 n`` unknowns in the plane and ``3 n`` in space,
+rows as in :mod:`.closed_form`:
 ``a . (u_i - u_j) <= b`` for a pair, ``a . u_i <= b`` for an obstacle piece or a side of
 the speed polygon), by the dual active-set method of Goldfarb and Idnani, "A
 numerically stable dual method for solving strictly convex quadratic programs",
@@ -61,7 +62,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from .closed_form import TOL, _feasible, _shift, _value, closed_form
+from .closed_form import TOL, _copy, _feasible, _shift, _value, closed_form
 
 __all__ = [
     "FALLBACK",
@@ -82,40 +83,51 @@ NUMERICAL = -2
 
 
 def workspace(
-    n: int, m: int
+    n: int, m: int, dim: int = 2
 ) -> tuple[
     NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.int64],
     NDArray[np.float64],
 ]:  # fmt: skip
-    """Work arrays of :func:`dual_active_set` for ``n`` robots (and ``m`` rows).
+    """Work arrays of :func:`dual_active_set` for ``n`` robots in ``dim`` dimensions (and
+    ``m`` rows).
 
-    ``(mats (2, d, d), vecs (5, d), lam (m,), act (d,), rb2 (m,))``, ``d = 2 n``.
+    ``(mats (2, d, d), vecs (5, d), lam (m,), act (d,), rb2 (m,))``, ``d = dim n``.
     """
-    d = 2 * n
+    d = dim * n
     return (
         np.zeros((2, d, d)), np.zeros((5, d)), np.zeros(m), np.zeros(d, np.int64), np.zeros(m),
     )  # fmt: skip
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _dot_x(ra, k, x, at):
+    """``a_k . x[at : at + dim]`` and ``|a_k| . |x[at : at + dim]|``."""
+    v = ra[k, 0] * x[at]
+    size = abs(ra[k, 0]) * abs(x[at])
+    for c in range(1, ra.shape[1]):
+        v += ra[k, c] * x[at + c]
+        size += abs(ra[k, c]) * abs(x[at + c])
+    return v, size
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _row_x(ri, rj, ra, k, x):
     """``g_k . x`` and ``|g_k| . |x|`` for the stacked ``x`` ``(d,)``."""
-    i = 2 * ri[k]
-    a0 = ra[k, 0]
-    a1 = ra[k, 1]
-    v = a0 * x[i] + a1 * x[i + 1]
-    size = abs(a0) * abs(x[i]) + abs(a1) * abs(x[i + 1])
+    dim = ra.shape[1]
+    v, size = _dot_x(ra, k, x, dim * ri[k])
     if rj[k] >= 0:
-        j = 2 * rj[k]
-        v -= a0 * x[j] + a1 * x[j + 1]
-        size += abs(a0) * abs(x[j]) + abs(a1) * abs(x[j + 1])
+        w, wsize = _dot_x(ra, k, x, dim * rj[k])
+        v -= w
+        size += wsize
     return v, size
 
 
 @njit(cache=True, nogil=True, inline="always")
 def _norm2(rj, ra, k):
     """``|g_k|^2``."""
-    s = ra[k, 0] * ra[k, 0] + ra[k, 1] * ra[k, 1]
+    s = ra[k, 0] * ra[k, 0]
+    for c in range(1, ra.shape[1]):
+        s += ra[k, c] * ra[k, c]
     return 2.0 * s if rj[k] >= 0 else s
 
 
@@ -123,15 +135,20 @@ def _norm2(rj, ra, k):
 def _jt_row(ri, rj, ra, k, J, dv):
     """``dv = J' g_k`` (``g_k`` has two or four non-zeros)."""
     d = J.shape[0]
-    i = 2 * ri[k]
-    a0 = ra[k, 0]
-    a1 = ra[k, 1]
+    dim = ra.shape[1]
+    i = dim * ri[k]
     for c in range(d):
-        dv[c] = a0 * J[i, c] + a1 * J[i + 1, c]
+        s = ra[k, 0] * J[i, c]
+        for e in range(1, dim):
+            s += ra[k, e] * J[i + e, c]
+        dv[c] = s
     if rj[k] >= 0:
-        j = 2 * rj[k]
+        j = dim * rj[k]
         for c in range(d):
-            dv[c] -= a0 * J[j, c] + a1 * J[j + 1, c]
+            s = ra[k, 0] * J[j, c]
+            for e in range(1, dim):
+                s += ra[k, e] * J[j + e, c]
+            dv[c] -= s
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -210,17 +227,18 @@ def _drop(J, R, u, act, q, ell) -> None:
 
 @njit(cache=True, nogil=True)
 def dual_active_set(ri, rj, ra, rb, uh, out, lam, mats, vecs, act) -> int:
-    """The QP's solution into ``out`` ``(n, 2)`` and its multipliers into ``lam`` ``(M,)``.
+    """The QP's solution into ``out`` ``(n, dim)`` and its multipliers into ``lam`` ``(M,)``.
 
-    Rows ``ri``, ``rj``, ``ra``, ``rb`` as in :func:`.closed_form.closed_form`; ``uh``
-    ``(n, 2)``; work arrays from :func:`workspace` (``mats``, ``vecs``, ``act``).
+    Rows ``ri``, ``rj``, ``ra`` ``(M, dim)``, ``rb`` as in :func:`.closed_form.closed_form`;
+    ``uh`` ``(n, dim)``; work arrays from :func:`workspace` (``mats``, ``vecs``, ``act``).
     Returns 0 (``uh`` feasible: ``out = uh`` bit for bit), 1 (solved), -1 (the rows are
     infeasible; ``out`` undefined) or -2 (iteration limit or a failed final check, from
     rounding: ``out`` undefined).
     """
     m = rb.shape[0]
     n = uh.shape[0]
-    d = 2 * n
+    dim = uh.shape[1]
+    d = dim * n
     J = mats[0]
     R = mats[1]
     x = vecs[0]
@@ -234,8 +252,8 @@ def dual_active_set(ri, rj, ra, rb, uh, out, lam, mats, vecs, act) -> int:
             R[i, c] = 0.0
         J[i, i] = 1.0
     for i in range(n):
-        x[2 * i] = uh[i, 0]
-        x[2 * i + 1] = uh[i, 1]
+        for c in range(dim):
+            x[dim * i + c] = uh[i, c]
     for k in range(m):
         lam[k] = 0.0
     q = 0
@@ -304,14 +322,9 @@ def dual_active_set(ri, rj, ra, rb, uh, out, lam, mats, vecs, act) -> int:
             u[ell] = 0.0
             _drop(J, R, u, act, q, ell)
             q -= 1
+    _copy(uh, out)  # x_hat - sum lambda_k g_k: robots on no active row keep x_hat
     if q == 0:
-        for i in range(n):
-            out[i, 0] = uh[i, 0]
-            out[i, 1] = uh[i, 1]
         return 0
-    for i in range(n):  # x_hat - sum lambda_k g_k: robots on no active row keep x_hat
-        out[i, 0] = uh[i, 0]
-        out[i, 1] = uh[i, 1]
     for a in range(q):
         k = act[a]
         lk = max(u[a], 0.0)

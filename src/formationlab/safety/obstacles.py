@@ -1,6 +1,9 @@
 """Static obstacles: circles and simple polygons, their clearances, repulsion and barriers.
 
-Every obstacle offers, for robot centres ``q`` of shape ``(..., n, 2)``:
+The same holds in space for spheres and axis-aligned boxes (:mod:`.solids`, which holds
+the formulas both share: a circle and a sphere are one formula in ``d`` dimensions); the
+functions below take any of the four, for robot centres of shape ``(..., n, d)``, ``d`` the
+obstacles' dimension. Every obstacle offers, for robot centres ``q`` of shape ``(..., n, 2)``:
 
 * the **signed distance** ``delta`` of a centre to the obstacle (negative inside) and
   its gradient; the robot's **clearance** is ``s = delta - rho_i / 2`` and ``s <= 0`` is a
@@ -15,7 +18,8 @@ Barrier pieces. An obstacle is split into convex pieces whose squared distance i
 smooth off the piece and convex: a circle is one piece (its centre, with radius
 ``R + D_o``), a polygon one piece per edge (the segment, radius ``D_o``). Each piece
 ``p`` gives ``h = |q_i - p*(q_i)|^2 - rho^2`` with ``p*`` the nearest point of the piece,
-``grad h = 2 (q_i - p*)``, the same form as the pair barrier between robots. Keeping
+``grad h = 2 (q_i - p*)``, the same form as the pair barrier between robots (each
+obstacle's ``pieces``; a sphere's and a box's in :mod:`.solids`). Keeping
 every edge's ``h >= 0`` keeps the centre at least ``D_o`` from the polygon: the centre
 cannot reach the polygon without coming within ``D_o`` of some edge.
 
@@ -28,15 +32,15 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..controllers.kinds.khatib import dkhatib_ds, khatib
 from ..errors import ObstacleError, require_extra
-from ..validation import COORDINATE_LIMIT
 from .condition import barrier_bounds
+from .solids import Ball, Box, Sphere, within_limit
 
 __all__ = [
     "Circle",
@@ -53,29 +57,9 @@ __all__ = [
 ]
 
 
-def _finite_point(value: ArrayLike, what: str) -> NDArray[np.float64]:
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ObstacleError(f"{what} must be two numbers [x, y], got {value!r}") from None
-    if arr.shape != (2,) or not np.all(np.isfinite(arr)):
-        raise ObstacleError(f"{what} must be two finite numbers [x, y], got {value!r}")
-    return arr
-
-
-def _within_limit(numbers: NDArray[np.float64], what: str) -> None:
-    """Refuse an obstacle whose coordinates (or radius) exceed ``COORDINATE_LIMIT``."""
-    largest = float(np.max(np.abs(numbers)))
-    if largest > COORDINATE_LIMIT:
-        raise ObstacleError(
-            f"{what} coordinates reach {largest:.3g}, beyond {COORDINATE_LIMIT:g}: squared "
-            "distances to it overflow double precision; give the obstacle in metres"
-        )
-
-
 @dataclass(frozen=True, kw_only=True, eq=False)
-class Circle:
-    """A disc obstacle.
+class Circle(Ball):
+    """A disc obstacle: the ball of :mod:`.solids` in the plane.
 
     Parameters
     ----------
@@ -85,29 +69,8 @@ class Circle:
         Radius ``R > 0`` (m).
     """
 
-    center: NDArray[np.float64]
-    radius: float
-
-    def __post_init__(self) -> None:
-        c = _finite_point(self.center, "circle center")
-        r = self.radius
-        if not (isinstance(r, int | float) and np.isfinite(r) and r > 0):
-            raise ObstacleError(f"circle radius must be a finite number > 0, got {r!r}")
-        _within_limit(np.append(c, r), "circle")
-        c.setflags(write=False)
-        object.__setattr__(self, "center", c)
-        object.__setattr__(self, "radius", float(r))
-
-    def describe(self) -> str:
-        """``"circle at (0, 0) of radius 0.5"``."""
-        return f"circle at ({self.center[0]:g}, {self.center[1]:g}) of radius {self.radius:g}"
-
-    def signed_distance(self, q: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """``delta = |q - c| - R`` and its gradient ``(q - c) / |q - c|``; ``(..., 2) -> (...)``."""
-        w = np.asarray(q, dtype=float) - self.center
-        dist = np.sqrt(np.sum(w * w, axis=-1))
-        grad = w / np.where(dist > 0, dist, 1.0)[..., None]
-        return dist - self.radius, grad
+    dim: ClassVar[int] = 2
+    kind: ClassVar[str] = "circle"
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -123,6 +86,8 @@ class Polygon:
 
     vertices: NDArray[np.float64]
 
+    dim: ClassVar[int] = 2
+
     def __post_init__(self) -> None:
         try:
             v = np.array(self.vertices, dtype=float)
@@ -134,7 +99,7 @@ class Polygon:
             raise ObstacleError(f"a polygon needs at least 3 vertices [x, y], got shape {v.shape}")
         if not np.all(np.isfinite(v)):
             raise ObstacleError(f"polygon vertices must be finite, got {v.tolist()}")
-        _within_limit(v, "polygon")
+        within_limit(v, "polygon")
         if np.allclose(v[0], v[-1]):
             v = v[:-1]  # a closing repeat of the first vertex is tolerated
         shapely: Any = require_extra("safety", ("shapely",), "polygon obstacles")
@@ -155,6 +120,17 @@ class Polygon:
         """``"polygon with 3 vertices starting at (1, 1)"``."""
         v0 = self.vertices[0]
         return f"polygon with {len(self.vertices)} vertices starting at ({v0[0]:g}, {v0[1]:g})"
+
+    def scenario(self) -> dict[str, object]:
+        """The scenario-file form ``{"polygon": [[x, y], ...]}``."""
+        return {"polygon": self.vertices.tolist()}
+
+    def pieces(
+        self, q: NDArray[np.float64], distance: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Barrier pieces: the nearest point of every edge ``(..., k, 2)``, radius ``D_o``
+        ``(k,)``."""
+        return self.nearest_on_edges(q), np.full(len(self.vertices), distance)
 
     @property
     def edges(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -199,29 +175,54 @@ class Polygon:
         return sign * dist, grad
 
 
-Obstacle = Circle | Polygon
+#: an obstacle in the plane (circle, polygon) or in space (sphere, box)
+Obstacle = Circle | Polygon | Sphere | Box
+#: the obstacles of the scenario files by kind, and the dimension each lives in
+KINDS: dict[str, int] = {"circle": 2, "polygon": 2, "sphere": 3, "box": 3}
+_FORMS = {
+    "circle": "circle = { center = [x, y], radius = R }",
+    "polygon": "polygon = [[x, y], ...]",
+    "sphere": "sphere = { center = [x, y, z], radius = R }",
+    "box": "box = { center = [x, y, z], size = [sx, sy, sz] }",
+}
 
 
-def obstacle_from_mapping(spec: Mapping[str, object]) -> Obstacle:
+def _table(spec: Mapping[str, object], kind: str, keys: tuple[str, ...]) -> Mapping[str, Any]:
+    """The inline table of a ``circle``, ``sphere`` or ``box``, with exactly ``keys``."""
+    table = spec[kind]
+    if not isinstance(table, Mapping) or set(table) != set(keys):
+        got = sorted(table) if isinstance(table, Mapping) else table
+        raise ObstacleError(f"a {kind} is {_FORMS[kind]}, got {got!r}")
+    return table
+
+
+def obstacle_from_mapping(spec: Mapping[str, object], *, dim: int | None = None) -> Obstacle:
     """An obstacle from its scenario-file form.
 
-    ``{"circle": {"center": [x, y], "radius": R}}`` or ``{"polygon": [[x, y], ...]}``.
+    ``{"circle": {"center": [x, y], "radius": R}}`` or ``{"polygon": [[x, y], ...]}`` in the
+    plane; ``{"sphere": {"center": [x, y, z], "radius": R}}`` or ``{"box": {"center":
+    [x, y, z], "size": [sx, sy, sz]}}`` in space. With ``dim``, the formation's dimension, an
+    obstacle of the other one is refused by name.
     """
     keys = set(spec)
-    if keys == {"circle"} and isinstance(spec["circle"], Mapping):
-        c = spec["circle"]
-        extra = set(c) - {"center", "radius"}
-        if extra or not {"center", "radius"} <= set(c):
-            raise ObstacleError(
-                f"a circle needs exactly center = [x, y] and radius = R, got keys {sorted(c)}"
-            )
-        return Circle(center=c["center"], radius=c["radius"])  # type: ignore[arg-type]
-    if keys == {"polygon"}:
+    kind = next(iter(keys)) if len(keys) == 1 else ""
+    if kind not in KINDS:
+        forms = " or ".join(_FORMS[k] for k in KINDS if dim is None or KINDS[k] == dim)
+        raise ObstacleError(f"an obstacle is either {forms}, got keys {sorted(keys)}")
+    if dim is not None and KINDS[kind] != dim:
+        other = [k for k in KINDS if KINDS[k] == dim]
+        where = {2: "the plane", 3: "space (3-D)"}
+        raise ObstacleError(
+            f"a {kind} is an obstacle in {where[KINDS[kind]]}, and this formation is in "
+            f"{where[dim]}: use {' or '.join(_FORMS[k] for k in other)}"
+        )
+    if kind == "polygon":
         return Polygon(vertices=spec["polygon"])  # type: ignore[arg-type]
-    raise ObstacleError(
-        "an obstacle is either circle = { center = [x, y], radius = R } or polygon = "
-        f"[[x, y], ...], got keys {sorted(keys)}"
-    )
+    if kind == "box":
+        box = _table(spec, "box", ("center", "size"))
+        return Box(center=box["center"], size=box["size"])
+    ball = _table(spec, kind, ("center", "radius"))
+    return (Circle if kind == "circle" else Sphere)(center=ball["center"], radius=ball["radius"])
 
 
 def clearances(
@@ -231,24 +232,24 @@ def clearances(
 
     Parameters
     ----------
-    q : array_like, shape (..., n, 2)
+    q : array_like, shape (..., n, d)
         Robot centres.
     radii : array_like, shape (n,)
         Robot radii ``rho_i / 2``.
-    obstacles : sequence of Circle or Polygon
+    obstacles : sequence of Circle, Polygon, Sphere or Box
         ``O`` obstacles.
 
     Returns
     -------
     s : ndarray, shape (..., n, O)
         Signed clearances (``<= 0``: the robot touches or overlaps the obstacle).
-    grad : ndarray, shape (..., n, O, 2)
+    grad : ndarray, shape (..., n, O, d)
         ``grad_{q_i} s``, a unit vector pointing away from the obstacle.
     """
     q = np.asarray(q, dtype=float)
     radii = np.asarray(radii, dtype=float)
     if not obstacles:
-        return np.zeros((*q.shape[:-1], 0)), np.zeros((*q.shape[:-1], 0, 2))
+        return np.zeros((*q.shape[:-1], 0)), np.zeros((*q.shape[:-1], 0, q.shape[-1]))
     parts = [ob.signed_distance(q) for ob in obstacles]
     s = np.stack([p[0] for p in parts], axis=-1) - radii[:, None]
     grad = np.stack([p[1] for p in parts], axis=-2)
@@ -286,7 +287,7 @@ def grad_obstacle_potential(
     eta: float,
     influence: float,
 ) -> NDArray[np.float64]:
-    """``grad_i`` of :func:`obstacle_potential`, ``sum_o gamma'(s_io) grad s_io``; ``(..., n, 2)``.
+    """``grad_i`` of :func:`obstacle_potential`, ``sum_o gamma'(s_io) grad s_io``; ``(..., n, d)``.
 
     A law adds ``-k grad`` to its command (``k`` its own gain, ``k_c`` for the paper's laws).
     """
@@ -301,11 +302,11 @@ def check_obstacle_starts(q0: ArrayLike, radii: ArrayLike, obstacles: Sequence[O
 
     Parameters
     ----------
-    q0 : array_like, shape (n, 2) or (B, n, 2)
+    q0 : array_like, shape (n, d) or (B, n, d)
         Initial positions (every trial of a batch is checked).
     radii : array_like, shape (n,)
         Robot radii ``rho_i / 2``.
-    obstacles : sequence of Circle or Polygon
+    obstacles : sequence of Circle, Polygon, Sphere or Box
     """
     s, _ = clearances(q0, radii, obstacles)
     bad = np.argwhere(s <= 0.0)
@@ -323,7 +324,7 @@ def check_obstacle_starts(q0: ArrayLike, radii: ArrayLike, obstacles: Sequence[O
 class ObstacleRows(NamedTuple):
     """Barrier constraints ``a . u_i <= b`` of every robot against every obstacle piece.
 
-    ``a`` has shape ``(..., n, K, 2)``, ``b`` and ``h`` ``(..., n, K)``, ``owner`` ``(K,)``
+    ``a`` has shape ``(..., n, K, d)``, ``b`` and ``h`` ``(..., n, K)``, ``owner`` ``(K,)``
     (the 0-based obstacle each piece belongs to).
     """
 
@@ -347,8 +348,8 @@ def obstacle_barrier_rows(
 
     Parameters
     ----------
-    q : array_like, shape (..., n, 2)
-    obstacles : sequence of Circle or Polygon
+    q : array_like, shape (..., n, d)
+    obstacles : sequence of Circle, Polygon, Sphere or Box
     distance : float
         ``D_o`` (m).
     gamma : float
@@ -361,18 +362,15 @@ def obstacle_barrier_rows(
     q = np.asarray(q, dtype=float)
     nearest, rho, owner = [], [], []
     for o, ob in enumerate(obstacles):
-        if isinstance(ob, Circle):
-            nearest.append(np.broadcast_to(ob.center, q.shape)[..., None, :])
-            rho.append(np.array([ob.radius + distance]))
-            owner.append(np.array([o]))
-        else:
-            k = len(ob.vertices)
-            nearest.append(ob.nearest_on_edges(q))
-            rho.append(np.full(k, distance))
-            owner.append(np.full(k, o))
+        p, r = ob.pieces(q, distance)
+        nearest.append(p)
+        rho.append(r)
+        owner.append(np.full(len(r), o))
     if not nearest:
         empty = np.zeros((*q.shape[:-1], 0))
-        return ObstacleRows(np.zeros((*empty.shape, 2)), empty, empty, np.zeros(0, np.int64))
+        return ObstacleRows(
+            np.zeros((*empty.shape, q.shape[-1])), empty, empty, np.zeros(0, np.int64)
+        )
     p = np.concatenate(nearest, axis=-2)
     rho_all = np.concatenate(rho)
     w = q[..., None, :] - p

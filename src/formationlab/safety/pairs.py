@@ -23,7 +23,7 @@ DENSE_BELOW = 48
 
 
 def _dense_pairs(q: NDArray[np.float64], radius: float) -> NDArray[np.int64]:
-    """``(trial, i, j)`` with ``|q_i - q_j| <= radius``, ``i < j``, from ``(B, n, 2)``."""
+    """``(trial, i, j)`` with ``|q_i - q_j| <= radius``, ``i < j``, from ``(B, n, d)``."""
     n = q.shape[-2]
     iu, ju = np.triu_indices(n, k=1)
     diff = q[:, ju, :] - q[:, iu, :]
@@ -37,7 +37,7 @@ def sensed_pairs(q: NDArray[np.float64], radius: float) -> NDArray[np.int64]:
 
     Parameters
     ----------
-    q : ndarray, shape (..., n, 2)
+    q : ndarray, shape (..., n, d)
         Positions; the batch axes are flattened.
     radius : float
         Sensing radius ``R`` (``inf``: every pair).
@@ -50,7 +50,7 @@ def sensed_pairs(q: NDArray[np.float64], radius: float) -> NDArray[np.int64]:
     """
     q = np.asarray(q, dtype=float)
     n = q.shape[-2]
-    flat = q.reshape(-1, n, 2)
+    flat = q.reshape(-1, n, q.shape[-1])
     if n < 2:
         return np.zeros((0, 3), np.int64)
     if n < DENSE_BELOW or not math.isfinite(radius):

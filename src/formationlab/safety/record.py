@@ -16,17 +16,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .config import SafetyFilter
-from .obstacles import Circle, Obstacle
+from .obstacles import Obstacle
 from .result import FilterResult, FilterStatus
 
 __all__ = ["SafetyRecord", "describe_obstacle"]
 
 
 def describe_obstacle(ob: Obstacle) -> dict[str, Any]:
-    """JSON-ready scenario form of an obstacle: ``{"circle": {...}}`` or ``{"polygon": [...]}``."""
-    if isinstance(ob, Circle):
-        return {"circle": {"center": ob.center.tolist(), "radius": float(ob.radius)}}
-    return {"polygon": ob.vertices.tolist()}
+    """JSON-ready scenario form of an obstacle: ``{"circle": {...}}``, ``{"polygon": [...]}``,
+    ``{"sphere": {...}}`` or ``{"box": {...}}``."""
+    return ob.scenario()
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -37,7 +36,7 @@ class SafetyRecord:
     ----------
     filter : SafetyFilter or None
         The filter (None: no filter).
-    obstacles : tuple of Circle or Polygon
+    obstacles : tuple of Circle, Polygon, Sphere or Box
         The static obstacles.
     status : ndarray of int8, shape (T,)
         :class:`FilterStatus` at each saved state (0 everywhere without a filter).

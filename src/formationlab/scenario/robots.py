@@ -125,6 +125,13 @@ def build_marching(mar: Any, formation: Formation, fail: Fail) -> March | None:
     if mar is None:
         return None
     if mar.kind == "motion-parameters":
+        if formation.dim != 2:
+            raise fail(
+                "marching.kind",
+                "motion parameters are designed on the shape in the plane (a rotation about "
+                'its centroid); a formation in space marches with kind = "reference" (every '
+                "robot, or leader = [...])",
+            )
         if isinstance(mar.velocity[0], list):
             raise fail(
                 "marching.velocity",

@@ -60,20 +60,12 @@ def build_safety(
         The validated ``[safety]`` table.
     formation : Formation
         Its contact distances bound ``distance`` and ``obstacle_distance``.
-    q0 : ndarray, shape (n, 2)
-        The robots' starts, which must be clear of every obstacle.
+    q0 : ndarray, shape (n, d)
+        The robots' starts, which must be clear of every obstacle (circles and polygons in
+        the plane, spheres and boxes in space: another kind is refused with its line).
     """
     if not obstacles and safety is None:
         return (), None
-    if formation.dim != 2:  # as System._check_space says, with the table's line
-        table = "safety" if safety is not None else "obstacles"
-        line = line_of(text, table) or _obstacle_line(text, 0)
-        at = f" (line {line})" if line else ""
-        raise ScenarioError(
-            f"{source}: [{table}]{at}: a formation in space ({formation.dim}-D) runs without "
-            f"{table} so far (they are planar); remove the table",
-            key=table,
-        )
     try:
         check_extra()
     except MissingExtraError as exc:
@@ -90,7 +82,7 @@ def build_safety(
     for k, spec in enumerate(obstacles or ()):
         at = where(f"obstacles, item {k + 1}", _obstacle_line(text, k))
         try:
-            ob = obstacle_from_mapping(spec)
+            ob = obstacle_from_mapping(spec, dim=formation.dim)
         except UserInputError as exc:
             raise ScenarioError(f"{at}: {exc}", key="obstacles") from None
         s = clearances(q0, radii, [ob])[0][:, 0]
@@ -112,6 +104,7 @@ def build_safety(
     try:
         config = SafetyFilter(**values)
         config.check_diameters(formation.diameters)
+        config.check_space(formation.dim)
     except UserInputError as exc:
         key = f"safety.{exc.key or 'distance'}"
         raise ScenarioError(f"{where(key, line_of(text, key))}: {exc}", key=key) from None

@@ -310,14 +310,17 @@ class MarchingModel(BaseModel):
     @field_validator("velocity", mode="before")
     @classmethod
     def _velocity(cls, v: Any) -> list[float] | list[list[float]]:
+        # [vx, vy] in the plane, [vx, vy, vz] in space: Marching.check holds it to the formation
         if isinstance(v, list) and v and all(isinstance(row, list) for row in v):
-            if not all(len(row) == 2 for row in v):  # one row per leader: Marching counts
-                raise ValueError(f"each leader's velocity must be a pair [vx, vy], got {v!r}")
+            if not all(len(row) in (2, 3) for row in v):  # one row per leader: Marching counts
+                raise ValueError(
+                    f"each leader's velocity must be [vx, vy] (in space [vx, vy, vz]), got {v!r}"
+                )
             return [[_finite(x, "velocity") for x in row] for row in v]
-        if not isinstance(v, list) or len(v) != 2:
+        if not isinstance(v, list) or len(v) not in (2, 3):
             raise ValueError(
-                f"velocity must be a pair [vx, vy] in m/s (or, with several leaders, one "
-                f"pair per leader), got {v!r}"
+                f"velocity must be [vx, vy] in m/s (in space [vx, vy, vz]; or, with several "
+                f"leaders, one per leader), got {v!r}"
             )
         return [_finite(x, "velocity") for x in v]
 

@@ -180,13 +180,17 @@ def static_info(formation: Formation, name: str) -> dict[str, Any]:
 
 
 def obstacle_shapes(obstacles: Any) -> list[dict[str, Any]]:
-    """The obstacles as the page draws them: ``{"kind": "circle", "center", "radius"}`` or
-    ``{"kind": "polygon", "vertices"}``, obstacle 1 first."""
+    """The obstacles as the page draws them: ``{"kind": "circle", "center", "radius"}`` (in
+    space a sphere: a centre of three coordinates), ``{"kind": "box", "center", "size"}``
+    (space) or ``{"kind": "polygon", "vertices"}``, obstacle 1 first."""
     out: list[dict[str, Any]] = []
     for o in obstacles:
         if hasattr(o, "radius"):
             out.append({"kind": "circle", "center": [float(c) for c in o.center],
                         "radius": float(o.radius)})  # fmt: skip
+        elif hasattr(o, "size"):
+            out.append({"kind": "box", "center": [float(c) for c in o.center],
+                        "size": [float(s) for s in o.size]})  # fmt: skip
         else:
             out.append({"kind": "polygon", "vertices": np.asarray(o.vertices).tolist()})
     return out

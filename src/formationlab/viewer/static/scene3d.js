@@ -160,10 +160,14 @@ class FlvScene3D {
       this.group.add(lines);
       this.trail = { lines, ring: new Float32Array(n * FLV_TRAIL * 3), count: 0, head: 0, t: -1 };
     }
-    // obstacles: spheres (circles with a centre in space)
+    // obstacles: spheres (circles with a centre in space) and axis-aligned boxes
     for (const o of info.obstacles || []) {
-      if (o.kind !== "circle" || o.center.length !== 3) continue;
-      const s = new THREE.Mesh(new THREE.SphereGeometry(o.radius, 24, 16),
+      if (o.center.length !== 3) continue;
+      let geometry = null;
+      if (o.kind === "circle") geometry = new THREE.SphereGeometry(o.radius, 24, 16);
+      else if (o.kind === "box") geometry = new THREE.BoxGeometry(...o.size);
+      else continue;
+      const s = new THREE.Mesh(geometry,
         new THREE.MeshLambertMaterial({ color: 0x5a6069, transparent: true, opacity: 0.35 }));
       s.position.set(...o.center);
       this.group.add(s);
