@@ -263,6 +263,13 @@ class SimulationResult:
             motion=self.motion(tolerances),
         )
 
+    @property
+    def below_safety_distance(self) -> bool:
+        """Whether two robots came closer than the safety filter's ``D_s`` at some step
+        (:attr:`formationlab.safety.SafetyRecord.below_safety_distance`): the filter's
+        promise broken, whatever the status and outcome say; False without a filter."""
+        return self.safety is not None and self.safety.below_safety_distance
+
     def converged_time(self, tolerances: Tolerances | None = None) -> float | None:
         """First saved time after which the robots stay stopped (instantaneous or net speed)."""
         tol = tolerances or Tolerances()
@@ -292,7 +299,8 @@ class SimulationResult:
         the reference); with marching ``final_speed``, ``converged_time`` and
         ``net_speed`` are measured relative to the centroid.
         With obstacles or a filter also ``safety``
-        (:meth:`formationlab.safety.SafetyRecord.summary`).
+        (:meth:`formationlab.safety.SafetyRecord.summary`), and always
+        ``below_safety_distance`` (:attr:`below_safety_distance`).
 
         **Many robots.** The lists stay readable: per-edge values (``distance_errors``,
         the sensing's ``own_distances``) only up to :data:`LIST_LIMIT` edges, per-robot
@@ -334,6 +342,7 @@ class SimulationResult:
             extra["final_points"] = p_final.tolist()
         if self.marching is not None and len(self.t) > 2:
             extra["marching"] = self._marching_summary()
+        extra["below_safety_distance"] = self.below_safety_distance
         if self.safety is not None:
             extra["safety"] = self.safety.summary()
         if self.sensing is not None:
@@ -650,7 +659,7 @@ def _result(
             raw.q, filter=system.safety if system.filtered else None,
             obstacles=system.obstacles,
             result=system.filter_result(raw.x) if system.filtered else None,
-            obstacle_clearance=least,
+            obstacle_clearance=least, least_distance=raw.min_pair_distance,
         )  # fmt: skip
     status, message = raw.status, raw.message
     try:
