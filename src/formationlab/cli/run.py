@@ -327,16 +327,10 @@ def _write_summary(
 def _below_warning(sc: Any, summary: dict[str, Any]) -> str:
     """The warning of a run whose robots came closer than the filter's ``D_s``."""
     f = summary["safety"]
-    advice = (
-        'condition = "discrete" (the default) keeps them apart at every Euler step, or use a '
-        "smaller dt or gamma"
-        if f["filter"]["condition"] == "continuous"
-        else "check that the robots start at least D_s apart and that the model follows the command"
-    )
     return (
         f"{sc.name}: two robots came {f['min_pair_distance']:.4g} m apart, closer than the "
         f"safety filter's distance D_s = {f['filter']['distance']:g} (summary.json's "
-        f"below_safety_distance); {advice}"
+        f"below_safety_distance); {sc.safety.below_advice}"
     )
 
 

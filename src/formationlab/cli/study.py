@@ -323,20 +323,13 @@ def _write_outputs(
         warn(
             f"{below} of {len(result.trials)} trials had two robots closer than the safety "
             f"filter's distance D_s = {sc.safety.distance:g} (trials.parquet's "
-            f"below_safety_distance; {_below_advice(sc.safety)})"
+            f"below_safety_distance; {sc.safety.below_advice})"
         )
     if not quiet:
         _print_table(summary)
         err_console.print(
             f"wrote trials.parquet, summary.json and figures to {out}", highlight=False
         )
-
-
-def _below_advice(safety: Any) -> str:
-    """What keeps a filter's pairs ``D_s`` apart at every step (docs/safety.md)."""
-    if safety.condition == "continuous":
-        return 'condition = "discrete" keeps them apart at every Euler step, or use a smaller dt'
-    return "check that the robots start at least D_s apart and that the model follows the command"
 
 
 def _cells(g: dict[str, Any], outs: list[str], sep: str = " ") -> list[str]:

@@ -205,6 +205,19 @@ class SafetyFilter:
             return least < self.distance * (1.0 - BELOW_TOLERANCE)
 
     @property
+    def below_advice(self) -> str:
+        """What keeps the pairs ``D_s`` apart at every step, for a run or study that came
+        below it (:meth:`below`)."""
+        if self.condition == "continuous":
+            return (
+                'condition = "discrete" (the default) keeps them apart at every Euler step, '
+                "or use a smaller dt or gamma"
+            )
+        return (
+            "check that the robots start at least D_s apart and that the model follows the command"
+        )
+
+    @property
     def enabled(self) -> bool:
         """Whether the filter changes anything (``filter != "none"``)."""
         return self.filter != "none"
