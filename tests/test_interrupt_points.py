@@ -186,3 +186,34 @@ def test_resume_of_a_search_that_kept_nothing_here_is_refused(tmp_path: Path, sc
     done = CliRunner().invoke(app, args)
     assert done.exit_code == 2
     assert "holds no settled starts; run without --resume" in " ".join(done.output.split())
+
+
+RUN_POINTS = ["writing trajectory.nc (", "drawing the figures ..."]
+
+
+@pytest.mark.parametrize(("point", "sig"), [(DRAW.choice(RUN_POINTS), DRAW.choice(SIGNALS))])
+def test_a_run_interrupted_while_saving_or_drawing_keeps_its_results_whole(
+    tmp_path: Path, point: str, sig: int
+):
+    import xarray as xr
+
+    scenario = tmp_path / "s.toml"
+    # 340,001 saved states of 3 robots: above the size at which `run` says what it writes
+    scenario.write_text(triangle("big", "340.0"))
+    out = tmp_path / "out"
+    err = _interrupted(["run", str(scenario), "--out", str(out)], point, sig)
+    said = [s for s in err.splitlines() if s.startswith("interrupted")]
+    if point.startswith("writing"):  # the results are written whole first, then it stops
+        assert said == [
+            f"interrupted while writing the results; they were written whole first: {out} "
+            "holds scenario.toml, trajectory.nc, summary.json (no figures)"
+        ]
+    else:
+        assert said == [f"interrupted while drawing the figures; the run's results are in {out}"]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "success" and summary["final_time"] == 340.0
+    with xr.open_dataset(out / "trajectory.nc", engine="h5netcdf") as ds:
+        assert ds.sizes["time"] == 340_001
+    names = {p.name for p in out.iterdir()} - {".formationlab.lock"}
+    assert names == set(summary["manifest"])  # every file listed, none half-written
+    _no_temporary_files(out)
