@@ -138,3 +138,33 @@ def test_study_flags_and_counts_trials_below_the_safety_distance(tmp_path: Path,
     assert group["below_safety_distance"] == int(df["below_safety_distance"].sum())
     said = f"{group['below_safety_distance']} of 20 trials had two robots closer than"
     assert (said in res.output) == (group["below_safety_distance"] > 0)
+
+
+def test_a_single_run_measures_clearances_and_the_filters_pairs_at_every_step_alike():
+    """The compiled single run and the numpy driver: the same least robot-robot and
+    robot-obstacle clearances and least distance of the filter's pairs, over every step
+    (the triangle among a disc and a triangle, decentralized filter; save_every = 50 saves
+    only a few states, and the least over them is larger)."""
+    import dataclasses
+    import warnings
+
+    from formationlab.io.scenario import load_scenario
+    from formationlab.scenario.loop import run_scenario
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # (the example's start note)
+        example = Path(__file__).resolve().parents[1] / "examples" / "triangle-obstacle.toml"
+        sc = dataclasses.replace(load_scenario(example), duration=2.0)
+    a = run_scenario(sc, backend="numba", save_every=50)
+    b = run_scenario(sc, backend="numpy", save_every=50)
+    for name in ("min_robot_clearance", "min_obstacle_clearance"):
+        assert getattr(a, name) == pytest.approx(getattr(b, name), abs=1e-9)
+    assert a.safety.least_distance == pytest.approx(b.safety.least_distance, abs=1e-9)
+    # the robots' centres: the least distance is the robot clearance plus a_ij = 0.2
+    assert a.safety.least_distance == pytest.approx(a.min_robot_clearance + 0.2, abs=1e-12)
+    assert 0 < a.min_obstacle_clearance < 1 and not a.below_safety_distance
+    saved = SafetyFilter(filter="barrier-decentralized").least_distance(a.q).min()
+    assert a.safety.least_distance <= saved
+    summary = a.summary()
+    assert summary["min_robot_clearance"] == a.min_robot_clearance
+    assert summary["min_obstacle_clearance"] == a.min_obstacle_clearance

@@ -77,11 +77,12 @@ class CompiledRun:
     distance of two points the safety filter keeps apart (NaN without a filter)."""
 
     def __init__(self, k, x, v, status, steps, min_clearance, wall, threads=1,
-                 min_pair_distance=math.nan):  # fmt: skip
+                 min_pair_distance=math.nan, min_obstacle_clearance=math.inf):  # fmt: skip
         self.k, self.x, self.v = k, x, v
         self.status, self.steps, self.min_clearance, self.wall = status, steps, min_clearance, wall
         self.threads = threads
         self.min_pair_distance = min_pair_distance
+        self.min_obstacle_clearance = min_obstacle_clearance
 
 
 def run_compiled(
@@ -160,8 +161,9 @@ def run_compiled(
     wall = time.perf_counter() - start
     k, x, v = run.saved()
     return CompiledRun(
-        k, x, v, status, k0, run.min_clearance, wall, threads if use else 1, run.min_pair_distance
-    )
+        k, x, v, status, k0, run.min_clearance, wall, threads if use else 1,
+        run.min_pair_distance, float(run.st.mo[0, 0]),
+    )  # fmt: skip
 
 
 class SingleRun:
@@ -427,5 +429,6 @@ def raw_solution(
     }
     return RawSolution(
         t=t, x=out.x, v=out.v, status=out.status, message=message, stats=stats,
-        min_pair_distance=out.min_pair_distance,
+        min_pair_distance=out.min_pair_distance, min_robot_clearance=float(out.min_clearance),
+        min_obstacle_clearance=float(out.min_obstacle_clearance),
     )  # fmt: skip
