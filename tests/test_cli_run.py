@@ -233,7 +233,7 @@ BAD = {
         "not connected",
     ),
     "dt not positive": (("dt = 1e-3", "dt = 0.0"), "dt must be a finite number > 0"),
-    "duration not positive": (("duration = 0.5", "duration = -1.0"), "greater than 0"),
+    "duration not positive": (("duration = 0.5", "duration = -1.0"), "must be > 0, got -1.0"),
 }
 
 

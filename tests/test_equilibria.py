@@ -389,3 +389,31 @@ def test_a_bad_equilibria_table_is_reported_at_its_own_key_and_line(tmp_path, ca
     assert exc.value.code == 2
     err = " ".join(capsys.readouterr().err.split())
     assert f"{key} (line {line})" in err, err
+
+
+@pytest.mark.parametrize(
+    ("value", "said"),
+    [
+        ("-3", "must be >= 0, got -3"),
+        ('"x"', "expected a whole number, got 'x'"),
+        ("2.5", "expected a whole number, got 2.5"),
+        ("5000000", "must be <= 1e+06, got 5000000"),
+    ],
+)
+def test_bad_starts_are_refused_in_the_packages_words_at_key_and_line(tmp_path, capsys, value,
+                                                                       said):  # fmt: skip
+    """``[equilibria] starts`` out of range or of the wrong type: one line naming the key, its
+    line, what it must be and what was given (not pydantic's "Input should be ...")."""
+    from formationlab.cli import main
+
+    table = f"\n[equilibria]\nstarts = {value}\n"
+    text = (EXAMPLES / "paper-simulation-1.toml").read_text() + table
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    line = len(text.splitlines())
+    with pytest.raises(SystemExit) as exc:
+        main(["validate", str(path)])
+    assert exc.value.code == 2
+    err = " ".join(capsys.readouterr().err.split())
+    assert f"equilibria.starts (line {line}): {said}" in err, err
+    assert "Input should" not in err and "input should" not in err

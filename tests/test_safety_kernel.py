@@ -36,7 +36,16 @@ def _same(a, b):
     np.testing.assert_allclose(a.q_final, b.q_final, rtol=0, atol=1e-9)
     np.testing.assert_allclose(a.u_final, b.u_final, rtol=0, atol=1e-9)
     np.testing.assert_allclose(a.min_clearance, b.min_clearance, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(a.net_speed, b.net_speed, rtol=0, atol=1e-9)
+    # its two parts, and the least distance of the filter's pairs with its verdict
+    np.testing.assert_allclose(a.min_robot_clearance, b.min_robot_clearance, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(
+        a.min_obstacle_clearance, b.min_obstacle_clearance, rtol=0, atol=1e-9
+    )
+    np.testing.assert_allclose(a.min_pair_distance, b.min_pair_distance, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(a.below_safety_distance, b.below_safety_distance)
+    np.testing.assert_array_equal(
+        a.min_clearance, np.minimum(a.min_robot_clearance, a.min_obstacle_clearance)
+    )
 
 
 def _both(formation, law, q0, **kw):

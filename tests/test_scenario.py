@@ -263,7 +263,7 @@ BAD = {
     ),
     "dt zero": (("dt = 1e-3", "dt = 0.0"), ["simulation.dt", "> 0"]),
     "dt negative": (("dt = 1e-3", "dt = -1e-3"), ["simulation.dt", "> 0"]),
-    "duration zero": (("duration = 1.0", "duration = 0.0"), ["duration", "greater than 0"]),
+    "duration zero": (("duration = 1.0", "duration = 0.0"), ["duration", "must be > 0, got 0.0"]),
     "duration missing": (("duration = 1.0", ""), ["simulation.duration", "required"]),
     "gain not positive": (("k_c = 2.0", "k_c = -1.0"), ["controller.k_c", "> 0"]),
     "repulsion bad key": (

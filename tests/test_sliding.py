@@ -52,10 +52,19 @@ class Relay:
     def clearance(self, q):
         return np.full(np.shape(q)[:-2], np.inf)
 
+    def clearances(self, q):
+        """Robot-robot and robot-obstacle clearances: none to have (infinite)."""
+        return self.clearance(q), self.clearance(q)
+
     def step_verdict(self, q, q_new):
         """Every step is acceptable (no robots to collide); the clearance is infinite."""
         shape = np.shape(q)[:-2]
         return np.zeros(shape, np.int8), np.full(shape, np.inf)
+
+    def judge(self, q, q_new):
+        """:meth:`step_verdict` with the clearance in its two parts (both infinite)."""
+        verdict, clear = self.step_verdict(q, q_new)
+        return verdict, clear, clear
 
 
 def relay_hitting_time(x0: float, a: float) -> float:

@@ -401,14 +401,24 @@ class System:
     def clearance(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Least ``r_ij - a_ij`` over all pairs, and robot-obstacle clearance; shape ``(...)``.
 
+        The lesser of :meth:`clearances`' two.
+        """
+        robots, obstacles = self.clearances(x)
+        return np.minimum(robots, obstacles)
+
+    def clearances(self, x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Least robot-robot clearance ``r_ij - a_ij`` and least robot-obstacle clearance
+        (``inf`` without obstacles) of the states ``x`` ``(..., n, k)``; each ``(...)``.
+
         For large formations the pairs a k-d tree finds close; when none is, a floor
         (every clearance is at least that).
         """
         iu, ju, a, floor = self._pairs(x)
-        least = np.min(self._clearances(x, iu, ju, a), axis=-1, initial=floor)
+        robots = np.min(self._clearances(x, iu, ju, a), axis=-1, initial=floor)
+        obstacles = np.full(np.shape(robots), np.inf)
         if self.obstacles:
-            least = np.minimum(least, np.min(self.obstacle_clearances(x), axis=(-2, -1)))
-        return least
+            obstacles = np.min(self.obstacle_clearances(x), axis=(-2, -1))
+        return robots, obstacles
 
     def pair_swept_clearances(
         self, x0: NDArray[np.float64], x1: NDArray[np.float64]
@@ -447,20 +457,29 @@ class System:
         Returns the verdict, 0 for an acceptable step and otherwise the rejecting
         ``Status.code`` (module docstring), and the least clearance at ``x1``; both ``(...)``.
         """
+        verdict, robots, obstacles = self.judge(x0, x1)
+        return verdict, np.minimum(robots, obstacles)
+
+    def judge(
+        self, x0: NDArray[np.float64], x1: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int8], NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`step_verdict` with the least clearance at ``x1`` in its two parts
+        (:meth:`clearances`: robot-robot, robot-obstacle); each ``(...)``."""
         with np.errstate(invalid="ignore", over="ignore"):
             q1 = self.positions(x1)
             finite = np.all(np.isfinite(x1), axis=(-2, -1)) & np.all(
                 np.isfinite(q1 * q1), axis=(-2, -1)
             )  # (squares that overflow: module docstring)
             safe = np.where(finite[..., None, None], x1, x0)
-            end = self.clearance(safe)
+            robots, obstacles = self.clearances(safe)
+            end = np.minimum(robots, obstacles)
             swept = self.swept_clearance(x0, safe)
         verdict = np.select(
             [~finite, ~(end > 0), ~(swept > 0)],
             [Status.NON_FINITE.code, Status.COLLISION.code, Status.STEP_TOO_LARGE.code],
             default=0,
         ).astype(np.int8)
-        return verdict, end
+        return verdict, robots, obstacles
 
     def closest_pair(self, x: NDArray[np.float64]) -> tuple[int, int, float]:
         """The 1-based robots ``i < j`` of least clearance in one state ``(n, k)``, and ``a_ij``."""

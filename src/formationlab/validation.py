@@ -356,11 +356,20 @@ _EXPECTED = {
 }
 
 
+#: pydantic's range errors: the bound's name in the error's context and its sign
+_BOUNDS = {
+    "greater_than_equal": ("ge", ">="),
+    "greater_than": ("gt", ">"),
+    "less_than_equal": ("le", "<="),
+    "less_than": ("lt", "<"),
+}
+
+
 def field_words(cls: type[BaseModel], err: Any) -> str:
     """What a pydantic error ``err`` of a field of the model ``cls`` says, in the words of
     :func:`number` and :func:`whole` ("must be a whole number >= 2"): for the inline tables
     of scenario files, whose ranges are the models' field constraints. (The keys of the
-    tables themselves keep pydantic's words, :func:`validation_error`.)"""
+    tables themselves get the same words from :func:`validation_error`.)"""
     ctx = err.get("ctx") or {}
     name = str(err["loc"][0]) if err["loc"] else ""
     field = cls.model_fields.get(name)
@@ -437,6 +446,9 @@ def validation_error(
                 where = f"{where}.{sub}" if where else sub
         elif kind in _EXPECTED:
             msg = f"{_EXPECTED[kind]}, got {given!r}"
+        elif kind in _BOUNDS:  # a range: in the words of `number` and `whole`
+            bound, word = _BOUNDS[kind]
+            msg = f"must be {word} {err['ctx'][bound]:g}, got {given!r}"
         else:
             msg = f"{err['msg'][0].lower()}{err['msg'][1:]}, got {given!r}"
         line = line_of(text, where)

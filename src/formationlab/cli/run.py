@@ -211,6 +211,8 @@ def _run(
     if removed:
         _note(f"removed {', '.join(removed)} of the earlier run in {folder}", quiet)
     _say(f"{sc.name}: {_verdict(summary)}; wrote {folder}/", quiet)
+    if summary.get("below_safety_distance"):
+        warn(_below_warning(sc, summary))
     if interrupted:
         fail(f"{result.message}; the results up to then are in {folder}", INTERRUPTED)
     if result.status != "success":
@@ -322,6 +324,16 @@ def _write_summary(
     return manifest
 
 
+def _below_warning(sc: Any, summary: dict[str, Any]) -> str:
+    """The warning of a run whose robots came closer than the filter's ``D_s``."""
+    f = summary["safety"]
+    return (
+        f"{sc.name}: two robots came {f['min_pair_distance']:.4g} m apart, closer than the "
+        f"safety filter's distance D_s = {f['filter']['distance']:g} (summary.json's "
+        f"below_safety_distance); {sc.safety.below_advice}"
+    )
+
+
 def _verdict(s: dict[str, Any]) -> str:
     """The one-line verdict of a run's summary: the outcome, whether and when the robots
     stopped, and how long the run lasted.
@@ -343,6 +355,12 @@ def _verdict(s: dict[str, Any]) -> str:
     if "max_bearing_error" in s:  # a formation judged by its bearings
         line = f"outcome {s['outcome']}{moving}, max |g_ij - g*_ij| = {s['max_bearing_error']:.3g}"
     lasted = f"; ran to t = {s['final_time']:.4g} s"
+    if s.get("below_safety_distance"):  # the filter's promise broken: said, never silent
+        f = s["safety"]
+        lasted += (
+            f"; below the safety distance: two robots came {f['min_pair_distance']:.3g} m apart, "
+            f"closer than D_s = {f['filter']['distance']:g}"
+        )
     if s["converged_time"] is not None:
         return line + f", converged at t = {s['converged_time']:.3g} s" + lasted
     speed = min(v for v in (s["final_speed"], s["net_speed"]) if v is not None)

@@ -5,14 +5,14 @@ from __future__ import annotations
 import shlex
 import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, NoReturn
 
 import typer
 
 from ..errors import ParameterError
 from ._app import FigureFormatOption, command, err_console, fail, warn
 from ._plan import check_study, plan_study
-from ._progress import progress_bar
+from ._progress import progress_bar, shows_progress
 
 #: files of an earlier study that ``study --force`` removes
 STUDY_PATTERNS = ("trials.parquet", "summary.json", "scenario.toml", "*.png", "*.pdf", "*.svg")
@@ -154,7 +154,10 @@ def study(
 
         claim_folder(out)  # (one writer at a time, as prepare_output_dir claims a new study's)
         kept = store.check_resumable()
-        say(f"resuming: {kept} finished chunks kept in {store.folder}")
+        try:
+            say(f"resuming: {kept} finished chunks kept in {store.folder}")
+        except KeyboardInterrupt:
+            _kept(store)
     else:
         from ..io import prepare_output_dir
 
@@ -162,15 +165,18 @@ def study(
         if force:
             _clear_earlier_study(out, store)
         store.start()
-    if sc.integrator.name != "euler":
+    try:
+        if sc.integrator.name != "euler":
+            say(
+                f"note: studies use the batched explicit Euler kernel (dt = {setup.dt:g}), not "
+                f"the scenario's {sc.integrator.name!r}"
+            )
         say(
-            f"note: studies use the batched explicit Euler kernel (dt = {setup.dt:g}), not the "
-            f"scenario's {sc.integrator.name!r}"
+            f"{len(setup.groups)} groups x {config.trials} trials, dt = {setup.dt:g}, "
+            f"duration = {setup.duration:g}, seed = {seed}"
         )
-    say(
-        f"{len(setup.groups)} groups x {config.trials} trials, dt = {setup.dt:g}, "
-        f"duration = {setup.duration:g}, seed = {seed}"
-    )
+    except KeyboardInterrupt:
+        _kept(store)
     result = _run_with_progress(
         run_study,
         setup,
@@ -239,13 +245,45 @@ def _with_filter(sc: Any, name: str) -> Any:
 def _run_with_progress(run: Any, *args: Any, store: Any, quiet: bool = False, **kwargs: Any) -> Any:
     try:
         with progress_bar("trials", quiet=quiet) as update:
-            return run(*args, store=store, progress=update, **kwargs)
+            shown = shows_progress(quiet)
+            return run(*args, store=store, progress=update if shown else _log(quiet), **kwargs)
     except KeyboardInterrupt:
-        fail(
-            f"interrupted; {store.finished()} finished chunks are kept in {store.folder}: "
-            "run the same command with --resume to finish",
-            code=130,
-        )
+        _kept(store)
+
+
+def _kept(store: Any) -> NoReturn:
+    """End an interrupted study, saying which chunks are kept for ``--resume``."""
+    fail(
+        f"interrupted; {store.finished()} finished chunks are kept in {store.folder}: "
+        "run the same command with --resume to finish",
+        code=130,
+    )
+
+
+def _log(quiet: bool) -> Any:
+    """Progress for a log (standard error not a terminal: no bar): a line when the trials
+    start (or resume) and one when the first chunk has finished, which say that Ctrl-C keeps
+    the finished chunks; nothing with ``quiet``."""
+    said: list[int] = []
+
+    def note(done: int, total: int) -> None:
+        if quiet or len(said) > 1:
+            return
+        if not said:
+            start = "resuming: " if done else ""
+            err_console.print(
+                f"trials: {start}{done:,} of {total:,} done; Ctrl-C keeps the finished chunks "
+                "for --resume",
+                highlight=False,
+            )
+        elif done > said[0]:
+            err_console.print(f"trials: first chunk finished ({done:,} of {total:,})",
+                              highlight=False)  # fmt: skip
+        else:
+            return
+        said.append(done)
+
+    return note
 
 
 def _write_outputs(
@@ -280,6 +318,13 @@ def _write_outputs(
         MANIFEST: ["trials.parquet", "scenario.toml", *figures, "summary.json", "chunks"],
     }
     atomic_write_json(out / "summary.json", summary)
+    below = sum(int(g.get("below_safety_distance", 0)) for g in summary.get("groups", []))
+    if below and sc.safety is not None:
+        warn(
+            f"{below} of {len(result.trials)} trials had two robots closer than the safety "
+            f"filter's distance D_s = {sc.safety.distance:g} (trials.parquet's "
+            f"below_safety_distance; {sc.safety.below_advice})"
+        )
     if not quiet:
         _print_table(summary)
         err_console.print(

@@ -110,7 +110,9 @@ class ChunkState(NamedTuple):
     hcl: NDArray[np.float64]  #: what rounding left out of them (models.stage.turn)
     hsl: NDArray[np.float64]
     ids: NDArray[np.int64]  #: (G, C) the trial in each slot
-    mc: NDArray[np.float64]  #: (G, C) least clearance over accepted states
+    mc: NDArray[np.float64]  #: (G, C) least robot-robot clearance over accepted states
+    mo: NDArray[np.float64]  #: (G, C) least robot-obstacle clearance over accepted states
+    md: NDArray[np.float64]  #: (G, C) least squared distance of two filtered points (inf)
     ns: NDArray[np.float64]  #: (G, C) net speed over the last check interval
     meta: NDArray[np.int64]  #: (G, 6)
     need: NDArray[np.bool_]  #: (G, C) the slot's trial waits for a QP solve
@@ -127,7 +129,11 @@ class TrialOutputs(NamedTuple):
     v: NDArray[np.float64]  #: (B, n, k) their rates
     steps: NDArray[np.int64]  #: (B,) accepted steps
     status: NDArray[np.int8]  #: (B,) Status.code
-    mc: NDArray[np.float64]  #: (B,) least clearance over accepted states
+    mc: NDArray[np.float64]  #: (B,) least robot-robot clearance over accepted states
+    mo: NDArray[np.float64]  #: (B,) least robot-obstacle clearance over accepted states
+    #: (B,) least squared distance of two points the safety filter keeps apart (pairs
+    #: within its sensing radius) over accepted states; inf without a filter
+    md: NDArray[np.float64]
     ns: NDArray[np.float64]  #: (B,) net speed over the last check interval
     qw: NDArray[np.float64]  #: (B, n, 2) positions at the start of the drift window
 
@@ -163,6 +169,8 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
     saves = sv.every > 0  # the run keeps its path (else how each trial ended)
     ids = st.ids[c]
     mc = st.mc[c]
+    mo = st.mo[c]
+    md = st.md[c]
     ns = st.ns[c]
     qc = st.qc[c]
     hc, hs, hcl, hsl = st.hc[c], st.hs[c], st.hcl[c], st.hsl[c]
@@ -226,6 +234,7 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
             for b in range(nact):
                 given_u = st.given_u[c, b] if flt.kind == CENTRALIZED else st.given_u[0, 0]
                 answer = filter_command(src, u, b, radius, obs, flt, st.given[c, b], given_u, S)
+                md[b] = min(md[b], S.least[0])  # (x is accepted: the filter's pairs at it)
                 if answer == WAIT:  # the host solves this trial's QP
                     st.need[c, b] = True
                     for i in range(n):
@@ -310,18 +319,19 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
                 if code[b] >= 0:
                     continue
                 ended += 1
+                end = np.inf  # the least robot-obstacle clearance at xn
                 if fin[b] == 0.0 and obs is not None:  # the obstacles' clearances join in
                     if obs.radius.shape[0] > 0:
                         reach = SWEPT_MARGIN * disp[b]
-                        floor = min(mc[b], gap[b])
-                        end, sw = obstacle_contact(obs, radius, x, xn, b, reach, floor)
-                        gap[b] = min(gap[b], end)
+                        end, sw = obstacle_contact(obs, radius, x, xn, b, reach, mo[b])
                         swept[b] = min(swept[b], sw)
-                said = verdict(fin[b], gap[b], swept[b])  # (the step's verdict, in one place)
+                # (the step's verdict, in one place)
+                said = verdict(fin[b], min(gap[b], end), swept[b])
                 if said != 0:
                     code[b] = said
                 else:
                     ended -= 1
+                    mo[b] = min(mo[b], end)
                     if bad == 0:  # (else the vectorised loop above took it)
                         mc[b] = min(mc[b], gap[b])
             if turns:  # the headings of the next states
@@ -346,6 +356,8 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
                 out.steps[g] = k
                 out.status[g] = code[b]
                 out.mc[g] = mc[b]
+                out.mo[g] = mo[b]
+                out.md[g] = md[b]
                 out.ns[g] = ns[b]
         x, xn = xn, x  # the live trials' next states are current now
         st.meta[c, 3] = 1 - st.meta[c, 3]
@@ -369,6 +381,8 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
                         rr[e, b] = rr[e, last]
                 ids[b] = ids[last]
                 mc[b] = mc[last]
+                mo[b] = mo[last]
+                md[b] = md[last]
                 ns[b] = ns[last]
                 code[b] = code[last]
             nact -= 1

@@ -57,10 +57,15 @@ class TrialRun(NamedTuple):
     v: NDArray[np.float64]  #: (B, n, k) their rates
     status: NDArray[np.int8]  #: (B,) Status.code
     steps: NDArray[np.int64]  #: (B,) accepted steps
-    min_clearance: NDArray[np.float64]  #: (B,) least clearance over accepted states
+    min_clearance: NDArray[np.float64]  #: (B,) least robot-robot clearance over accepted states
     net_speed: NDArray[np.float64]  #: (B,) net speed over the last check interval
     q_window: NDArray[np.float64]  #: (B, n, 2) positions at the start of the drift window
     window_step: int  #: that step (negative: never reached)
+    #: (B,) least robot-obstacle clearance over accepted states (inf without obstacles)
+    min_obstacle_clearance: NDArray[np.float64]
+    #: (B,) least distance of two points the filter keeps apart (NaN without a filter:
+    #: :meth:`formationlab.safety.SafetyFilter.least_distance`) over accepted states
+    min_pair_distance: NDArray[np.float64]
 
 
 def run_trials(
@@ -98,15 +103,15 @@ def run_trials(
     stage = safety_stage(law, obstacles, safety)
     B, n, k = q0.shape
     window_step = n_steps - tol.drift_steps(dt)  # negative: never reached
-    # (mc starts as the least clearance of the starts, as the driver starts it)
+    # (mc and mo start as the least clearances of the starts, as the driver starts them)
     out = trial_outputs(B, n, k)
-    out.mc[:] = system.clearance(q0)
+    out.mc[:], out.mo[:] = system.clearances(q0)
     numbers = RunNumbers(float(dt), int(n_steps), int(check_every), float(tol.speed),
                          int(window_step), int(n_steps) + 1)  # fmt: skip
     sensed = (sensing is not None and not sensing.ideal) or (faults is not None and faults.any)
     if not sensed:
         _run_group(q0, out, chunk, terms, robots, stage, None, numbers, safety, obstacles)
-        return TrialRun(out.x, out.v, out.status, out.steps, out.mc, out.ns, out.qw, window_step)
+        return _trial_run(out, window_step, system)
     channel, stop_at, headed = sensing_channel(system, seeds, B, dt)
     group = int(min(B, max(64, GROUP_BYTES // trial_bytes(channel))))
     for g0 in range(0, B, group):
@@ -114,7 +119,15 @@ def run_trials(
         sense = (channel, ids, *sensing_arrays(channel, ids, stop_at, headed))
         part = TrialOutputs(*(a[g0 : g0 + ids.size] for a in out))  # views
         _run_group(q0[ids], part, chunk, terms, robots, stage, sense, numbers, safety, obstacles)
-    return TrialRun(out.x, out.v, out.status, out.steps, out.mc, out.ns, out.qw, window_step)
+    return _trial_run(out, window_step, system)
+
+
+def _trial_run(out: TrialOutputs, window_step: int, system: System) -> TrialRun:
+    """The :class:`TrialRun` of the loop's outputs ``out`` (distances, not their squares)."""
+    least = np.sqrt(out.md) if system.filtered else np.full(out.md.shape, np.nan)
+    return TrialRun(
+        out.x, out.v, out.status, out.steps, out.mc, out.ns, out.qw, window_step, out.mo, least
+    )
 
 
 def sensing_channel(
@@ -176,7 +189,7 @@ def _run_group(
     still = march_terms(None)  # (a batch does not march)
     kept = no_saving()  # (how each trial ended)
     st = chunk_state(
-        x, B=B, mc=out.mc, turns=robots.kind in (HEADING, NEAR_IDENTITY),
+        x, B=B, mc=out.mc, mo=out.mo, turns=robots.kind in (HEADING, NEAR_IDENTITY),
         centralized=flt is not None and flt.kind == CENTRALIZED,
     )  # fmt: skip
     sn = ss = None
@@ -217,22 +230,27 @@ def _run_group(
 
 def chunk_state(
     x: NDArray[np.float64], *, B: int | None = None, mc: NDArray[np.float64] | None = None,
-    turns: bool = False, centralized: bool = False, stop_rule: bool = True,
+    mo: NDArray[np.float64] | None = None, turns: bool = False, centralized: bool = False,
+    stop_rule: bool = True,
 ) -> ChunkState:  # fmt: skip
     """The chunks' state at the start, from the starts ``x`` ``(G, n, k, C)``: the ``B``
-    trials (default all) in order, chunk by chunk; ``mc`` ``(B,)`` their clearances (default
-    +inf); ``turns``: room for headings; ``centralized``: room for QP pauses;
-    ``stop_rule``: room for the positions at the stop rule's checks."""
+    trials (default all) in order, chunk by chunk; ``mc`` and ``mo`` ``(B,)`` their
+    robot-robot and robot-obstacle clearances (default +inf); ``turns``: room for headings;
+    ``centralized``: room for QP pauses; ``stop_rule``: room for the positions at the stop
+    rule's checks."""
     G, n, _, C = x.shape
     B = G * C if B is None else B
     ids = np.zeros((G, C), np.int64)
     least = np.full((G, C), np.inf)
+    least_o = np.full((G, C), np.inf)
     meta = np.zeros((G, 6), np.int64)
     for g in range(G):
         sel = np.arange(g * C, min(B, (g + 1) * C))
         ids[g, : sel.size] = sel
         if mc is not None:
             least[g, : sel.size] = mc[sel]
+        if mo is not None:
+            least_o[g, : sel.size] = mo[sel]
         meta[g] = (sel.size, 0, -1, 0, RUNNING, 0)
     hshape = (G, n, C) if turns else (G, 1, 1)
     qp = (G, C, n, 2) if centralized else (1, 1, n, 2)
@@ -240,7 +258,8 @@ def chunk_state(
     return ChunkState(
         x=x, xn=np.zeros_like(x), qc=qc,
         hc=np.zeros(hshape), hs=np.zeros(hshape), hcl=np.zeros(hshape), hsl=np.zeros(hshape),
-        ids=ids, mc=least, ns=np.full((G, C), np.nan), meta=meta, need=np.zeros((G, C), bool),
+        ids=ids, mc=least, mo=least_o, md=np.full((G, C), np.inf), ns=np.full((G, C), np.nan),
+        meta=meta, need=np.zeros((G, C), bool),
         need_p=np.zeros(qp), need_u=np.zeros(qp), given=np.zeros((G, C), bool),
         given_u=np.zeros(qp),
     )  # fmt: skip
@@ -252,6 +271,7 @@ def trial_outputs(B: int, n: int, k: int, *, kept: bool = True) -> TrialOutputs:
     m = n if kept else 1
     return TrialOutputs(
         x=np.empty((B, m, k)), v=np.full((B, m, k), np.nan), steps=np.zeros(B, np.int64),
-        status=np.zeros(B, np.int8), mc=np.full(B, np.inf), ns=np.full(B, np.nan),
+        status=np.zeros(B, np.int8), mc=np.full(B, np.inf), mo=np.full(B, np.inf),
+        md=np.full(B, np.inf), ns=np.full(B, np.nan),
         qw=np.full((B, m, 2), np.nan),
     )  # fmt: skip

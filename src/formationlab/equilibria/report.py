@@ -29,9 +29,10 @@ from ..errors import ParameterError, UserInputError
 from ..integrators import INTEGRATORS, RK4, FixedStepIntegrator, ImplicitEuler
 from ..simulation.run import simulate
 from ..validation import steps_within, validation_error
+from .blocks import SettledStore, settle_in_blocks
 from .catalogue import Catalogue, catalogue
 from .continuation import Branch, follow
-from .search import random_starts, settle
+from .search import random_starts
 
 #: the most random starts one search settles (each is a run of the formation)
 STARTS_LIMIT = 1_000_000
@@ -290,6 +291,8 @@ def find_equilibria(
     end_states: EndStates | None = None,
     end_states_source: str | None = None,
     progress: Callable[[str], None] | None = None,
+    store: SettledStore | None = None,
+    settled: Callable[[int, int], None] | None = None,
 ) -> EquilibriaReport:
     """Find, refine, classify and (optionally) follow the equilibria of a scenario's law.
 
@@ -308,6 +311,11 @@ def find_equilibria(
         ``progress(stage)``, called as each of its stages starts (three, four with a
         ``follow`` gain): the scenario's run, the random starts (or the study's end
         states), the refinement and classification, following the equilibria.
+    store : SettledStore, optional
+        Keeps the random starts' settled blocks, and gives back those it holds (a resumed
+        search: :func:`~formationlab.equilibria.blocks.settle_in_blocks`).
+    settled : callable, optional
+        ``settled(done, total)``: the random starts settled so far, after each block.
 
     Returns
     -------
@@ -348,11 +356,12 @@ def find_equilibria(
         if sc.obstacles:  # starts touching an obstacle are left out
             keep = system.obstacle_clearances(q0).min(axis=(-2, -1)) > 0  # type: ignore[union-attr]
             q0 = q0[keep]
-        settled = settle(
-            sc.formation, law, q0, duration=config.duration, integrator=settler, system=system
-        )
-        cands.append(settled.q_final)
-        outs.append(settled.outcome)
+        q_end, o_end = settle_in_blocks(
+            sc.formation, law, q0, duration=config.duration, integrator=settler, system=system,
+            store=store, progress=settled,
+        )  # fmt: skip
+        cands.append(q_end)
+        outs.append(o_end)
         source["random_starts"] = {
             "count": config.starts,
             "seed": config.seed,

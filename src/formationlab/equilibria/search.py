@@ -188,6 +188,7 @@ def settle(
     )  # fmt: skip
     return BatchResult.from_final(
         formation, x=out.x, v=out.v, status=out.status, steps=out.steps,
-        min_clearance=out.min_clearance, net_speed=out.net_speed, dt=integrator.dt,
+        min_clearance=out.min_clearance, min_obstacle_clearance=out.min_obstacle_clearance,
+        net_speed=out.net_speed, dt=integrator.dt,
         tolerances=tol, q_window=out.q_window, window_step=out.window_step,
     )  # fmt: skip

@@ -18,6 +18,7 @@ too large); the run stops with that status and a message that says so.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, TypeVar
 
@@ -65,6 +66,14 @@ class RawSolution:
         :mod:`formationlab.integrators.diagnostics` (``switch_count``,
         ``sliding_time``, ``sliding_start``, ``sliding_end``, ``max_excursion``)
         and whatever the integrator adds. Counts are integers.
+    min_pair_distance : float
+        Least distance of two points the safety filter keeps apart, over every accepted
+        step (:meth:`formationlab.safety.SafetyFilter.least_distance`); NaN without a
+        filter or where the integrator does not measure it (``filippov``).
+    min_robot_clearance, min_obstacle_clearance : float
+        Least robot-robot clearance ``r_ij - a_ij`` and least robot-obstacle clearance
+        (inf without obstacles) over every accepted step; NaN where the integrator does
+        not measure them (``filippov``).
     """
 
     t: NDArray[np.float64]
@@ -74,6 +83,9 @@ class RawSolution:
     message: str = ""
     stats: dict[str, Any] = field(default_factory=dict)
     dim: int = 2  #: the position columns of the state: 2 in the plane, 3 in space
+    min_pair_distance: float = math.nan
+    min_robot_clearance: float = math.nan
+    min_obstacle_clearance: float = math.nan
 
     @property
     def q(self) -> NDArray[np.float64]:
@@ -157,7 +169,9 @@ class FixedStepIntegrator(Integrator):
         t, x, v = out.trajectory(0)
         return RawSolution(
             t=t, x=x, v=v, status=out.statuses()[0], message=out.message[0], stats=out.stats,
-            dim=position_dim(system),
+            dim=position_dim(system), min_pair_distance=float(out.min_pair_distance[0]),
+            min_robot_clearance=float(out.min_clearance[0]),
+            min_obstacle_clearance=float(out.min_obstacle_clearance[0]),
         )  # fmt: skip
 
 

@@ -23,6 +23,7 @@ against, to rounding.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from typing import Any
@@ -72,12 +73,16 @@ _CHUNKS_PER_THREAD = 4
 
 class CompiledRun:
     """Saved steps ``k``, states ``x`` ``(T, n, 2)``, velocities ``v``, status, steps,
-    least clearance, wall time and the threads the run ended on."""
+    least robot-robot clearance, wall time, the threads the run ended on and the least
+    distance of two points the safety filter keeps apart (NaN without a filter)."""
 
-    def __init__(self, k, x, v, status, steps, min_clearance, wall, threads=1):
+    def __init__(self, k, x, v, status, steps, min_clearance, wall, threads=1,
+                 min_pair_distance=math.nan, min_obstacle_clearance=math.inf):  # fmt: skip
         self.k, self.x, self.v = k, x, v
         self.status, self.steps, self.min_clearance, self.wall = status, steps, min_clearance, wall
         self.threads = threads
+        self.min_pair_distance = min_pair_distance
+        self.min_obstacle_clearance = min_obstacle_clearance
 
 
 def run_compiled(
@@ -155,7 +160,10 @@ def run_compiled(
             run.keep_reached()  # the run ends where it was, not at the last saved step
     wall = time.perf_counter() - start
     k, x, v = run.saved()
-    return CompiledRun(k, x, v, status, k0, run.min_clearance, wall, threads if use else 1)
+    return CompiledRun(
+        k, x, v, status, k0, run.min_clearance, wall, threads if use else 1,
+        run.min_pair_distance, float(run.st.mo[0, 0]),
+    )  # fmt: skip
 
 
 class SingleRun:
@@ -205,11 +213,11 @@ class SingleRun:
             x[None, :, :, None], stop_rule=False, turns=kind in (HEADING, NEAR_IDENTITY),
             centralized=self.stage[1] is not None and self.stage[1].kind == CENTRALIZED,
         )  # fmt: skip
-        if self.pairs:  # the start's clearance, robots and obstacles (the lists layout's
-            self.st.mc[0, 0] = _start_clearance(layout, x0, system)  # loop finds it)
-        elif self.obstacles:  # the start's clearance to the obstacles (the robots' in the loop)
+        if self.pairs:  # the start's clearance of the robots (the lists layout's loop finds it)
+            self.st.mc[0, 0] = _start_clearance(layout, x0, system)
+        if self.obstacles:  # the start's clearance to the obstacles
             assert system is not None
-            self.st.mc[0, 0] = np.min(system.obstacle_clearances(x0), initial=np.inf)
+            self.st.mo[0, 0] = np.min(system.obstacle_clearances(x0), initial=np.inf)
         self.out = trial_outputs(1, n, k, kept=False)
         self.sense: tuple[Any, ...] = (None, None)
         self.channel = None
@@ -240,8 +248,15 @@ class SingleRun:
 
     @property
     def min_clearance(self) -> float:
-        """Least clearance over the accepted states so far."""
+        """Least robot-robot clearance over the accepted states so far."""
         return float(self.st.mc[0, 0])
+
+    @property
+    def min_pair_distance(self) -> float:
+        """Least distance of two points the safety filter keeps apart over the accepted
+        states so far (:meth:`formationlab.safety.SafetyFilter.least_distance`); NaN
+        without a filter."""
+        return math.sqrt(float(self.st.md[0, 0])) if self.safety is not None else math.nan
 
     def advance(self, k_end: int, chunks: int = 1) -> None:
         """Steps until the run ends or reaches step ``k_end`` (from the last step, until it
@@ -353,10 +368,9 @@ def _measuring(system: System | None) -> bool:
 
 
 def _start_clearance(terms: KernelTerms, x0: NDArray[np.float64], system: System | None) -> float:
-    """Least clearance of the start ``x0`` ``(n, k)``: of its pairs (``r_ij - a_ij``) and,
-    with ``system``, of its robots to the obstacles."""
+    """Least robot-robot clearance ``r_ij - a_ij`` of the start ``x0`` ``(n, k)``."""
     if system is not None:
-        return float(system.clearance(x0))
+        return float(system.clearances(x0)[0])
     q = x0[:, :2]
     r = np.linalg.norm(q[terms.pair_j] - q[terms.pair_i], axis=-1)
     return float(np.min(r - terms.pair_contact, initial=np.inf))
@@ -413,4 +427,8 @@ def raw_solution(
         "backend": "numba",
         "threads": out.threads,
     }
-    return RawSolution(t=t, x=out.x, v=out.v, status=out.status, message=message, stats=stats)
+    return RawSolution(
+        t=t, x=out.x, v=out.v, status=out.status, message=message, stats=stats,
+        min_pair_distance=out.min_pair_distance, min_robot_clearance=float(out.min_clearance),
+        min_obstacle_clearance=float(out.min_obstacle_clearance),
+    )  # fmt: skip

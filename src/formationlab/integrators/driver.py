@@ -171,7 +171,11 @@ class Stepping:
         self.steps = np.zeros(B, dtype=np.int64)
         self.status = np.full(B, Status.SUCCESS.code, dtype=np.int8)
         self.message = [""] * B
-        self.min_clear = system.clearance(x)
+        self.min_clear, self.min_obs = system.clearances(x)
+        # the least distance of the filter's pairs (System.filtered; duck-typed systems of
+        # the tests have no filter), measured at every accepted state in `step`
+        self.filter = system.safety if getattr(system, "filtered", False) else None
+        self.min_pair = np.full(B, np.inf if self.filter is not None else np.nan)
         self.net = np.full(B, np.nan)
         self.dim = d = position_dim(system)  # the position columns
         self.q_window = np.full((B, *x.shape[1:-1], d), np.nan)
@@ -220,6 +224,9 @@ class Stepping:
             self.live,
         )
         channel, stop, n_steps = self.channel, self.stop, self.n_steps
+        if self.filter is not None:  # (x is accepted: the pairs the filter keeps apart)
+            least = self.filter.least_distance(system.model.points(x))
+            self.min_pair[live] = np.minimum(self.min_pair[live], least)
         here = system
         if channel is not None:
             u_local = channel.local(*channel.observe(x, live, k), live) if self.sampled else None
@@ -255,7 +262,7 @@ class Stepping:
             self._finish(~ending, Status.SUCCESS, k, x, v)
             ending[:] = True
         else:
-            verdict, clear = system.step_verdict(x, x_new)
+            verdict, clear, clear_obs = system.judge(x, x_new)
             verdict[ending] = 0
             for code in np.unique(verdict[verdict > 0]) if verdict.any() else ():
                 bad = verdict == code
@@ -277,6 +284,7 @@ class Stepping:
         self.seen_c = self.seen_c[keep]
         assert clear is not None  # a trial that goes on had its step judged
         self.min_clear[self.live] = np.minimum(self.min_clear[self.live], clear[keep])
+        self.min_obs[self.live] = np.minimum(self.min_obs[self.live], clear_obs[keep])
         if self.monitor is not None and self.live.size and self.live[0] == 0:
             self.monitor.record(self.time(k + 1), system.sigma(self.x[0]))
         return True
@@ -326,6 +334,7 @@ class Stepping:
             x=self.x_out, v=self.v_out, steps=steps, status=status, message=message,
             min_clearance=self.min_clear, net_speed=self.net, q_window=self.q_window,
             window_step=self.window_step, saved=self.saved, stats=stats, dt=dt,
+            min_obstacle_clearance=self.min_obs, min_pair_distance=self.min_pair,
         )  # fmt: skip
 
 

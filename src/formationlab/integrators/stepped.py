@@ -49,7 +49,12 @@ class Stepped:
     message : list of str
         Why each trial ended, in words (says what to change when it failed).
     min_clearance : ndarray, shape (B,)
-        Least ``r_ij - a_ij`` over every accepted state.
+        Least ``r_ij - a_ij`` over every accepted state (robot-robot).
+    min_obstacle_clearance : ndarray, shape (B,)
+        Least robot-obstacle clearance over every accepted state (inf without obstacles).
+    min_pair_distance : ndarray, shape (B,)
+        Least distance of two points the safety filter keeps apart over every accepted
+        state (:meth:`formationlab.safety.SafetyFilter.least_distance`); NaN without one.
     net_speed : ndarray, shape (B,)
         Net speed over the last check interval (NaN before the second check
         or without a stop rule).
@@ -80,6 +85,8 @@ class Stepped:
     saved: list[tuple[int, NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]]
     stats: dict[str, Any] = field(default_factory=dict)
     dt: float = 0.0
+    min_obstacle_clearance: NDArray[np.float64] | None = None
+    min_pair_distance: NDArray[np.float64] | None = None
 
     def statuses(self) -> list[Status]:
         """The :class:`Status` of every trial."""

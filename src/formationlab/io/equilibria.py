@@ -2,11 +2,14 @@
 
 ``equilibria.json`` holds ``{"equilibria": [...], ...}`` with one entry per
 distinct equilibrium (:meth:`formationlab.equilibria.Catalogue.to_dict`),
-written atomically.
+written atomically. :class:`SettledFolder` keeps the random starts' settled blocks in
+``DIR/settled/<fingerprint>/`` while the search runs, for ``--resume``.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 from pathlib import Path
 from typing import Any
@@ -14,10 +17,77 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import ScenarioError
-from .files import atomic_write_json
+from ..errors import ParameterError, ScenarioError
+from .files import KeptFolder, atomic_path, atomic_write_json
 
-__all__ = ["read_study_end_states", "write_equilibria"]
+__all__ = ["SettledFolder", "read_study_end_states", "write_equilibria"]
+
+
+class SettledFolder(KeptFolder):
+    """Settled blocks of one search's random starts under ``DIR/settled/<fingerprint>/``
+    (a :class:`formationlab.equilibria.blocks.SettledStore`), each ``block-K.npz`` written
+    atomically: a block is there whole or not at all.
+
+    Parameters
+    ----------
+    out : path-like
+        The search's output folder.
+    identity : dict
+        JSON-ready: what decides the starts and how they settle (the scenario's text, the
+        ``[equilibria]`` settings); its fingerprint names the folder, so blocks of another
+        search are never taken.
+    """
+
+    def __init__(self, out: str | os.PathLike[str], identity: dict[str, Any]) -> None:
+        text = json.dumps(identity, sort_keys=True, default=str)
+        super().__init__(out, "settled", identity, hashlib.sha256(text.encode()).hexdigest()[:16])
+
+    def check_resumable(self) -> int:
+        """How many settled starts are kept for this search.
+
+        Raises
+        ------
+        ParameterError
+            The folder holds no blocks of this search (none, or another search's).
+        """
+        if not (self.folder / "manifest.json").exists():
+            other = any(self.root.glob("*/manifest.json"))
+            raise ParameterError(
+                f"nothing to resume in {self.root.parent}: it holds "
+                + ("the settled starts of another search (another scenario or [equilibria] "
+                   "settings); resume with the same ones, or start afresh with --force"
+                   if other else "no settled starts; run without --resume")
+            )  # fmt: skip
+        return sum(len(self._read(p)[1]) for p in sorted(self.folder.glob("block-*.npz")))
+
+    def _path(self, k: int) -> Path:
+        return self.folder / f"block-{k:06d}.npz"
+
+    def _read(self, path: Path) -> tuple[NDArray[np.float64], NDArray[np.str_]]:
+        try:
+            with np.load(path, allow_pickle=False) as f:
+                return np.asarray(f["q"], dtype=float), np.asarray(f["outcome"])
+        except (OSError, ValueError, KeyError) as exc:
+            raise ParameterError(
+                f"cannot read the settled starts {path} ({exc}): delete it and resume to "
+                "settle them again"
+            ) from None
+
+    def load(self, k: int) -> tuple[NDArray[np.float64], NDArray[np.str_]] | None:
+        """Block ``k``'s end states and outcomes, or None if it was not settled."""
+        path = self._path(k)
+        return self._read(path) if path.exists() else None
+
+    def save(self, k: int, q: NDArray[np.float64], outcome: NDArray[np.str_]) -> None:
+        """Keep block ``k``."""
+        with atomic_path(self._path(k)) as tmp, open(tmp, "wb") as fh:
+            np.savez(fh, q=np.asarray(q, dtype=float), outcome=np.asarray(outcome, dtype=str))
+
+    def settled(self) -> int:
+        """How many starts the kept blocks hold."""
+        if not self.folder.is_dir():
+            return 0
+        return sum(len(self._read(p)[1]) for p in self.folder.glob("block-*.npz"))
 
 
 def write_equilibria(data: dict[str, Any], target: str | os.PathLike[str]) -> Path:

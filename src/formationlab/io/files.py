@@ -25,6 +25,7 @@ from ..errors import OutputError, OutputExistsError
 from .claim import LOCK_NAME, claim_folder, release_claim
 
 __all__ = [
+    "KeptFolder",
     "atomic_path",
     "atomic_write_bytes",
     "atomic_write_json",
@@ -294,3 +295,20 @@ def remove_stale(
                 raise output_error(exc, folder, f"remove {name} of the earlier run from") from exc
             removed.append(name)
     return removed
+
+
+class KeptFolder:
+    """Work kept for ``--resume`` under ``DIR/<kind>/<fingerprint>/`` beside a
+    ``manifest.json`` of the work's identity, so that another work's files are never
+    taken: a study's chunks (:class:`formationlab.io.trials.ChunkFolder`), an equilibria
+    search's settled starts (:class:`formationlab.io.equilibria.SettledFolder`)."""
+
+    def __init__(self, out: str | os.PathLike[str], kind: str, identity: dict[str, Any],
+                 fingerprint: str) -> None:  # fmt: skip
+        self.root = Path(out) / kind
+        self.identity = identity
+        self.folder = self.root / fingerprint
+
+    def start(self) -> None:
+        """Create the folder and write the manifest (a fresh run)."""
+        atomic_write_json(self.folder / "manifest.json", self.identity)

@@ -1,43 +1,55 @@
 """The files of a study: ``trials.parquet``, ``summary.json`` and the chunks kept for resuming.
 
-``trials.parquet`` has one row per trial and these columns (robots 1-based):
+``trials.parquet`` has one row per trial and these columns (robots 1-based; docs/outputs.md
+defines them for a reader, and a test holds that page to the columns written):
 
-========================  ======================================================
-``group``                 0-based group (law x sweep point), as in ``summary.json``
-``trial``                 0-based trial number within the group
-``seed``                  the study's seed; with ``trial`` it reproduces the start
-                          (:func:`formationlab.studies.sampling.trial_initial_states`)
-``law``                   the law's name
-one per swept parameter   its value; NaN for a law the parameter does not apply to
-``outcome``               one of :data:`formationlab.OUTCOMES` (the batched kernel's)
-``settled``               whether the trial was settled with implicit Euler
-                          (``[study.settle]``: not-converged under a switching law)
-``settled_outcome``       its outcome after settling; ``outcome`` if not settled
-``max_distance_error``    largest ``|r_ij - d_ij|`` over the edges at the end
-``converged_time``        time of the first passed convergence test (instantaneous or
-                          net speed <= the tolerance); NaN if never
-``net_speed``             net speed over the last check interval (displacement / time)
-``min_clearance``         least ``r_ij - a_ij`` over pairs and time
-``steps``                 Euler steps taken (a trial stops once converged)
-``drift_vx, drift_vy``    velocity of the centroid at the end, m/s, of the rigid motion
-                          (and ``drift_vz`` for a formation in space)
-                          fitted over the last ``drift_window`` seconds
-                          (:mod:`formationlab.outcomes.rigid_motion`): the drift of a
-                          ``drifting`` or ``rotating`` trial; NaN when the trial
-                          stopped before that window (or the run is shorter)
-``drift_speed``           largest robot speed in that rigid motion, m/s
-``drift_omega``           its angular velocity, rad/s (counter-clockwise positive; in
-                          space its size, the axis carrying the direction)
-``drift_cx, drift_cy``    its centre of rotation (NaN when ``drift_omega`` is 0); in
-                          space, with ``drift_cz``, the point of its screw axis nearest
-                          the centroid
-``drift_ax, ...``         in space, the unit direction of that axis (``drift_ay``,
-                          ``drift_az``; the velocity along it is the screw's advance)
-``shape_rate``            how fast the shape changed over the window (the rigid fit's
-                          largest residual over the window), m/s
-``x1_init, y1_init, ...`` initial positions (``z1_init``, ... in space)
-``x1, y1, x2, y2, ...``   final positions (``z1``, ... in space)
-========================  ======================================================
+============================  ======================================================
+``group``                     0-based group (law x sweep point), as in ``summary.json``
+``trial``                     0-based trial number within the group
+``seed``                      the study's seed; with ``trial`` it reproduces the start
+                              (:func:`formationlab.studies.sampling.trial_initial_states`)
+``law``                       the law's name
+one per swept parameter       its value; NaN for a law the parameter does not apply to
+``outcome``                   one of :data:`formationlab.OUTCOMES` (the batched kernel's)
+``settled``                   whether the trial was settled with implicit Euler
+                              (``[study.settle]``: not-converged under a switching law)
+``settled_outcome``           its outcome after settling; ``outcome`` if not settled
+``max_distance_error``        largest ``|r_ij - d_ij|`` over the edges at the end
+``max_bearing_error``         largest ``||g_ij - g*_ij||`` at the end (bearing formations;
+                              NaN for the others)
+``converged_time``            time of the first passed convergence test (instantaneous or
+                              net speed <= the tolerance); NaN if never
+``net_speed``                 net speed over the last check interval (displacement / time)
+``min_clearance``             least clearance of robots and obstacles together over every
+                              accepted step (the lesser of the next two)
+``min_robot_clearance``       least ``r_ij - a_ij`` over the pairs of robots and time
+``min_obstacle_clearance``    least robot-obstacle clearance over time; NaN without obstacles
+``min_pair_distance``         least distance of two robots the safety filter keeps ``D_s``
+                              apart, over time; NaN without a filter
+``below_safety_distance``     whether that distance came below ``D_s`` (the filter's promise
+                              broken; ``SafetyFilter.below``)
+``steps``                     Euler steps taken (a trial stops once converged)
+``drift_vx, drift_vy``        velocity of the centroid at the end, m/s, of the rigid motion
+                              (and ``drift_vz`` for a formation in space)
+                              fitted over the last ``drift_window`` seconds
+                              (:mod:`formationlab.outcomes.rigid_motion`): the drift of a
+                              ``drifting`` or ``rotating`` trial; NaN when the trial
+                              stopped before that window (or the run is shorter)
+``drift_speed``               the fastest robot's speed in that rigid motion, m/s (not the
+                              centroid's: that is the norm of ``drift_vx, drift_vy``)
+``drift_omega``               its angular velocity, rad/s (counter-clockwise positive; in
+                              space its size, the axis carrying the direction)
+``drift_cx, drift_cy``        its centre of rotation (NaN when ``drift_omega`` is 0); in
+                              space, with ``drift_cz``, the point of its screw axis nearest
+                              the centroid
+``drift_ax, ...``             in space, the unit direction of that axis (``drift_ay``,
+                              ``drift_az``; the velocity along it is the screw's advance)
+``shape_rate``                how fast the shape changed over the window (the rigid fit's
+                              largest residual over the window), m/s
+``x1_init, y1_init, ...``     initial positions (``z1_init``, ... in space)
+``theta1_init, ...``          initial headings (unicycles)
+``x1, y1, x2, y2, ...``       final positions (``z1``, ... in space)
+============================  ======================================================
 
 Chunks live in ``DIR/chunks/<fingerprint>/`` (the fingerprint of the study's
 identity, :func:`formationlab.studies.runner.study_identity`) beside a
@@ -57,13 +69,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from ..errors import ParameterError
-from .files import atomic_path, atomic_write_json
+from .files import KeptFolder, atomic_path
 
 __all__ = ["ChunkFolder", "read_trials", "trials_schema", "write_trials"]
 
 _INTS = ("group", "trial", "seed", "steps")
 _STRINGS = ("law", "outcome", "settled_outcome")
-_BOOLS = ("settled",)
+_BOOLS = ("settled", "below_safety_distance")
 
 
 def trials_schema(columns: list[str]) -> pa.Schema:
@@ -113,7 +125,7 @@ def read_trials(path: str | os.PathLike[str]) -> pd.DataFrame:
         raise ParameterError(f"cannot read {path} as a trials table (parquet): {reason}") from None
 
 
-class ChunkFolder:
+class ChunkFolder(KeptFolder):
     """Finished chunks of one study under ``DIR/chunks/<fingerprint>/`` (a ``ChunkStore``).
 
     Parameters
@@ -125,16 +137,10 @@ class ChunkFolder:
     """
 
     def __init__(self, out: str | os.PathLike[str], identity: dict[str, Any]) -> None:
-        self.root = Path(out) / "chunks"
-        self.identity = identity
-        self.folder = self.root / str(identity["fingerprint"])
+        super().__init__(out, "chunks", identity, str(identity["fingerprint"]))
 
     def path(self, chunk_id: str) -> Path:
         return self.folder / f"{chunk_id}.parquet"
-
-    def start(self) -> None:
-        """Create the folder and write the manifest (a fresh run)."""
-        atomic_write_json(self.folder / "manifest.json", self.identity)
 
     def check_resumable(self) -> int:
         """Check that this study can be resumed here; return how many chunks are kept.

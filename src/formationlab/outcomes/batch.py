@@ -43,8 +43,9 @@ class BatchResult:
     converged_time : ndarray, shape (B,)
         Time the trial was first seen converged, seconds; NaN when it was not.
     min_clearance : ndarray, shape (B,)
-        Least ``r_ij - a_ij`` over every accepted state of the run (the step
-        rejected for reaching contact is not part of the run).
+        Least clearance over every accepted state of the run (the step rejected for
+        reaching contact is not part of the run), robots and obstacles together: the
+        lesser of ``min_robot_clearance`` and ``min_obstacle_clearance``.
     steps : ndarray of int64, shape (B,)
         Steps actually simulated (accepted). A trial ends early when it has
         converged, when its next step would reach contact (``"collision"``) or
@@ -68,6 +69,18 @@ class BatchResult:
     max_bearing_error : ndarray, shape (B,)
         Largest ``||g_ij - g*_ij||`` over the edges at ``q_final`` for a formation judged by
         its bearings (docs/bearing.md); NaN for the others.
+    min_robot_clearance : ndarray, shape (B,)
+        Least robot-robot clearance ``r_ij - a_ij`` over every accepted state.
+    min_obstacle_clearance : ndarray, shape (B,)
+        Least robot-obstacle clearance (distance to the obstacle minus the robot's radius)
+        over every accepted state; inf without obstacles.
+    min_pair_distance : ndarray, shape (B,)
+        Least distance of two points the safety filter keeps ``D_s`` apart (pairs within
+        its sensing radius) over every accepted state; NaN without a filter.
+    below_safety_distance : ndarray of bool, shape (B,)
+        Whether that distance came below the filter's ``D_s``
+        (:meth:`formationlab.safety.SafetyFilter.below`): the filter's promise broken;
+        False without a filter.
     """
 
     q_final: NDArray[np.float64]
@@ -82,6 +95,10 @@ class BatchResult:
     x_final: NDArray[np.float64]
     motion: RigidMotion
     max_bearing_error: NDArray[np.float64] | None = None
+    min_robot_clearance: NDArray[np.float64] | None = None
+    min_obstacle_clearance: NDArray[np.float64] | None = None
+    min_pair_distance: NDArray[np.float64] | None = None
+    below_safety_distance: NDArray[np.bool_] | None = None
 
     def statuses(self) -> list[Status]:
         """The :class:`~formationlab.status.Status` of every trial."""
@@ -104,8 +121,17 @@ class BatchResult:
         window_step: int = 0,
         q: NDArray[np.float64] | None = None,
         u: NDArray[np.float64] | None = None,
+        min_obstacle_clearance: NDArray[np.float64] | None = None,
+        min_pair_distance: NDArray[np.float64] | None = None,
+        below_safety_distance: NDArray[np.bool_] | None = None,
     ) -> BatchResult:
         """Classify final states ``x`` / velocities ``v`` ``(B, n, k)`` (positions first).
+
+        ``min_clearance`` ``(B,)`` is each trial's least robot-robot clearance and
+        ``min_obstacle_clearance`` its least robot-obstacle one (default none: inf);
+        ``min_pair_distance`` the least distance of the pairs a safety filter keeps apart
+        (default NaN: no filter) and ``below_safety_distance`` whether it came below the
+        filter's ``D_s`` (``SafetyFilter.below`` decides it; default False).
 
         ``q_window`` ``(B, n, 2)`` holds the positions at step ``window_step`` (NaN for
         trials that had ended by then, and for all when ``window_step < 0``: a run
@@ -135,12 +161,27 @@ class BatchResult:
             )  # fmt: skip
         status, outcome = _diverged(formation, q, status, outcome)
         converged = status == Status.CONVERGED.code
+        robots = np.asarray(min_clearance, dtype=float)
+        obst = (
+            np.full(robots.shape, np.inf) if min_obstacle_clearance is None
+            else np.asarray(min_obstacle_clearance, dtype=float)
+        )  # fmt: skip
+        least = (
+            np.full(robots.shape, np.nan) if min_pair_distance is None
+            else np.asarray(min_pair_distance, dtype=float)
+        )  # fmt: skip
+        below = (
+            np.zeros(robots.shape, bool) if below_safety_distance is None
+            else np.asarray(below_safety_distance, dtype=bool)
+        )  # fmt: skip
         return cls(
             q_final=q, u_final=u, outcome=outcome,
             max_distance_error=errors,
             converged_time=np.where(converged, steps * float(dt), np.nan),
-            min_clearance=min_clearance, steps=steps, net_speed=net_speed,
+            min_clearance=np.minimum(robots, obst), steps=steps, net_speed=net_speed,
             status=status, x_final=x, motion=motion, max_bearing_error=berr,
+            min_robot_clearance=robots, min_obstacle_clearance=obst, min_pair_distance=least,
+            below_safety_distance=below,
         )  # fmt: skip
 
 

@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..errors import FormationlabWarning, ParameterError
 from ..validation import number, whole
 from .condition import CONDITIONS, Condition
+from .pairs import sensed_pairs
 from .result import unchanged
 
 if TYPE_CHECKING:
@@ -31,12 +32,16 @@ if TYPE_CHECKING:
     from .obstacles import Obstacle
     from .result import FilterResult
 
-__all__ = ["FILTERS", "FilterKind", "SafetyFilter", "register_filter"]
+__all__ = ["BELOW_TOLERANCE", "FILTERS", "FilterKind", "SafetyFilter", "register_filter"]
 
 FilterKind = Literal["none", "barrier", "barrier-decentralized"]
 FILTERS: tuple[str, ...] = ("none", "barrier", "barrier-decentralized")
 #: the most sides of the polygon that stands for the filter's speed limit
 SIDES_LIMIT = 256
+#: a pair counts as below ``D_s`` when closer than ``D_s (1 - BELOW_TOLERANCE)``: the
+#: discrete condition keeps ``h >= 0`` exactly in real arithmetic, and rounding of the
+#: filter's solves (Clarabel's tolerance) may leave a pair this much (relative) inside
+BELOW_TOLERANCE = 1e-6
 
 
 class _Filter(NamedTuple):
@@ -172,6 +177,45 @@ class SafetyFilter:
         """The step the rows guard: :attr:`step` under the discrete condition, else 0 (the
         continuous rows)."""
         return float(self.step) if self.condition == "discrete" and self.step else 0.0
+
+    def least_distance(self, p: ArrayLike) -> NDArray[np.float64]:
+        """Least distance ``|p_i - p_j|`` of the pairs this filter keeps ``D_s`` apart (those
+        within the sensing radius) at points ``p`` ``(..., n, 2)``; ``(...)``, ``inf`` where
+        no pair is within the radius. The compiled loop measures the same pairs as it
+        filters (:func:`formationlab.safety.stage.filter_command`)."""
+        p = np.asarray(p, dtype=float)
+        batch = p.shape[:-2]
+        out = np.full(int(np.prod(batch, dtype=np.int64)), np.inf)
+        pairs = sensed_pairs(p, float(self.sensing_radius))
+        if pairs.size:
+            flat = p.reshape(-1, *p.shape[-2:])
+            d = flat[pairs[:, 0], pairs[:, 2]] - flat[pairs[:, 0], pairs[:, 1]]
+            np.minimum.at(out, pairs[:, 0], np.sum(d * d, axis=-1))
+        return np.sqrt(out).reshape(batch)
+
+    def below(self, least: ArrayLike) -> NDArray[np.bool_]:
+        """Whether a run whose least pair distance (:meth:`least_distance` over its steps)
+        is ``least`` came below ``D_s``: the filter's promise broken (the continuous
+        condition with a coarse step or a huge ``gamma``, a start inside ``D_s``, a model
+        whose points do not follow the command). The one place this is decided; a margin
+        of :data:`BELOW_TOLERANCE` (relative) leaves out rounding. NaN (not measured) is not
+        below."""
+        least = np.asarray(least, dtype=float)
+        with np.errstate(invalid="ignore"):
+            return least < self.distance * (1.0 - BELOW_TOLERANCE)
+
+    @property
+    def below_advice(self) -> str:
+        """What keeps the pairs ``D_s`` apart at every step, for a run or study that came
+        below it (:meth:`below`)."""
+        if self.condition == "continuous":
+            return (
+                'condition = "discrete" (the default) keeps them apart at every Euler step, '
+                "or use a smaller dt or gamma"
+            )
+        return (
+            "check that the robots start at least D_s apart and that the model follows the command"
+        )
 
     @property
     def enabled(self) -> bool:

@@ -8,6 +8,7 @@ record costs one filter evaluation per *saved* step, not per step.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -51,6 +52,11 @@ class SafetyRecord:
         (``inf`` without obstacles).
     pair_distance : ndarray, shape (T,)
         Least centre distance ``|q_i - q_j|`` at each saved state.
+    least_distance : float
+        Least distance of two points the filter keeps ``D_s`` apart over *every* step of
+        the run, saved or not (:meth:`SafetyFilter.least_distance`: the robots' positions,
+        a near-identity unicycle's hand points; pairs within the sensing radius); NaN where
+        the run did not measure it (no filter, ``filippov``).
     """
 
     filter: SafetyFilter | None
@@ -61,6 +67,7 @@ class SafetyRecord:
     active_obstacles: NDArray[np.int64]
     obstacle_clearance: NDArray[np.float64]
     pair_distance: NDArray[np.float64]
+    least_distance: float = math.nan
 
     @classmethod
     def from_states(
@@ -71,6 +78,7 @@ class SafetyRecord:
         obstacles: Sequence[Obstacle],
         result: FilterResult | None,
         obstacle_clearance: NDArray[np.float64],
+        least_distance: float = math.nan,
     ) -> SafetyRecord:
         """The record of positions ``q`` ``(T, n, 2)`` and the filter ``result`` at them."""
         T, n = q.shape[:2]
@@ -88,7 +96,7 @@ class SafetyRecord:
         return cls(
             filter=filter, obstacles=tuple(obstacles), status=status, active=active,
             active_pairs=pairs, active_obstacles=obs, obstacle_clearance=obstacle_clearance,
-            pair_distance=pair,
+            pair_distance=pair, least_distance=float(least_distance),
         )  # fmt: skip
 
     def pair_matrix(self, k: int) -> NDArray[np.bool_]:
@@ -99,6 +107,21 @@ class SafetyRecord:
         out[sel[:, 1], sel[:, 2]] = out[sel[:, 2], sel[:, 1]] = True
         return out
 
+    @property
+    def min_pair_distance(self) -> float:
+        """The least pair distance of the run: over every step where the run measured it
+        (:attr:`least_distance`), else over the saved states (centres)."""
+        saved = float(np.min(self.pair_distance, initial=np.inf))
+        if self.filter is not None and math.isfinite(self.least_distance):
+            return self.least_distance
+        return saved
+
+    @property
+    def below_safety_distance(self) -> bool:
+        """Whether two robots came closer than the filter's ``D_s`` (the filter's promise
+        broken; :meth:`SafetyFilter.below` decides); False without a filter."""
+        return self.filter is not None and bool(self.filter.below(self.min_pair_distance))
+
     def summary(self) -> dict[str, Any]:
         """JSON-ready: the filter, the obstacles and what was active (robots 1-based).
 
@@ -106,7 +129,9 @@ class SafetyRecord:
         ``status_counts`` (saved steps per :class:`FilterStatus`), ``active_fraction``
         (saved steps with an active constraint), ``active_final`` (robots, pairs
         ``"i-j"`` and ``"robot i - obstacle o"`` active at the last state),
-        ``robots_ever_active``, ``min_pair_distance``, ``min_obstacle_clearance``.
+        ``robots_ever_active``, ``min_pair_distance`` (:attr:`min_pair_distance`: over
+        every step with a filter), ``below_safety_distance`` (:attr:`below_safety_distance`),
+        ``min_obstacle_clearance`` (over the saved states; None without obstacles).
         """
         f = self.filter
         counts = {s.name.lower(): int(np.sum(self.status == s)) for s in FilterStatus}
@@ -138,6 +163,7 @@ class SafetyRecord:
                 "obstacles": [f"robot {i + 1} - obstacle {o + 1}" for _, i, o in fin_o],
             },
             "robots_ever_active": [int(i) + 1 for i in np.flatnonzero(self.active.any(axis=0))],
-            "min_pair_distance": float(np.min(self.pair_distance)),
+            "min_pair_distance": self.min_pair_distance,
+            "below_safety_distance": self.below_safety_distance,
             "min_obstacle_clearance": clear,
         }

@@ -93,6 +93,9 @@ class FilterScratch(NamedTuple):
     mats: NDArray[np.float64]
     vecs: NDArray[np.float64]
     act: NDArray[np.int64]
+    #: (1,) least squared distance of two points within the sensing radius at the trial's
+    #: state (inf: no such pair), which the loop keeps as its least over the run
+    least: NDArray[np.float64]
 
 
 def filter_terms(safety: Any) -> FilterTerms:
@@ -121,13 +124,14 @@ def filter_scratch(n, obs, flt):
         np.empty(rows, dtype=np.int64), np.empty(max(n - 1, 1), dtype=np.int64),
         np.empty(big, dtype=np.int64), np.empty(big, dtype=np.int64), np.empty((big, 2)),
         np.empty(big), np.empty(big), np.empty(big), np.empty(big), np.empty((2, dq, dq)),
-        np.empty((5, dq)), np.empty(dq, dtype=np.int64),
+        np.empty((5, dq)), np.empty(dq, dtype=np.int64), np.full(1, np.inf),
     )  # fmt: skip
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _decentralized(pq, uq, uf, obs, flt, nbr, A, bb, neg, owner, out) -> None:
-    """``uf``: every robot's own rows (``decentralized_filter``'s) solved.
+def _decentralized(pq, uq, uf, obs, flt, nbr, A, bb, neg, owner, out, least) -> None:
+    """``uf``: every robot's own rows (``decentralized_filter``'s) solved; ``least[0]``
+    the least squared distance of the pairs that pose rows.
 
     A robot whose command satisfies its pair and speed rows (tested here, with the
     arithmetic of ``_project``'s first test) and has no obstacle near
@@ -164,6 +168,7 @@ def _decentralized(pq, uq, uf, obs, flt, nbr, A, bb, neg, owner, out) -> None:
         for p in range(deg):  # (the first test of _project, row by row)
             dx = x - pq[nbr[p], 0]
             dy = y - pq[nbr[p], 1]
+            least[0] = min(least[0], dx * dx + dy * dy)
             h = dx * dx + dy * dy - d2
             bound = 0.5 * barrier_bound(h, flt.gamma, flt.step)  # (half of the pair's)
             inside = inside and -2.0 * dx * uh0 + -2.0 * dy * uh1 <= bound
@@ -179,8 +184,10 @@ def _decentralized(pq, uq, uf, obs, flt, nbr, A, bb, neg, owner, out) -> None:
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _centralized(pq, uq, uf, obs, flt, ri, rj, ra, rb, rh, lam, mats, vecs, act, rb2) -> int:
-    """``uf`` by :func:`centralized_command` on the rows of ``barrier_constraints``.
+def _centralized(pq, uq, uf, obs, flt, ri, rj, ra, rb, rh, lam, mats, vecs, act, rb2,
+                 least) -> int:  # fmt: skip
+    """``uf`` by :func:`centralized_command` on the rows of ``barrier_constraints``;
+    ``least[0]`` the least squared distance of the pairs that pose rows.
 
     Returns its status (``FALLBACK``: apply the decentralized filter; ``NUMERICAL``: solve
     the QP with Clarabel).
@@ -193,6 +200,7 @@ def _centralized(pq, uq, uf, obs, flt, ri, rj, ra, rb, rh, lam, mats, vecs, act,
             wy = pq[i, 1] - pq[j, 1]
             if not wx * wx + wy * wy <= flt.r2:
                 continue
+            least[0] = min(least[0], wx * wx + wy * wy)
             h = wx * wx + wy * wy - flt.d2
             ri[m] = i
             rj[m] = j
@@ -259,8 +267,11 @@ def filter_command(src, u, b, radius, obs, flt, given, given_u, S):
     """Trial ``b``'s command ``u[:, :, b]`` at its points ``src[:, :, b]`` with the obstacles'
     repulsion and through the filter, in place; ``WAIT`` when it needs Clarabel (its points
     and command are then in ``S.pq``, ``S.uq``). ``given``: the host's answer for this trial
-    is in ``given_u`` ``(n, 2)``."""
+    is in ``given_u`` ``(n, 2)``. ``S.least[0]`` becomes the least squared distance of two
+    points within the sensing radius (the pairs the filter keeps ``D_s`` apart), measured
+    when the filter is solved here (a trial given its answer was measured when it paused)."""
     n = src.shape[0]
+    S.least[0] = np.inf
     for i in range(n):
         S.pq[i, 0] = src[i, 0, b]
         S.pq[i, 1] = src[i, 1, b]
@@ -269,16 +280,18 @@ def filter_command(src, u, b, radius, obs, flt, given, given_u, S):
     if obs.radius.shape[0] > 0:
         repel(obs, radius, S.pq, S.uq)
     if flt.kind == DECENTRALIZED:
-        _decentralized(S.pq, S.uq, S.uf, obs, flt, S.nbr, S.A, S.bb, S.neg, S.owner, S.out)
+        _decentralized(S.pq, S.uq, S.uf, obs, flt, S.nbr, S.A, S.bb, S.neg, S.owner, S.out,
+                       S.least)  # fmt: skip
     elif flt.kind == CENTRALIZED and given:
         for i in range(n):
             S.uf[i, 0] = given_u[i, 0]
             S.uf[i, 1] = given_u[i, 1]
     elif flt.kind == CENTRALIZED:
         qp = _centralized(S.pq, S.uq, S.uf, obs, flt, S.ri, S.rj, S.ra, S.rb, S.rh, S.lam,
-                          S.mats, S.vecs, S.act, S.rb2)  # fmt: skip
+                          S.mats, S.vecs, S.act, S.rb2, S.least)  # fmt: skip
         if qp == FALLBACK:  # relaxed rows infeasible too: barrier_filter's fallback
-            _decentralized(S.pq, S.uq, S.uf, obs, flt, S.nbr, S.A, S.bb, S.neg, S.owner, S.out)
+            _decentralized(S.pq, S.uq, S.uf, obs, flt, S.nbr, S.A, S.bb, S.neg, S.owner, S.out,
+                       S.least)  # fmt: skip
         elif qp == NUMERICAL:  # rounding defeated the exact method: Clarabel's turn
             return WAIT
     else:

@@ -115,6 +115,10 @@ class SimulationResult:
     own_distances : ndarray, shape (E, 2), or None
         Under ``sensing.mismatch``: the desired distance of each edge as its first and
         its second robot held it.
+    min_robot_clearance, min_obstacle_clearance : float
+        Least robot-robot clearance ``r_ij - a_ij`` and least robot-obstacle clearance
+        (distance minus the robot's radius; inf without obstacles) over every accepted
+        step, saved or not; NaN where the integrator does not measure them (``filippov``).
     """
 
     formation: Formation
@@ -135,6 +139,8 @@ class SimulationResult:
     sensing: Sensing | None = None
     faults: Faults | None = None
     own_distances: NDArray[np.float64] | None = None
+    min_robot_clearance: float = math.nan
+    min_obstacle_clearance: float = math.nan
 
     def __post_init__(self) -> None:
         if self.x is None:
@@ -263,6 +269,13 @@ class SimulationResult:
             motion=self.motion(tolerances),
         )
 
+    @property
+    def below_safety_distance(self) -> bool:
+        """Whether two robots came closer than the safety filter's ``D_s`` at some step
+        (:attr:`formationlab.safety.SafetyRecord.below_safety_distance`): the filter's
+        promise broken, whatever the status and outcome say; False without a filter."""
+        return self.safety is not None and self.safety.below_safety_distance
+
     def converged_time(self, tolerances: Tolerances | None = None) -> float | None:
         """First saved time after which the robots stay stopped (instantaneous or net speed)."""
         tol = tolerances or Tolerances()
@@ -292,7 +305,10 @@ class SimulationResult:
         the reference); with marching ``final_speed``, ``converged_time`` and
         ``net_speed`` are measured relative to the centroid.
         With obstacles or a filter also ``safety``
-        (:meth:`formationlab.safety.SafetyRecord.summary`).
+        (:meth:`formationlab.safety.SafetyRecord.summary`), and always
+        ``min_robot_clearance`` and ``min_obstacle_clearance`` (over every accepted step;
+        None where not measured or without obstacles) and ``below_safety_distance``
+        (:attr:`below_safety_distance`).
 
         **Many robots.** The lists stay readable: per-edge values (``distance_errors``,
         the sensing's ``own_distances``) only up to :data:`LIST_LIMIT` edges, per-robot
@@ -334,6 +350,9 @@ class SimulationResult:
             extra["final_points"] = p_final.tolist()
         if self.marching is not None and len(self.t) > 2:
             extra["marching"] = self._marching_summary()
+        extra["min_robot_clearance"] = _finite(self.min_robot_clearance)
+        extra["min_obstacle_clearance"] = _finite(self.min_obstacle_clearance)
+        extra["below_safety_distance"] = self.below_safety_distance
         if self.safety is not None:
             extra["safety"] = self.safety.summary()
         if self.sensing is not None:
@@ -650,7 +669,7 @@ def _result(
             raw.q, filter=system.safety if system.filtered else None,
             obstacles=system.obstacles,
             result=system.filter_result(raw.x) if system.filtered else None,
-            obstacle_clearance=least,
+            obstacle_clearance=least, least_distance=raw.min_pair_distance,
         )  # fmt: skip
     status, message = raw.status, raw.message
     try:
@@ -685,7 +704,14 @@ def _result(
         sensing=sensing,
         faults=faults,
         own_distances=_own_distances(system, integrator),
+        min_robot_clearance=raw.min_robot_clearance,
+        min_obstacle_clearance=raw.min_obstacle_clearance,
     )
+
+
+def _finite(value: float) -> float | None:
+    """``value``, or None when it is not a finite number (not measured, no obstacles)."""
+    return float(value) if math.isfinite(value) else None
 
 
 def _own_distances(system: System, integrator: Integrator) -> NDArray[np.float64] | None:

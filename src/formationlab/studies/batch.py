@@ -204,6 +204,7 @@ def run_batch(
             run.x, run.v, run.status, run.steps, run.min_clearance, run.net_speed,
         )  # fmt: skip
         qw, window_step = run.q_window, run.window_step
+        mo, md = run.min_obstacle_clearance, run.min_pair_distance
     elif backend == "numpy":
         system = System(formation=formation, law=law, model=model, sensing=sensing, faults=faults)
         if obstacles or safety is not None:
@@ -221,12 +222,16 @@ def run_batch(
             out.x, out.v, out.status, out.steps, out.min_clearance, out.net_speed,
         )  # fmt: skip
         qw, window_step = out.q_window, out.window_step
+        mo, md = out.min_obstacle_clearance, out.min_pair_distance
     else:
         raise ParameterError(f'backend must be "numba" or "numpy", got {backend!r}')
     at = {"q": model.points(x), "u": model.point_rates(x, v)}  # where the law acts
     return BatchResult.from_final(
         formation, x=x, v=v, status=status, steps=steps, min_clearance=mc, net_speed=ns,
-        dt=float(dt), tolerances=tol, q_window=qw, window_step=window_step, **at,
+        dt=float(dt), tolerances=tol, q_window=qw, window_step=window_step,
+        min_obstacle_clearance=mo, min_pair_distance=md,
+        below_safety_distance=safety.below(md) if safety is not None and safety.enabled else None,
+        **at,
     )  # fmt: skip
 
 

@@ -25,6 +25,7 @@ from ..formation.spec import Formation
 from ..integrators import ImplicitEuler
 from ..models import RobotModel, SingleIntegrator
 from ..outcomes.analysis import Tolerances
+from ..outcomes.batch import BatchResult
 from ..outcomes.rigid_motion import RigidMotion
 from .batch import batch_backend, run_batch
 from .config import BoxInitial, GaussianInitial, SettleModel, StudyConfig
@@ -173,6 +174,7 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
         converged_time=np.asarray(res.converged_time, dtype=float),
         net_speed=np.asarray(res.net_speed, dtype=float),
         min_clearance=np.asarray(res.min_clearance, dtype=float),
+        **safety_columns(res),
         steps=np.asarray(res.steps, dtype=np.int64),
         **motion_columns(res.motion),
     )
@@ -188,6 +190,30 @@ def run_chunk(task: ChunkTask) -> pd.DataFrame:
         for a, name in enumerate(axes):
             cols[f"{name}{i + 1}"] = qf[:, i, a]
     return pd.DataFrame(cols)
+
+
+def safety_columns(res: BatchResult) -> dict[str, NDArray[Any]]:
+    """The clearance and safety-filter columns of ``trials.parquet`` (:mod:`formationlab.io.
+    trials`): ``min_robot_clearance``, ``min_obstacle_clearance`` (NaN without obstacles),
+    ``min_pair_distance`` (NaN without a filter) and ``below_safety_distance``."""
+    B = len(res.min_clearance)
+    obst = res.min_obstacle_clearance
+    obst = np.full(B, np.nan) if obst is None else np.asarray(obst, dtype=float)
+    return {
+        "min_robot_clearance": np.asarray(
+            res.min_clearance if res.min_robot_clearance is None else res.min_robot_clearance,
+            dtype=float,
+        ),
+        "min_obstacle_clearance": np.where(np.isposinf(obst), np.nan, obst),
+        "min_pair_distance": np.asarray(
+            np.full(B, np.nan) if res.min_pair_distance is None else res.min_pair_distance,
+            dtype=float,
+        ),
+        "below_safety_distance": np.asarray(
+            np.zeros(B, bool) if res.below_safety_distance is None else res.below_safety_distance,
+            dtype=bool,
+        ),
+    }
 
 
 def motion_columns(motion: RigidMotion) -> dict[str, NDArray[np.float64]]:

@@ -97,8 +97,10 @@ def summarize_groups(
     list of dict
         ``law``, ``parameters``, ..., ``trials``, ``counts``, ``fractions`` and
         ``ci95`` (``[low, high]``) keyed by every outcome in ``outcomes``,
-        ``median_converged_time`` (of the trials that converged, or None) and
-        ``trial_steps``; then ``settled`` (how many trials were settled with
+        ``median_converged_time`` (of the trials that converged, or None),
+        ``trial_steps`` and ``below_safety_distance`` (how many trials had a pair of
+        robots closer than the safety filter's ``D_s``: the filter's promise broken);
+        then ``settled`` (how many trials were settled with
         implicit Euler) and ``settled_counts``, ``settled_fractions`` and
         ``settled_ci95`` of the outcomes after settling (column
         ``settled_outcome``; ``outcome`` where the table has no such column); and
@@ -127,6 +129,8 @@ def summarize_groups(
             entry["trial_steps"] = 0
         entry["shape_error"], entry["drift"] = _steady(rows)
         settled = 0 if rows is None or "settled" not in rows else int(rows["settled"].sum())
+        below = "below_safety_distance"
+        entry[below] = 0 if rows is None or below not in rows else int(rows[below].sum())
         entry["settled"] = settled
         entry.update({f"settled_{k}": v for k, v in _fractions(rows, after, n, outs).items()})
         out.append(entry)
