@@ -41,7 +41,7 @@ def law_field(q, u, sigma, nact, terms, rr, known, axes):
     """
     t = terms
     n = q.shape[0]
-    if len(axes) == 3:  # (a constant: the plane's code below is compiled as it was)
+    if axes.ndim == 3:  # (a constant: the plane's code below is compiled as it was)
         _pairs_in_space(q, u, nact, t, rr, known)
         return
     for i in range(n):

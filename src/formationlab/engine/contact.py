@@ -65,12 +65,12 @@ def segment_clearance_in_space(x0, y0, z0, ex, ey, ez, a):
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
 def _swept(q, qp, i, j, b, a, axes):
     """Least ``r_ij - a_ij`` along the straight step ``qp -> q`` (``System.swept_clearance``),
-    in the plane or in space (``len(axes)``: 2 or 3)."""
+    in the plane or in space (``axes.ndim``: 2 or 3)."""
     x0 = qp[j, 0, b] - qp[i, 0, b]
     y0 = qp[j, 1, b] - qp[i, 1, b]
     ex = (q[j, 0, b] - q[i, 0, b]) - x0
     ey = (q[j, 1, b] - q[i, 1, b]) - y0
-    if len(axes) == 2:
+    if axes.ndim == 2:
         return segment_clearance(x0, y0, ex, ey, a)
     z0 = qp[j, 2, b] - qp[i, 2, b]
     ez = (q[j, 2, b] - q[i, 2, b]) - z0
@@ -80,7 +80,7 @@ def _swept(q, qp, i, j, b, a, axes):
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
 def contact(x, xp, disp, gap, swept, near, nact, terms, rr, axes):
     """Clearances of the centres ``x`` for the step rule (``System.step_verdict``), the
-    positions ``x[:, :len(axes)]`` (2 or 3 axes, the plane or space).
+    positions ``x[:, :axes.ndim]`` (2 or 3 axes, the plane or space).
 
     ``rr[p, b]`` becomes pair ``p``'s length in trial ``b`` at ``x``, which the law's field
     at ``x`` reads at the next step (:func:`formationlab.controllers.stage.law_field`).
@@ -104,7 +104,7 @@ def contact(x, xp, disp, gap, swept, near, nact, terms, rr, axes):
         for b in range(nact):
             dx = x[j, 0, b] - x[i, 0, b]
             dy = x[j, 1, b] - x[i, 1, b]
-            if len(axes) == 3:  # (a constant: compiled for one dimension)
+            if axes.ndim == 3:  # (a constant: compiled for one dimension)
                 dz = x[j, 2, b] - x[i, 2, b]
                 r = math.sqrt(dx * dx + dy * dy + dz * dz)
             else:

@@ -14,18 +14,22 @@ both take the step here.
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
+from numpy.typing import NDArray
 
 __all__ = ["PLANE", "SPACE", "axes_for", "euler"]
 
-#: The positions' axes of a formation in the plane and in space: the loop's functions take
-#: them as an argument (``axes``) and read the dimension as ``len(axes)``, a constant where
-#: numba compiles them, so that each dimension compiles its own code from the one source
-#: (the plane's exactly as before space was added) and no loop runs over a dimension.
-PLANE, SPACE = (0, 1), (0, 1, 2)
+#: The marker of the positions' dimension that the loop's functions take (``axes``): an
+#: array of ``d`` axes of length 1 (``d = 2`` in the plane, 3 in space), whose ``axes.ndim``
+#: is a constant where numba compiles them, so that each dimension compiles its own code from
+#: the one source (the plane's as it was before space was added) and no loop runs over a
+#: dimension. (An array rather than a tuple: numba's parallel loops cannot take tuples.)
+PLANE, SPACE = np.zeros((1, 1)), np.zeros((1, 1, 1))
+PLANE.flags.writeable = SPACE.flags.writeable = False  # (one numba type, here and as globals)
 
 
-def axes_for(dim: int) -> tuple[int, ...]:
+def axes_for(dim: int) -> NDArray[np.float64]:
     """:data:`PLANE` or :data:`SPACE` for positions of ``dim`` coordinates."""
     return SPACE if dim == 3 else PLANE
 
@@ -33,7 +37,7 @@ def axes_for(dim: int) -> tuple[int, ...]:
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
 def euler(x, f, xn, dt, lo, hi, nact, disp, fin, axes):
     """``xn = x + dt f`` for robots ``lo:hi`` of the first ``nact`` trials, whose positions
-    are the first ``len(axes)`` numbers of a state (2 or 3).
+    are the first ``axes.ndim`` numbers of a state (2 or 3).
 
     ``disp[b]`` becomes the larger of itself and trial ``b``'s largest squared move of a
     position (``|xn_i - x_i|^2``, as computed from ``xn``); ``fin[b]`` stays 0 while every
@@ -41,7 +45,7 @@ def euler(x, f, xn, dt, lo, hi, nact, disp, fin, axes):
     otherwise).
     """
     kk = x.shape[1]
-    if len(axes) == 3:  # (a constant: the plane's code below is compiled as it was)
+    if axes.ndim == 3:  # (a constant: the plane's code below is compiled as it was)
         _euler_in_space(x, f, xn, dt, lo, hi, nact, disp, fin)
         return
     for i in range(lo, hi):

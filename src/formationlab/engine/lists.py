@@ -90,12 +90,12 @@ REACH, DRIFT, PAIRS, FRESH, NEED, EXTRA = range(6)
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
 def _swept(q, qp, i, j, a, axes):
     """Least ``r_ij - a`` along the straight step ``qp -> q`` (``System.swept_clearance``),
-    positions ``(n, len(axes))``."""
+    positions ``(n, axes.ndim)``."""
     x0 = qp[j, 0] - qp[i, 0]
     y0 = qp[j, 1] - qp[i, 1]
     ex = (q[j, 0] - q[i, 0]) - x0
     ey = (q[j, 1] - q[i, 1]) - y0
-    if len(axes) == 2:
+    if axes.ndim == 2:
         return segment_clearance(x0, y0, ex, ey, a)
     z0 = qp[j, 2] - qp[i, 2]
     ez = (q[j, 2] - q[i, 2]) - z0
@@ -185,7 +185,7 @@ def _pair(p, q, radius, s0, gain, eta, pairs, fp, axes):
     a = radius[i] + radius[j]
     dx = q[j, 0] - q[i, 0]
     dy = q[j, 1] - q[i, 1]
-    if len(axes) == 3:  # (a constant: compiled for one dimension)
+    if axes.ndim == 3:  # (a constant: compiled for one dimension)
         dz = q[j, 2] - q[i, 2]
         r = math.sqrt(dx * dx + dy * dy + dz * dz)
         fp[p, 2] = dz  # (scaled below)
@@ -195,7 +195,7 @@ def _pair(p, q, radius, s0, gain, eta, pairs, fp, axes):
     g = repulsion_gain(r, clr, gain, eta, s0)  # k_r gamma'(s) / r, Khatib
     fp[p, 0] = g * dx
     fp[p, 1] = g * dy
-    if len(axes) == 3:
+    if axes.ndim == 3:
         fp[p, 2] *= g
     return clr
 
@@ -304,7 +304,7 @@ def _gather_in_space(i, nbr_ptr, nbr_edge, p_ptr, p_rows, fe, fp, u):
 @njit(cache=True, fastmath=False, error_model="numpy", inline="always")
 def items_chunk(c, chunks, q, qp, sweep, L, pairs, n_pairs, fe, fp, on, area_g, least, axes):
     """Chunk ``c`` of ``chunks`` of every kind of item at positions ``q`` ``(n, d)``
-    (``d = len(axes)``; in space the edges and close pairs).
+    (``d = axes.ndim``; in space the edges and close pairs).
 
     ``qp`` is the state the step came from and ``sweep`` twice its largest move
     (with a margin): pairs closer than that are tested along the step. Writes the
@@ -319,7 +319,7 @@ def items_chunk(c, chunks, q, qp, sweep, L, pairs, n_pairs, fe, fp, on, area_g, 
     stride = L.surf_stride
     aa, ab, ac, target, a_gain = L.area_a, L.area_b, L.area_c, L.area_target, L.area_gain
     lo, hi = _part(c, chunks, L.edge_i.shape[0])
-    if len(axes) == 3:  # (a constant: compiled for one dimension)
+    if axes.ndim == 3:  # (a constant: compiled for one dimension)
         g_min, w_min = _edges_in_space(lo, hi, q, qp, sweep, kind, gain, ei, ej, ea, ed, fe)
     else:
         g_min, w_min = _edges(
@@ -362,7 +362,7 @@ def gather_chunk(c, chunks, q, L, p_ptr, p_rows, fe, fp, on, area_g, u, axes):
     )  # fmt: skip
     lo, hi = _part(c, chunks, q.shape[0])
     for i in range(lo, hi):
-        if len(axes) == 3:  # (a constant: compiled for one dimension)
+        if axes.ndim == 3:  # (a constant: compiled for one dimension)
             _gather_in_space(i, L.nbr_ptr, L.nbr_edge, p_ptr, p_rows, fe, fp, u)
         else:
             _gather(i, q, R, p_ptr, p_rows, fe, fp, on, area_g, u)
@@ -408,7 +408,7 @@ def _drift(xn, qb, lo, hi, axes):
     for i in range(lo, hi):
         bx = xn[i, 0, 0] - qb[i, 0]
         by = xn[i, 1, 0] - qb[i, 1]
-        if len(axes) == 3:  # (a constant: compiled for one dimension)
+        if axes.ndim == 3:  # (a constant: compiled for one dimension)
             bz = xn[i, 2, 0] - qb[i, 2]
             far = max(far, bx * bx + by * by + bz * bz)
         else:
@@ -525,8 +525,8 @@ def list_field(x, src, u, ls, L, par, hand, axes):
     computed them at the centres). Returns whether the list had room and the least
     clearance of the centres when the items were computed here (else +inf). ``par`` as for
     :func:`_items`; ``axes``: the positions' (2 or 3, :mod:`.euler`)."""
-    q = x[:, : len(axes), 0]  # (views: the centres and the law's points of the one trial)
-    p = src[:, : len(axes), 0]
+    q = x[:, : axes.ndim, 0]  # (views: the centres and the law's points of the one trial)
+    p = src[:, : axes.ndim, 0]
     least = np.inf
     if ls.kept[FRESH] == 0.0:
         if not _rebuild(q, 0.0, ls, L):
@@ -568,8 +568,8 @@ def list_contact(xn, x, disp, ls, L, par, axes):
     """The verdict's clearances of the step ``x -> xn`` (finite; ``disp`` its largest move):
     the close list made to hold at ``xn``, then the items there. Returns whether the list
     had room, the least clearance at ``xn`` and the least along the step."""
-    q = xn[:, : len(axes), 0]
+    q = xn[:, : axes.ndim, 0]
     if not _rebuild(q, disp, ls, L):
         return False, 0.0, 0.0
-    gap, swept = _items(q, x[:, : len(axes), 0], SWEPT_MARGIN * disp, ls, L, par, axes)
+    gap, swept = _items(q, x[:, : axes.ndim, 0], SWEPT_MARGIN * disp, ls, L, par, axes)
     return True, gap, swept

@@ -92,9 +92,9 @@ class RunNumbers(NamedTuple):
     speed: float  #: the stop rule's speed
     window_step: int  #: start of the drift window (negative: never)
     k_end: int  #: the chunks stop (and stay running) at this step: the end of a block
-    #: the positions' axes (:data:`.euler.PLANE` or :data:`.euler.SPACE`): their number is
-    #: the dimension, a constant for numba, which compiles the loop once for each
-    axes: tuple[int, ...] = PLANE
+    #: the positions' dimension as ``axes.ndim`` (:data:`.euler.PLANE` or
+    #: :data:`.euler.SPACE`), a constant for numba, which compiles the loop once for each
+    axes: NDArray[np.float64] = PLANE
 
 
 class ChunkState(NamedTuple):
@@ -155,13 +155,13 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
     the saving stage (:class:`~.saving.Saving`); when it saves nothing
     (:func:`~.saving.no_saving`) only how each trial ended is kept (``out.x``, ``out.v``;
     with saving, the saved rows hold the last state). The positions are the first
-    ``dim = len(run.axes)`` numbers of a state (2 or 3, :data:`.euler.PLANE` or
+    ``dim = run.axes.ndim`` numbers of a state (2 or 3, :data:`.euler.PLANE` or
     :data:`.euler.SPACE`): numba compiles the loop once for each dimension, from this source
     (in space the single integrator, without marching, obstacles, filter or sensing, which
     the hosts keep on the numpy path).
     """
     axes = run.axes
-    dim = len(axes)  # (a constant where numba compiles the loop)
+    dim = axes.ndim  # (a constant where numba compiles the loop)
     n = st.x.shape[1]
     kk = st.x.shape[2]
     C = st.x.shape[3]

@@ -185,7 +185,7 @@ def _run_group(
     kept = no_saving()  # (how each trial ended)
     st = chunk_state(
         x, B=B, mc=out.mc, turns=robots.kind in (HEADING, NEAR_IDENTITY),
-        centralized=flt is not None and flt.kind == CENTRALIZED, dim=len(numbers.axes),
+        centralized=flt is not None and flt.kind == CENTRALIZED, dim=numbers.axes.ndim,
     )  # fmt: skip
     sn = ss = None
     blocks = False

@@ -115,10 +115,10 @@ def rates(x, hc, hs, u, f, vel, nact, model, axes):
     limited = vmax < np.inf or wmax < np.inf  # no limit: no scaling (limit_unicycle)
     if model.kind == SINGLE and not limited:  # f = u (the same numbers as a scale of 1)
         for i in range(n):
-            for d in range(len(axes)):
+            for d in range(axes.ndim):
                 for b in range(nact):
                     f[i, d, b] = u[i, d, b]
-    elif model.kind == SINGLE and len(axes) == 3:  # (a constant: compiled in space only)
+    elif model.kind == SINGLE and axes.ndim == 3:  # (a constant: compiled in space only)
         for i in range(n):
             for b in range(nact):
                 ux = u[i, 0, b]
@@ -208,7 +208,7 @@ def speed(f, b, model, axes):
     (``axes``: the positions'; in space the single integrator's)."""
     top = 0.0
     for i in range(f.shape[0]):
-        if len(axes) == 3:  # (a constant: compiled in space only)
+        if axes.ndim == 3:  # (a constant: compiled in space only)
             fx, fy, fz = f[i, 0, b], f[i, 1, b], f[i, 2, b]
             s = math.sqrt(fx * fx + fy * fy + fz * fz)
         else:
