@@ -42,7 +42,7 @@ def law_field(q, u, sigma, nact, terms, rr, known, axes):
     t = terms
     n = q.shape[0]
     if axes.ndim == 3:  # (a constant: the plane's code below is compiled as it was)
-        _pairs_in_space(q, u, nact, t, rr, known)
+        _pairs_in_space(q, u, nact, t, rr, known, axes)
         return
     for i in range(n):
         for b in range(nact):
@@ -56,10 +56,7 @@ def law_field(q, u, sigma, nact, terms, rr, known, axes):
         j = t.pair_j[p]
         a = t.pair_contact[p]
         if not known:
-            for b in range(nact):
-                dx = q[j, 0, b] - q[i, 0, b]
-                dy = q[j, 1, b] - q[i, 1, b]
-                rr[p, b] = math.sqrt(dx * dx + dy * dy)
+            _lengths(q, rr, p, i, j, nact, axes)
         if t.pair_is_edge[p]:
             d = t.pair_distance[p]
             bx = t.pair_bearing[p * t.bearing_stride, 0]
@@ -128,7 +125,21 @@ def law_field(q, u, sigma, nact, terms, rr, known, axes):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
-def _pairs_in_space(q, u, nact, t, rr, known):
+def _lengths(q, rr, p, i, j, nact, axes):
+    """``rr[p, b] = |q_j - q_i|`` in each of the first ``nact`` trials (``axes.ndim``: 2 or 3
+    coordinates)."""
+    for b in range(nact):
+        dx = q[j, 0, b] - q[i, 0, b]
+        dy = q[j, 1, b] - q[i, 1, b]
+        if axes.ndim == 3:  # (a constant: compiled for one dimension)
+            dz = q[j, 2, b] - q[i, 2, b]
+            rr[p, b] = math.sqrt(dx * dx + dy * dy + dz * dz)
+        else:
+            rr[p, b] = math.sqrt(dx * dx + dy * dy)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
+def _pairs_in_space(q, u, nact, t, rr, known, axes):
     """:func:`law_field` of a formation in space (``q`` ``(n, 3, C)``): each edge's force
     ``g r_ij`` (:func:`.kinds.edges.edge_gain`: eq. 8, or Krick et al.'s) and Khatib's
     repulsion between the other pairs; the laws with these terms only compile in space
@@ -145,11 +156,7 @@ def _pairs_in_space(q, u, nact, t, rr, known):
         j = t.pair_j[p]
         a = t.pair_contact[p]
         if not known:
-            for b in range(nact):
-                dx = q[j, 0, b] - q[i, 0, b]
-                dy = q[j, 1, b] - q[i, 1, b]
-                dz = q[j, 2, b] - q[i, 2, b]
-                rr[p, b] = math.sqrt(dx * dx + dy * dy + dz * dz)
+            _lengths(q, rr, p, i, j, nact, axes)
         d = t.pair_distance[p]
         edge = t.pair_is_edge[p]
         for b in range(nact):

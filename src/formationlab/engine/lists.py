@@ -135,13 +135,7 @@ def _edges(lo, hi, q, qp, sweep, kind, gain, edge_i, edge_j, edge_a, edge_d, bea
         fx[e] = f0  # eq. (8), Krick et al.'s, or Zhao and Zelazo's (its kind)
         fy[e] = f1
         clr[e] = r - ea[e]
-    g_min = np.inf
-    w_min = np.inf
-    for e in range(hi - lo):
-        g_min = min(g_min, clr[e])
-        if clr[e] <= sweep:  # tested along the step
-            w_min = min(w_min, _swept(q, qp, ei[e], ej[e], ea[e], PLANE))
-    return g_min, w_min
+    return _least(hi - lo, q, qp, sweep, ei, ej, ea, clr, PLANE)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
@@ -167,12 +161,19 @@ def _edges_in_space(lo, hi, q, qp, sweep, kind, gain, edge_i, edge_j, edge_a, ed
         fy[e] = g * dy
         fz[e] = g * dz
         clr[e] = r - ea[e]
+    return _least(hi - lo, q, qp, sweep, ei, ej, ea, clr, SPACE)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", inline="always")
+def _least(m, q, qp, sweep, ei, ej, ea, clr, axes):
+    """The least clearance of ``m`` edges (``clr``) and the least along the step of those
+    within ``sweep``."""
     g_min = np.inf
     w_min = np.inf
-    for e in range(hi - lo):
+    for e in range(m):
         g_min = min(g_min, clr[e])
         if clr[e] <= sweep:  # tested along the step
-            w_min = min(w_min, _swept(q, qp, ei[e], ej[e], ea[e], SPACE))
+            w_min = min(w_min, _swept(q, qp, ei[e], ej[e], ea[e], axes))
     return g_min, w_min
 
 
