@@ -189,7 +189,8 @@ class SingleRun:
         model = system.model if system is not None else SingleIntegrator()
         self.model = model_terms(model)
         kind = self.model.kind
-        dim = system.formation.dim if system is not None else 2
+        # (without a system, single integrators: the state is the positions)
+        dim = system.formation.dim if system is not None else x0.shape[1]
         self.obstacles = tuple(system.obstacles) if system is not None else ()
         self.safety = (  # (its rows guard steps of dt)
             system.at_step(dt).safety if system is not None and system.filtered else None
