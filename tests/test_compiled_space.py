@@ -17,8 +17,10 @@ import numpy as np
 import pytest
 
 import formationlab as fl
+from formationlab.dynamics import System
 from formationlab.engine.layout import PAIRS_UP_TO
 from formationlab.errors import ParameterError
+from formationlab.integrators.compiled import compiled_terms, run_compiled
 from formationlab.models import DoubleIntegrator
 from formationlab.studies.batch import batch_backend, run_batch
 
@@ -72,6 +74,11 @@ def test_a_swarm_in_space_on_the_lists_layout_is_the_drivers() -> None:
     assert a.status == b.status
     assert np.max(np.abs(a.q - b.q)) <= 1e-12 * np.max(np.abs(b.q))
     assert np.max(np.abs(a.q[-1] - a.q[0])) > 1e-3
+    # the run without a system (the benchmarks' call): single integrators in space
+    law = fl.DistanceLaw()
+    layout = compiled_terms(System(formation=formation, law=law), fl.Euler(dt=1e-2))
+    out = run_compiled(layout, q0, dt=1e-2, n_steps=30, save_every=5)
+    np.testing.assert_array_equal(out.x, a.q)
 
 
 def test_a_swarm_in_space_sees_contact_in_all_three_axes() -> None:
