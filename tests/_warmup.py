@@ -31,8 +31,12 @@ def _many(x0):
 
 
 def part0() -> None:
-    """The batch kernel of obstacles and safety filters (the longest compilation)."""
+    """The batch kernel of obstacles and safety filters (the longest compilation), and the
+    loop in space on both layouts (``tests/test_compiled_space.py``)."""
     fl, f, q0 = _triangle()
+    from formationlab.engine.layout import PAIRS_UP_TO
+    from formationlab.formation.graphs import delaunay_edges
+    from formationlab.formation.templates import lattice
     from formationlab.safety import Circle, SafetyFilter
     from formationlab.studies.batch import run_batch
 
@@ -41,6 +45,11 @@ def part0() -> None:
         cfg = SafetyFilter(filter=kind, distance=0.25)
         run_batch(f, fl.get_law("distance"), _many(q0), dt=1e-2, duration=0.05, safety=cfg,
                   obstacles=disc)  # fmt: skip
+    for count in (4, PAIRS_UP_TO + 8):  # the pairs layout, then the lists layout
+        tpl = lattice("fcc", count)
+        edges = "complete" if count <= PAIRS_UP_TO else delaunay_edges(tpl)
+        space = fl.Formation.from_template(tpl, edges=edges, one_based=False)
+        fl.simulate(space, fl.get_law("distance"), tpl, duration=0.05)
 
 
 def part1() -> None:

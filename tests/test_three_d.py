@@ -196,8 +196,10 @@ def test_what_cannot_work_in_space_is_refused_by_name() -> None:
         fl.simulate(f, fl.DistanceLaw(), q0, duration=0.1,
                     obstacles=[Circle(center=(9.0, 9.0), radius=0.5)])  # fmt: skip
     assert err.value.key == "obstacles"
-    with pytest.raises(ParameterError, match="numpy"):
-        fl.DistanceLaw().compiled_terms(f)
+    for law in (fl.ChiralityRestrictedLaw(), fl.BearingLaw()):  # (the compiled loop in space
+        with pytest.raises(ParameterError, match="numpy path"):  # steps the laws of distances)
+            law.compiled_terms(f)
+    assert fl.DistanceLaw().compiled_terms(f).pair_i.size == 6
 
 
 def test_the_switching_plane_is_parallel_to_the_face() -> None:

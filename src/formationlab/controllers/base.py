@@ -103,6 +103,11 @@ class Law:
     #: with kernel terms; space for a law whose every term is an edge's or a pair's, a
     #: function of one measured relative position and its length (the laws of distances).
     sensed_dims: ClassVar[tuple[int, ...]] = (2,)
+    #: The spaces in which the compiled loop (:mod:`formationlab.engine.loop`) steps the law
+    #: (:meth:`compiled_terms`): the plane for every law with kernel terms; space for a law
+    #: whose every term is an edge's along ``r_ij`` or Khatib's repulsion of a pair (the laws
+    #: of distances); the others run on the numpy path there.
+    compiled_dims: ClassVar[tuple[int, ...]] = (2,)
     #: Whether the law is built from its gains alone (its defaults run); False for a law
     #: that needs a file (the learned law's parameters), which :func:`laws_in` leaves out.
     from_gains: ClassVar[bool] = True
@@ -182,10 +187,12 @@ class Law:
         :meth:`kernel_terms` would otherwise inherit terms of another law.
         """
 
-        if formation.dim != 2:
+        if formation.dim not in self.compiled_dims:
+            able = sorted(n for n, c in LAWS.items() if formation.dim in c.compiled_dims)
             raise ParameterError(
-                "the compiled loop steps formations in the plane; a formation in space runs "
-                'on the numpy path (backend="numpy", which "auto" chooses)'
+                f"the compiled loop steps formations in space under the laws "
+                f"{', '.join(repr(a) for a in able)}; the law {self.name!r} runs there on the "
+                'numpy path (backend="numpy", which "auto" chooses)'
             )
         return self._own_terms(formation, pairs=pairs)
 

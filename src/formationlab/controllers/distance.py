@@ -161,6 +161,7 @@ class DistanceLaw(Law):
 
     name = "distance"
     sensed_dims = (2, 3)  # edges and pairs only: lengths, any space
+    compiled_dims = (2, 3)  # (the same reason: the compiled loop's field in space)
     barrier_at_contact = True
     k_c: float = 2.0
     repulsion: Repulsion = field(default_factory=Repulsion)

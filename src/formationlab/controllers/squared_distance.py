@@ -136,6 +136,7 @@ class SquaredDistanceLaw(Law):
 
     name = "squared-distance"
     sensed_dims = (2, 3)  # edges and pairs only: lengths, any space
+    compiled_dims = (2, 3)  # (the same reason: the compiled loop's field in space)
     k: float = 1.0
     k_r: float = 2.0
     repulsion: Repulsion = field(default_factory=Repulsion)

@@ -19,7 +19,7 @@ import math
 
 from numba import njit
 
-from .kinds.edges import edge_force, edge_force_at
+from .kinds.edges import edge_force, edge_force_at, edge_gain
 from .kinds.khatib import repulsion_gain
 from .kinds.restriction import restriction_force, switched_on, switching, triangle_product
 from .kinds.signed_area import area_force, area_gain, signed_area
@@ -28,17 +28,22 @@ __all__ = ["law_field", "local_field"]
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def law_field(q, u, sigma, nact, terms, rr, known):
+def law_field(q, u, sigma, nact, terms, rr, known, axes):
     """``u = f(q)`` for the first ``nact`` trials of a chunk.
 
     ``rr[p, b]`` is pair ``p``'s length ``r_ij`` in trial ``b``: given when ``known`` (the
     contact rule of the step that led to ``q`` computed it, :func:`formationlab.engine.
     contact.contact`), else computed here first, so that each state's square roots are taken
     once. Plain arithmetic, no branch that calls: every loop over trials is vectorised (the
-    engine decides contact, in loops of its own).
+    engine decides contact, in loops of its own). ``axes``: the positions' axes, whose
+    length (2 or 3, a constant where numba compiles it) is the dimension; in space the law
+    is its edges and pairs (:func:`_pairs_in_space`).
     """
     t = terms
     n = q.shape[0]
+    if axes.ndim == 3:  # (a constant: the plane's code below is compiled as it was)
+        _pairs_in_space(q, u, nact, t, rr, known, axes)
+        return
     for i in range(n):
         for b in range(nact):
             u[i, 0, b] = 0.0
@@ -51,10 +56,7 @@ def law_field(q, u, sigma, nact, terms, rr, known):
         j = t.pair_j[p]
         a = t.pair_contact[p]
         if not known:
-            for b in range(nact):
-                dx = q[j, 0, b] - q[i, 0, b]
-                dy = q[j, 1, b] - q[i, 1, b]
-                rr[p, b] = math.sqrt(dx * dx + dy * dy)
+            _lengths(q, rr, p, i, j, nact, axes)
         if t.pair_is_edge[p]:
             d = t.pair_distance[p]
             bx = t.pair_bearing[p * t.bearing_stride, 0]
@@ -120,6 +122,58 @@ def law_field(q, u, sigma, nact, terms, rr, known):
             fx, fy = area_force(g, xa, ya, xb, yb)
             u[ic, 0, b] += fx
             u[ic, 1, b] += fy
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
+def _lengths(q, rr, p, i, j, nact, axes):
+    """``rr[p, b] = |q_j - q_i|`` in each of the first ``nact`` trials (``axes.ndim``: 2 or 3
+    coordinates)."""
+    for b in range(nact):
+        dx = q[j, 0, b] - q[i, 0, b]
+        dy = q[j, 1, b] - q[i, 1, b]
+        if axes.ndim == 3:  # (a constant: compiled for one dimension)
+            dz = q[j, 2, b] - q[i, 2, b]
+            rr[p, b] = math.sqrt(dx * dx + dy * dy + dz * dz)
+        else:
+            rr[p, b] = math.sqrt(dx * dx + dy * dy)
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
+def _pairs_in_space(q, u, nact, t, rr, known, axes):
+    """:func:`law_field` of a formation in space (``q`` ``(n, 3, C)``): each edge's force
+    ``g r_ij`` (:func:`.kinds.edges.edge_gain`: eq. 8, or Krick et al.'s) and Khatib's
+    repulsion between the other pairs; the laws with these terms only compile in space
+    (``Law.compiled_dims``)."""
+    n = q.shape[0]
+    for i in range(n):
+        for b in range(nact):
+            u[i, 0, b] = 0.0
+            u[i, 1, b] = 0.0
+            u[i, 2, b] = 0.0
+    s0 = t.repulsion_influence
+    for p in range(t.pair_i.shape[0]):
+        i = t.pair_i[p]
+        j = t.pair_j[p]
+        a = t.pair_contact[p]
+        if not known:
+            _lengths(q, rr, p, i, j, nact, axes)
+        d = t.pair_distance[p]
+        edge = t.pair_is_edge[p]
+        for b in range(nact):
+            dx = q[j, 0, b] - q[i, 0, b]
+            dy = q[j, 1, b] - q[i, 1, b]
+            dz = q[j, 2, b] - q[i, 2, b]
+            r = rr[p, b]
+            if edge:
+                g = edge_gain(t.kind, r, dx * dx + dy * dy + dz * dz, d, a, t.edge_gain)  # (8)
+            else:
+                g = repulsion_gain(r, r - a, t.repulsion_gain, t.repulsion_eta, s0)  # Khatib
+            u[i, 0, b] += g * dx
+            u[i, 1, b] += g * dy
+            u[i, 2, b] += g * dz
+            u[j, 0, b] -= g * dx
+            u[j, 1, b] -= g * dy
+            u[j, 2, b] -= g * dz
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)

@@ -25,7 +25,7 @@ from numba import njit
 from ..models.stage import headings, rates
 from ..models.terms import HEADING, NEAR_IDENTITY
 from .contact import contact, verdict
-from .euler import euler
+from .euler import PLANE, euler
 
 __all__ = ["commanded_rates", "commanded_step"]
 
@@ -44,7 +44,7 @@ def commanded_rates(x, u, f, model):
     hs = np.empty_like(hc)
     if turns:  # the library's cos and sin of each heading (nothing carried between calls)
         headings(x, hc, hs, np.empty_like(hc), np.empty_like(hc), B)
-    rates(x, hc, hs, u, f, np.empty(B), B, model)
+    rates(x, hc, hs, u, f, np.empty(B), B, model, PLANE)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
@@ -64,10 +64,10 @@ def commanded_step(x, f, xn, dt, terms, code):
     swept = np.empty(B)
     near = np.empty(B)
     rr = np.empty((terms.pair_i.shape[0], B))
-    euler(x, f, xn, dt, 0, n, B, disp, fin)
+    euler(x, f, xn, dt, 0, n, B, disp, fin, PLANE)  # (the environments are planar)
     for b in range(B):
         disp[b] = math.sqrt(disp[b])
-    contact(xn, x, disp, gap, swept, near, B, terms, rr)
+    contact(xn, x, disp, gap, swept, near, B, terms, rr, PLANE)
     for b in range(B):
         code[b] = verdict(fin[b], gap[b], swept[b])
     return rr

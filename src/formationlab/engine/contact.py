@@ -26,6 +26,7 @@ __all__ = [
     "TOO_LARGE",
     "contact",
     "segment_clearance",
+    "segment_clearance_in_space",
     "verdict",
 ]
 
@@ -43,28 +44,43 @@ def segment_clearance(x0, y0, ex, ey, a):
     """Least ``|(x0, y0) + s (ex, ey)| - a`` over ``s`` in ``[0, 1]``.
 
     A pair's clearance along a straight step: ``(x0, y0) = q_j - q_i`` at its start,
-    ``(ex, ey)`` the change of ``q_j - q_i`` over the step, ``a = a_ij``.
+    ``(ex, ey)`` the change of ``q_j - q_i`` over the step, ``a = a_ij``. The plane's case
+    of :func:`segment_clearance_in_space` (``z = 0`` adds exact zeros: the same numbers).
     """
-    dd = ex * ex + ey * ey
-    s = min(max(-(x0 * ex + y0 * ey) / (dd if dd > 0 else 1.0), 0.0), 1.0)
-    mx = x0 + s * ex
-    my = y0 + s * ey
-    return math.sqrt(mx * mx + my * my) - a
+    return segment_clearance_in_space(x0, y0, 0.0, ex, ey, 0.0, a)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
-def _swept(q, qp, i, j, b, a):
-    """Least ``r_ij - a_ij`` along the straight step ``qp -> q`` (``System.swept_clearance``)."""
+def segment_clearance_in_space(x0, y0, z0, ex, ey, ez, a):
+    """Least ``|(x0, y0, z0) + s (ex, ey, ez)| - a`` over ``s`` in ``[0, 1]``
+    (:func:`segment_clearance` in space)."""
+    dd = ex * ex + ey * ey + ez * ez
+    s = min(max(-(x0 * ex + y0 * ey + z0 * ez) / (dd if dd > 0 else 1.0), 0.0), 1.0)
+    mx = x0 + s * ex
+    my = y0 + s * ey
+    mz = z0 + s * ez
+    return math.sqrt(mx * mx + my * my + mz * mz) - a
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
+def _swept(q, qp, i, j, b, a, axes):
+    """Least ``r_ij - a_ij`` along the straight step ``qp -> q`` (``System.swept_clearance``),
+    in the plane or in space (``axes.ndim``: 2 or 3)."""
     x0 = qp[j, 0, b] - qp[i, 0, b]
     y0 = qp[j, 1, b] - qp[i, 1, b]
     ex = (q[j, 0, b] - q[i, 0, b]) - x0
     ey = (q[j, 1, b] - q[i, 1, b]) - y0
-    return segment_clearance(x0, y0, ex, ey, a)
+    if axes.ndim == 2:
+        return segment_clearance(x0, y0, ex, ey, a)
+    z0 = qp[j, 2, b] - qp[i, 2, b]
+    ez = (q[j, 2, b] - q[i, 2, b]) - z0
+    return segment_clearance_in_space(x0, y0, z0, ex, ey, ez, a)
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def contact(x, xp, disp, gap, swept, near, nact, terms, rr):
-    """Clearances of the centres ``x`` for the step rule (``System.step_verdict``).
+def contact(x, xp, disp, gap, swept, near, nact, terms, rr, axes):
+    """Clearances of the centres ``x`` for the step rule (``System.step_verdict``), the
+    positions ``x[:, :axes.ndim]`` (2 or 3 axes, the plane or space).
 
     ``rr[p, b]`` becomes pair ``p``'s length in trial ``b`` at ``x``, which the law's field
     at ``x`` reads at the next step (:func:`formationlab.controllers.stage.law_field`).
@@ -88,7 +104,11 @@ def contact(x, xp, disp, gap, swept, near, nact, terms, rr):
         for b in range(nact):
             dx = x[j, 0, b] - x[i, 0, b]
             dy = x[j, 1, b] - x[i, 1, b]
-            r = math.sqrt(dx * dx + dy * dy)
+            if axes.ndim == 3:  # (a constant: compiled for one dimension)
+                dz = x[j, 2, b] - x[i, 2, b]
+                r = math.sqrt(dx * dx + dy * dy + dz * dz)
+            else:
+                r = math.sqrt(dx * dx + dy * dy)
             rr[p, b] = r
             clr = r - a
             gap[b] = min(gap[b], clr)
@@ -101,7 +121,7 @@ def contact(x, xp, disp, gap, swept, near, nact, terms, rr):
             j = terms.pair_j[p]
             a = terms.pair_contact[p]
             if rr[p, b] - a <= SWEPT_MARGIN * disp[b]:
-                swept[b] = min(swept[b], _swept(x, xp, i, j, b, a))
+                swept[b] = min(swept[b], _swept(x, xp, i, j, b, a, axes))
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")

@@ -62,7 +62,7 @@ from .contact import (
     contact,
     verdict,
 )
-from .euler import euler
+from .euler import PLANE, euler
 from .lists import list_contact, list_field, list_step
 from .saving import save
 
@@ -92,6 +92,9 @@ class RunNumbers(NamedTuple):
     speed: float  #: the stop rule's speed
     window_step: int  #: start of the drift window (negative: never)
     k_end: int  #: the chunks stop (and stay running) at this step: the end of a block
+    #: the positions' dimension as ``axes.ndim`` (:data:`.euler.PLANE` or
+    #: :data:`.euler.SPACE`), a constant for numba, which compiles the loop once for each
+    axes: NDArray[np.float64] = PLANE
 
 
 class ChunkState(NamedTuple):
@@ -104,7 +107,7 @@ class ChunkState(NamedTuple):
 
     x: NDArray[np.float64]  #: (G, n, k, C)
     xn: NDArray[np.float64]  #: (G, n, k, C)
-    qc: NDArray[np.float64]  #: (G, n, 2, C) positions at the previous check
+    qc: NDArray[np.float64]  #: (G, n, d, C) positions at the previous check
     hc: NDArray[np.float64]  #: (G, n, C) unicycles' cos theta (else (G, 1, 1))
     hs: NDArray[np.float64]  #: sin theta
     hcl: NDArray[np.float64]  #: what rounding left out of them (models.stage.turn)
@@ -135,7 +138,7 @@ class TrialOutputs(NamedTuple):
     #: within its sensing radius) over accepted states; inf without a filter
     md: NDArray[np.float64]
     ns: NDArray[np.float64]  #: (B,) net speed over the last check interval
-    qw: NDArray[np.float64]  #: (B, n, 2) positions at the start of the drift window
+    qw: NDArray[np.float64]  #: (B, n, d) positions at the start of the drift window
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
@@ -157,8 +160,14 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
     thread; ``law`` None, and the chunk one trial of any model, without sensing). ``sv``:
     the saving stage (:class:`~.saving.Saving`); when it saves nothing
     (:func:`~.saving.no_saving`) only how each trial ended is kept (``out.x``, ``out.v``;
-    with saving, the saved rows hold the last state).
+    with saving, the saved rows hold the last state). The positions are the first
+    ``dim = run.axes.ndim`` numbers of a state (2 or 3, :data:`.euler.PLANE` or
+    :data:`.euler.SPACE`): numba compiles the loop once for each dimension, from this source
+    (in space the single integrator, without marching, obstacles, filter or sensing, which
+    the hosts keep on the numpy path).
     """
+    axes = run.axes
+    dim = axes.ndim  # (a constant where numba compiles the loop)
     n = st.x.shape[1]
     kk = st.x.shape[2]
     C = st.x.shape[3]
@@ -175,7 +184,7 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
     qc = st.qc[c]
     hc, hs, hcl, hsl = st.hc[c], st.hs[c], st.hcl[c], st.hsl[c]
     x, xn = (st.x[c], st.xn[c]) if st.meta[c, 3] == 0 else (st.xn[c], st.x[c])
-    u = np.empty((n, 2, C))
+    u = np.empty((n, dim, C))
     f = u if same else np.empty((n, kk, C))
     p = np.empty((n, 2, C) if hand else (1, 2, 1))  # hand points
     scratch = np.empty(C)  # the law's surface decisions, the unicycles' speeds
@@ -217,7 +226,7 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
             points(x, hc, hs, p, nact, model)
             src = p
         if lists is not None:  # the law over its lists (one trial)
-            room, start = list_field(x, src, u, ls, lay, par, hand)
+            room, start = list_field(x, src, u, ls, lay, par, hand, axes)
             if not room:  # the close list needs more room: the host grows it
                 _pause(st, c, nact, step, kc, GROW)
                 return
@@ -226,7 +235,7 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
             if sn is not None and sn.measured:  # each robot's command from its measurements
                 sensed_field(src, x, hc, hs, u, ul, nact, ids, k, law, sn, ss)
             else:
-                law_field(src, u, scratch, nact, law, rr, known)
+                law_field(src, u, scratch, nact, law, rr, known, axes)
         if mt.kind != STILL:  # the formation marches
             march(src, u, nact, k, mt, acc)
         if obs is not None:  # obstacles' repulsion and the filter, trial by trial
@@ -248,14 +257,14 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
                 _pause(st, c, nact, step, kc, PAUSED)
                 return
         if not same:
-            rates(x, hc, hs, u, f, scratch, nact, model)
+            rates(x, hc, hs, u, f, scratch, nact, model, axes)
         if sn is not None:  # robots stopped by a fault
             halt(f, k * dt, sn, nact)
         if k == run.window_step:  # start of the drift window (the driver's q_window)
             for b in range(nact):
                 for i in range(n):
-                    out.qw[ids[b], i, 0] = x[i, 0, b]
-                    out.qw[ids[b], i, 1] = x[i, 1, b]
+                    for d in range(dim):
+                        out.qw[ids[b], i, d] = x[i, d, b]
         # (code[b] is -1 for every live trial here: compaction keeps it so)
         ended = 0  # trials that end at this step
         checked = run.check_every > 0 and (k % run.check_every == 0 or k == run.n_steps)
@@ -267,13 +276,17 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
                     for b in range(nact):
                         dx = x[i, 0, b] - qc[i, 0, b]
                         dy = x[i, 1, b] - qc[i, 1, b]
-                        gap[b] = max(gap[b], dx * dx + dy * dy)
+                        if dim == 3:
+                            dz = x[i, 2, b] - qc[i, 2, b]
+                            gap[b] = max(gap[b], dx * dx + dy * dy + dz * dz)
+                        else:
+                            gap[b] = max(gap[b], dx * dx + dy * dy)
             for b in range(nact):
                 nan = False
                 for i in range(n):
                     for d in range(kk):
                         nan = nan or f[i, d, b] != f[i, d, b]
-                still = (not nan) and speed(f, b, model) <= run.speed
+                still = (not nan) and speed(f, b, model, axes) <= run.speed
                 if kc >= 0:
                     net = math.sqrt(gap[b]) / ((k - kc) * dt)
                     ns[b] = net
@@ -296,16 +309,16 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
                 fin[b] = 0.0
                 disp[b] = 0.0
             if lists is not None:
-                list_step(x, f, xn, dt, ls, disp, fin, par)
+                list_step(x, f, xn, dt, ls, disp, fin, par, axes)
             else:
-                euler(x, f, xn, dt, 0, n, nact, disp, fin)
+                euler(x, f, xn, dt, 0, n, nact, disp, fin, axes)
             for b in range(nact):
                 disp[b] = math.sqrt(disp[b])
             if law is not None:
-                contact(xn, x, disp, gap, swept, near, nact, law, rr)
+                contact(xn, x, disp, gap, swept, near, nact, law, rr, axes)
                 known = not hand  # (the law acts on the centres, whose lengths these are)
             if lists is not None and fin[0] == 0.0:  # (not finite: judged before the list)
-                room, gap[0], swept[0] = list_contact(xn, x, disp[0], ls, lay, par)
+                room, gap[0], swept[0] = list_contact(xn, x, disp[0], ls, lay, par, axes)
                 if not room:  # the step is taken again, with room for the list
                     _pause(st, c, nact, step, kc, GROW)
                     return
@@ -338,7 +351,7 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
                 turn(xn, x, hc, hs, hcl, hsl, wide, nact)
         if checked:  # (after the verdict: a chunk paused before here takes the step again)
             for i in range(n):
-                for d in range(2):
+                for d in range(dim):
                     for b in range(nact):
                         qc[i, d, b] = x[i, d, b]
             kc = k
@@ -369,8 +382,8 @@ def step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, lists, sv):
                 for i in range(n):
                     for d in range(kk):
                         x[i, d, b] = x[i, d, last]
-                    qc[i, 0, b] = qc[i, 0, last]
-                    qc[i, 1, b] = qc[i, 1, last]
+                    for d in range(dim):
+                        qc[i, d, b] = qc[i, d, last]
                     if turns:
                         hc[i, b] = hc[i, last]
                         hs[i, b] = hs[i, last]

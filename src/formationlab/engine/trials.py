@@ -23,16 +23,18 @@ from numpy.typing import NDArray
 
 from ..controllers import Law
 from ..dynamics import System
+from ..errors import ParameterError
 from ..formation.spec import Formation
 from ..marching.terms import march_terms
 from ..models import RobotModel
-from ..models.terms import HEADING, NEAR_IDENTITY, model_terms
+from ..models.terms import HEADING, NEAR_IDENTITY, SINGLE, model_terms
 from ..outcomes.analysis import Tolerances
 from ..safety import barrier_filter
 from ..safety.obstacle_terms import obstacle_terms
 from ..safety.stage import CENTRALIZED, NONE, filter_terms
 from ..sensing import BLOCK, Channel, Faults, Seed, Sensing
 from ..sensing.stage import sensing_arrays, trial_bytes
+from .euler import axes_for
 from .loop import DONE, RUNNING, ChunkState, RunNumbers, TrialOutputs, run_chunks, step_chunk
 from .saving import no_saving
 
@@ -59,7 +61,7 @@ class TrialRun(NamedTuple):
     steps: NDArray[np.int64]  #: (B,) accepted steps
     min_clearance: NDArray[np.float64]  #: (B,) least robot-robot clearance over accepted states
     net_speed: NDArray[np.float64]  #: (B,) net speed over the last check interval
-    q_window: NDArray[np.float64]  #: (B, n, 2) positions at the start of the drift window
+    q_window: NDArray[np.float64]  #: (B, n, d) positions at the start of the drift window
     window_step: int  #: that step (negative: never reached)
     #: (B,) least robot-obstacle clearance over accepted states (inf without obstacles)
     min_obstacle_clearance: NDArray[np.float64]
@@ -100,15 +102,21 @@ def run_trials(
     )  # fmt: skip
     terms = law.compiled_terms(formation).writable()  # one signature for every law
     robots = model_terms(model)
+    sensed = (sensing is not None and not sensing.ideal) or (faults is not None and faults.any)
+    if formation.dim == 3 and (robots.kind != SINGLE or sensed):
+        raise ParameterError(
+            "the compiled loop steps formations in space on single integrators without "
+            f'sensing or faults; run this one ({model.name!r}) with backend="numpy"'
+        )
     stage = safety_stage(law, obstacles, safety)
     B, n, k = q0.shape
     window_step = n_steps - tol.drift_steps(dt)  # negative: never reached
     # (mc and mo start as the least clearances of the starts, as the driver starts them)
-    out = trial_outputs(B, n, k)
+    dim = formation.dim
+    out = trial_outputs(B, n, k, dim=dim)
     out.mc[:], out.mo[:] = system.clearances(q0)
     numbers = RunNumbers(float(dt), int(n_steps), int(check_every), float(tol.speed),
-                         int(window_step), int(n_steps) + 1)  # fmt: skip
-    sensed = (sensing is not None and not sensing.ideal) or (faults is not None and faults.any)
+                         int(window_step), int(n_steps) + 1, axes_for(dim))  # fmt: skip
     if not sensed:
         _run_group(q0, out, chunk, terms, robots, stage, None, numbers, safety, obstacles)
         return _trial_run(out, window_step, system)
@@ -190,7 +198,7 @@ def _run_group(
     kept = no_saving()  # (how each trial ended)
     st = chunk_state(
         x, B=B, mc=out.mc, mo=out.mo, turns=robots.kind in (HEADING, NEAR_IDENTITY),
-        centralized=flt is not None and flt.kind == CENTRALIZED,
+        centralized=flt is not None and flt.kind == CENTRALIZED, dim=numbers.axes.ndim,
     )  # fmt: skip
     sn = ss = None
     blocks = False
@@ -231,13 +239,13 @@ def _run_group(
 def chunk_state(
     x: NDArray[np.float64], *, B: int | None = None, mc: NDArray[np.float64] | None = None,
     mo: NDArray[np.float64] | None = None, turns: bool = False, centralized: bool = False,
-    stop_rule: bool = True,
+    stop_rule: bool = True, dim: int = 2,
 ) -> ChunkState:  # fmt: skip
     """The chunks' state at the start, from the starts ``x`` ``(G, n, k, C)``: the ``B``
     trials (default all) in order, chunk by chunk; ``mc`` and ``mo`` ``(B,)`` their
     robot-robot and robot-obstacle clearances (default +inf); ``turns``: room for headings;
-    ``centralized``: room for QP pauses; ``stop_rule``: room for the positions at the stop
-    rule's checks."""
+    ``centralized``: room for QP pauses; ``stop_rule``: room for the positions (``dim``
+    numbers) at the stop rule's checks."""
     G, n, _, C = x.shape
     B = G * C if B is None else B
     ids = np.zeros((G, C), np.int64)
@@ -254,7 +262,7 @@ def chunk_state(
         meta[g] = (sel.size, 0, -1, 0, RUNNING, 0)
     hshape = (G, n, C) if turns else (G, 1, 1)
     qp = (G, C, n, 2) if centralized else (1, 1, n, 2)
-    qc = np.array(x[:, :, :2], order="C") if stop_rule else np.zeros((G, 1, 2, C))
+    qc = np.array(x[:, :, :dim], order="C") if stop_rule else np.zeros((G, 1, dim, C))
     return ChunkState(
         x=x, xn=np.zeros_like(x), qc=qc,
         hc=np.zeros(hshape), hs=np.zeros(hshape), hcl=np.zeros(hshape), hsl=np.zeros(hshape),
@@ -265,13 +273,14 @@ def chunk_state(
     )  # fmt: skip
 
 
-def trial_outputs(B: int, n: int, k: int, *, kept: bool = True) -> TrialOutputs:
-    """Room for how ``B`` trials of ``n`` robots (``k`` numbers each) end; without ``kept``
-    none for their final states and drift windows (a run that saves its path has them)."""
+def trial_outputs(B: int, n: int, k: int, *, kept: bool = True, dim: int = 2) -> TrialOutputs:
+    """Room for how ``B`` trials of ``n`` robots (``k`` numbers each, ``dim`` of them the
+    position) end; without ``kept`` none for their final states and drift windows (a run
+    that saves its path has them)."""
     m = n if kept else 1
     return TrialOutputs(
         x=np.empty((B, m, k)), v=np.full((B, m, k), np.nan), steps=np.zeros(B, np.int64),
         status=np.zeros(B, np.int8), mc=np.full(B, np.inf), mo=np.full(B, np.inf),
         md=np.full(B, np.inf), ns=np.full(B, np.nan),
-        qw=np.full((B, m, 2), np.nan),
+        qw=np.full((B, m, dim), np.nan),
     )  # fmt: skip

@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 
 from ..controllers.terms import KernelTerms
 from ..dynamics import System
+from ..engine.euler import axes_for
 from ..engine.layout import PAIRS_UP_TO, REORDER_FROM, RunLayout, robot_order, run_layout
 from ..engine.lists import grow, list_stage
 from ..engine.loop import DONE, GROW, PAUSED, RUNNING, RunNumbers, step_chunk
@@ -43,7 +44,7 @@ from ..engine.trials import chunk_state, safety_stage, sensing_channel, trial_ou
 from ..errors import ParameterError
 from ..marching.terms import march_terms, with_references
 from ..models import SingleIntegrator
-from ..models.terms import HEADING, NEAR_IDENTITY, model_terms
+from ..models.terms import HEADING, NEAR_IDENTITY, SINGLE, model_terms
 from ..safety import barrier_filter
 from ..safety.stage import CENTRALIZED
 from ..sensing import BLOCK
@@ -51,6 +52,7 @@ from ..sensing.stage import sensing_arrays
 from ..status import Status
 from .base import RawSolution, steps_for
 from .diagnostics import switching_diagnostics
+from .driver import position_dim
 from .explicit import Euler
 
 __all__ = [
@@ -195,6 +197,8 @@ class SingleRun:
         model = system.model if system is not None else SingleIntegrator()
         self.model = model_terms(model)
         kind = self.model.kind
+        # (without a system, single integrators: the state is the positions)
+        dim = system.formation.dim if system is not None else x0.shape[1]
         self.obstacles = tuple(system.obstacles) if system is not None else ()
         self.safety = (  # (its rows guard steps of dt)
             system.at_step(dt).safety if system is not None and system.filtered else None
@@ -211,14 +215,14 @@ class SingleRun:
         )  # fmt: skip
         self.st = chunk_state(
             x[None, :, :, None], stop_rule=False, turns=kind in (HEADING, NEAR_IDENTITY),
-            centralized=self.stage[1] is not None and self.stage[1].kind == CENTRALIZED,
+            centralized=self.stage[1] is not None and self.stage[1].kind == CENTRALIZED, dim=dim,
         )  # fmt: skip
         if self.pairs:  # the start's clearance of the robots (the lists layout's loop finds it)
             self.st.mc[0, 0] = _start_clearance(layout, x0, system)
         if self.obstacles:  # the start's clearance to the obstacles
             assert system is not None
             self.st.mo[0, 0] = np.min(system.obstacle_clearances(x0), initial=np.inf)
-        self.out = trial_outputs(1, n, k, kept=False)
+        self.out = trial_outputs(1, n, k, kept=False, dim=dim)
         self.sense: tuple[Any, ...] = (None, None)
         self.channel = None
         self.blocks = -1  # the last block of steps whose noise and losses are drawn
@@ -229,9 +233,11 @@ class SingleRun:
             self.sense = sensing_arrays(self.channel, np.zeros(1, np.intp), stop_at, headed)
         elif not self.pairs:
             extra = 2.0 * self.model.offset if kind == NEAR_IDENTITY else 0.0
-            self.ls = list_stage(layout, n, max(1, chunks), extra)
+            self.ls = list_stage(layout, n, max(1, chunks), extra, dim)
         self.sv = saving(1, n, k, n_steps, save_every, perm)
-        self.numbers = RunNumbers(float(dt), int(n_steps), 0, -1.0, -1, int(n_steps) + 1)
+        self.numbers = RunNumbers(
+            float(dt), int(n_steps), 0, -1.0, -1, int(n_steps) + 1, axes_for(dim)
+        )
 
     @property
     def step(self) -> int:
@@ -336,15 +342,19 @@ def compiled_terms(system: System, integrator: object) -> RunLayout | KernelTerm
     (:func:`formationlab.models.terms.model_terms`: single integrators, unicycles of both
     mappings, double integrators, with their limits), marching or not, among obstacles and
     under a safety filter or not, sensing and with faults or not, with a law whose
-    ``kernel_terms`` describe its control.
+    ``kernel_terms`` describe its control. In space (``Formation.dim == 3``): single
+    integrators (with a speed limit or not), without sensing or faults, marching, obstacles
+    or a filter, under a law of ``Law.compiled_dims``.
     """
     if type(integrator) is not Euler:
         return None
     try:
-        model_terms(system.model)
+        robots = model_terms(system.model)
     except ParameterError:  # (a model of the user's own)
         return None
     f = system.formation
+    if f.dim == 3 and (robots.kind != SINGLE or _measuring(system) or _acted_on(system)):
+        return None  # (in space the loop steps single integrators on the true positions)
     if _measuring(system) or f.n <= PAIRS_UP_TO:
         try:
             return system.law.compiled_terms(f).writable()
@@ -359,6 +369,12 @@ def compiled_terms(system: System, integrator: object) -> RunLayout | KernelTerm
     return run_layout(terms, reorder=order)  # emptied as it is laid out
 
 
+def _acted_on(system: System) -> bool:
+    """Whether marching, obstacles or a safety filter act on the command of ``system`` (in
+    space these run on the numpy path)."""
+    return system.marching is not None or bool(system.obstacles) or system.filtered
+
+
 def _measuring(system: System | None) -> bool:
     """Whether the robots of ``system`` command from their measurements or a fault stops one
     (the sensing stage, on the pairs layout)."""
@@ -371,7 +387,7 @@ def _start_clearance(terms: KernelTerms, x0: NDArray[np.float64], system: System
     """Least robot-robot clearance ``r_ij - a_ij`` of the start ``x0`` ``(n, k)``."""
     if system is not None:
         return float(system.clearances(x0)[0])
-    q = x0[:, :2]
+    q = x0  # (single integrators: the state is the positions)
     r = np.linalg.norm(q[terms.pair_j] - q[terms.pair_i], axis=-1)
     return float(np.min(r - terms.pair_contact, initial=np.inf))
 
@@ -430,5 +446,5 @@ def raw_solution(
     return RawSolution(
         t=t, x=out.x, v=out.v, status=out.status, message=message, stats=stats,
         min_pair_distance=out.min_pair_distance, min_robot_clearance=float(out.min_clearance),
-        min_obstacle_clearance=float(out.min_obstacle_clearance),
+        min_obstacle_clearance=float(out.min_obstacle_clearance), dim=position_dim(system),
     )  # fmt: skip

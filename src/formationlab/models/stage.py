@@ -102,11 +102,12 @@ def _limit_unicycle(v, w, vmax, wmax):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True)
-def rates(x, hc, hs, u, f, vel, nact, model):
+def rates(x, hc, hs, u, f, vel, nact, model, axes):
     """``f = x_dot`` from the law's controls ``u`` (``RobotModel.derivative``, with limits).
 
     ``hc``, ``hs``: the unicycles' ``cos theta`` and ``sin theta`` ``(n, C)`` (:func:`turn`);
-    ``vel`` ``(C,)``: room for their speeds.
+    ``vel`` ``(C,)``: room for their speeds. ``axes``: the positions' (the loop's
+    ``run.axes``); in space the single integrator, the model the loop steps there.
     """
     n = x.shape[0]
     vmax = model.max_speed
@@ -114,9 +115,20 @@ def rates(x, hc, hs, u, f, vel, nact, model):
     limited = vmax < np.inf or wmax < np.inf  # no limit: no scaling (limit_unicycle)
     if model.kind == SINGLE and not limited:  # f = u (the same numbers as a scale of 1)
         for i in range(n):
-            for d in range(2):
+            for d in range(axes.ndim):
                 for b in range(nact):
                     f[i, d, b] = u[i, d, b]
+    elif model.kind == SINGLE and axes.ndim == 3:  # (a constant: compiled in space only)
+        for i in range(n):
+            for b in range(nact):
+                ux = u[i, 0, b]
+                uy = u[i, 1, b]
+                uz = u[i, 2, b]
+                size = math.sqrt(ux * ux + uy * uy + uz * uz)
+                s = vmax / size if size > vmax else 1.0  # limit_speed
+                f[i, 0, b] = ux * s
+                f[i, 1, b] = uy * s
+                f[i, 2, b] = uz * s
     elif model.kind == SINGLE:
         for i in range(n):
             for b in range(nact):
@@ -191,11 +203,16 @@ def rates(x, hc, hs, u, f, vel, nact, model):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
-def speed(f, b, model):
-    """Largest robot speed of trial ``b`` (``RobotModel.speed``) from its rates ``f``."""
+def speed(f, b, model, axes):
+    """Largest robot speed of trial ``b`` (``RobotModel.speed``) from its rates ``f``
+    (``axes``: the positions'; in space the single integrator's)."""
     top = 0.0
     for i in range(f.shape[0]):
-        s = math.sqrt(f[i, 0, b] * f[i, 0, b] + f[i, 1, b] * f[i, 1, b])
+        if axes.ndim == 3:  # (a constant: compiled in space only)
+            fx, fy, fz = f[i, 0, b], f[i, 1, b], f[i, 2, b]
+            s = math.sqrt(fx * fx + fy * fy + fz * fz)
+        else:
+            s = math.sqrt(f[i, 0, b] * f[i, 0, b] + f[i, 1, b] * f[i, 1, b])
         if model.kind == NEAR_IDENTITY or model.kind == HEADING:
             s += model.offset * abs(f[i, 2, b])
         elif model.kind == DOUBLE:

@@ -39,7 +39,10 @@ def build_close_list(q, radius, reach, ex_ptr, ex_nbr, pairs, cell_of, items, st
 
     Parameters
     ----------
-    q : (n, 2) positions (finite); radius : (n,) half diameters; reach : clearance bound.
+    q : (n, d) positions (finite), d = 2 or 3: in space the cells are columns over the
+        plane of the first two axes (a pair within reach is within it there too), and the
+        distances are measured in space; radius : (n,) half diameters; reach : clearance
+        bound.
     ex_ptr, ex_nbr : CSR rows of the excluded partners of each robot (int32).
     pairs : (cap, 2) int32 buffer, filled with the first ``min(count, cap)`` pairs.
     cell_of, items, stamp, cand : (n,) int32 scratch; start : (cells + 1,) int32 scratch.
@@ -73,7 +76,11 @@ def build_close_list(q, radius, reach, ex_ptr, ex_nbr, pairs, cell_of, items, st
                         continue
                     dx = q[j, 0] - q[i, 0]
                     dy = q[j, 1] - q[i, 1]
-                    if math.sqrt(dx * dx + dy * dy) - (radius[i] + radius[j]) < reach:
+                    r2 = dx * dx + dy * dy
+                    for d in range(2, q.shape[1]):  # (in space: the cells are columns)
+                        dz = q[j, d] - q[i, d]
+                        r2 += dz * dz
+                    if math.sqrt(r2) - (radius[i] + radius[j]) < reach:
                         cand[m] = j
                         m += 1
         for a in range(1, m):  # insertion sort: rows are short

@@ -99,9 +99,12 @@ def batch_backend(
     the learned law) runs on the numpy path: the batch does when all its laws are such
     (a study's chunks pass the one law of their group), else the note names them.
     """
-    del obstacles, safety, sensed  # every combination is compiled
     if dim != 2 and backend == "numba":
-        return "numpy", "the compiled loop steps formations in the plane; this one is in space"
+        why = _space_note(sensed, model, laws)
+        if obstacles or (safety is not None and safety.filter != "none"):
+            why = why or "the compiled loop steps formations in space without obstacles or filters"
+        if why:
+            return "numpy", why
     numpy_laws = sorted({law.name for law in laws if not law.compiles()})
     note = ""
     if numpy_laws and backend == "numba":
@@ -118,6 +121,23 @@ def batch_backend(
         except ParameterError:  # a model without a stage of the loop (yet)
             return "numpy", f"the compiled loop has no stage for the robot model {model.name!r}"
     return backend, note  # type: ignore[return-value]
+
+
+def _space_note(sensed: bool, model: RobotModel | None, laws: Sequence[Law]) -> str:
+    """Why a batch in space runs on the numpy path ("" when the compiled loop steps it):
+    the loop steps single integrators on their true positions under the laws of
+    ``Law.compiled_dims`` there."""
+    if sensed:
+        return "the compiled loop steps formations in space without sensing or faults"
+    if model is not None and not isinstance(model, SingleIntegrator):
+        return f"the compiled loop steps single integrators in space, not {model.name!r}"
+    plane = sorted({law.name for law in laws if 3 not in law.compiled_dims})
+    if plane:
+        return (
+            "the compiled loop steps formations in space under the laws of distances, not "
+            + ", ".join(repr(n) for n in plane)
+        )
+    return ""
 
 
 def run_batch(

@@ -461,7 +461,8 @@ def run_study(
 
 def _warm_kernels(tasks: list[ChunkTask], notify: Callable[[str], None] | None) -> float:
     """Compile (or load from numba's cache) each version of the loop the tasks use (with or
-    without sensing, safety, per robot model, on numba's threads or not), on a batch of two
+    without sensing, safety, per robot model, in the plane or in space, on numba's threads or
+    not), on a batch of two
     steps, so that the
     study's throughput does not count it; returns the time taken."""
     first: dict[tuple[Any, ...], ChunkTask] = {}  # one batch per version of the loop
@@ -471,7 +472,8 @@ def _warm_kernels(tasks: list[ChunkTask], notify: Callable[[str], None] | None) 
             # a chunk of more than MIN_CHUNK trials runs on the threads' version of the loop
             # (engine.trials), a smaller one on the loop itself
             threads = t.size > MIN_CHUNK
-            first.setdefault((t.group.sensed, safe, type(t.model), threads), t)
+            dim = t.group.formation.dim  # (the loop compiles once for each dimension)
+            first.setdefault((t.group.sensed, safe, type(t.model), dim, threads), t)
     if not first:
         return 0.0
     # (the loop itself, or its threads' version for chunks of more than MIN_CHUNK trials)
@@ -511,7 +513,8 @@ def _kernel_cached(dispatcher: Any) -> bool:
 def _backend_used(setup: StudySetup) -> dict[str, Any]:
     """``backend_used``, ``backend_note`` and ``safety`` of a study with obstacles or a filter;
     ``backend_used`` and ``backend_note`` of one whose backend is not the one asked for (a
-    formation in space runs on the numpy path)."""
+    formation in space under a law or model the compiled loop does not step there runs on the
+    numpy path)."""
     used, note = setup.backend
     safety = setup.safety_description()
     if safety is None:

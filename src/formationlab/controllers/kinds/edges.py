@@ -18,7 +18,7 @@ from .bearing import bearing_force
 from .log_barrier import phi_gain
 from .squared_distance import squared_gain
 
-__all__ = ["BEARING", "LOG_BARRIER", "SQUARED", "edge_force", "edge_force_at"]
+__all__ = ["BEARING", "LOG_BARRIER", "SQUARED", "edge_force", "edge_force_at", "edge_gain"]
 
 #: Edge term: the paper's phi (eq. 5), Krick et al.'s squared distance, Zhao and Zelazo's
 #: bearing projection.
@@ -38,8 +38,15 @@ def edge_force_at(kind, rx, ry, r, d, a, gain, bx, by):
     already (the compiled loop computes each pair's length once per state)."""
     if kind == BEARING:
         return bearing_force(rx, ry, bx, by, gain)  # Zhao and Zelazo 2016, eq. (11)
-    if kind == LOG_BARRIER:
-        g = phi_gain(r, d, a, gain)  # eq. (8)
-    else:
-        g = gain * squared_gain(rx * rx + ry * ry, d)  # Krick et al. 2009
+    g = edge_gain(kind, r, rx * rx + ry * ry, d, a, gain)
     return g * rx, g * ry
+
+
+@formula
+def edge_gain(kind, r, r2, d, a, gain):
+    """The factor ``g`` of an edge term along ``r_ij`` (robot ``i``'s term is ``g r_ij``), in
+    any dimension: ``r = |r_ij|`` and ``r2 = r_ij . r_ij`` (as summed by the caller), for
+    :data:`LOG_BARRIER` and :data:`SQUARED` (the bearing term is not along ``r_ij``)."""
+    if kind == LOG_BARRIER:
+        return phi_gain(r, d, a, gain)  # eq. (8)
+    return gain * squared_gain(r2, d)  # Krick et al. 2009

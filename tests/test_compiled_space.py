@@ -1,0 +1,163 @@
+"""The compiled loop in space: 3-D runs and batches against the numpy driver.
+
+The loop (``engine/loop.py``) reads the positions' dimension from ``RunNumbers.axes`` and
+compiles once for each; these tests hold its 3-D version (single integrators, the laws of
+distances) against the stepping driver, the specification, on both layouts of the law:
+its pairs (a tetrahedron, an octahedron) and its lists (an fcc patch larger than
+``PAIRS_UP_TO``, Delaunay edges). The plane's results are held bit for bit by the
+recorded-results tests (``test_engine_reference.py``, ``test_paper.py``,
+``test_core_identity.py``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import formationlab as fl
+from formationlab.dynamics import System
+from formationlab.engine.layout import PAIRS_UP_TO
+from formationlab.errors import ParameterError
+from formationlab.integrators.compiled import compiled_terms, run_compiled
+from formationlab.models import DoubleIntegrator
+from formationlab.studies.batch import batch_backend, run_batch
+
+TETRAHEDRON = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, 0.8660254038, 0.0],
+               [0.5, 0.2886751346, 0.8164965809]]  # fmt: skip
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+OCTAHEDRON = [[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, 1.0], [0, 0, -1.0]]
+
+
+def _start(template: list[list[float]] | np.ndarray, sigma: float, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.asarray(template, dtype=float) + sigma * rng.standard_normal(np.shape(template))
+
+
+def _both(formation, law, q0, duration, **kw):
+    a = fl.simulate(formation, law, q0, duration=duration, backend="numba", **kw)
+    b = fl.simulate(formation, law, q0, duration=duration, backend="numpy", **kw)
+    return a, b
+
+
+@pytest.mark.parametrize(
+    ("template", "edges", "law"),
+    [
+        (TETRAHEDRON, "complete", fl.DistanceLaw()),
+        (OCTAHEDRON, "complete", fl.get_law("squared-distance")),
+    ],
+)
+def test_a_run_in_space_on_the_pairs_layout_is_the_drivers(template, edges, law) -> None:
+    formation = fl.Formation.from_template(template, edges=edges, diameters=0.2)
+    q0 = _start(template, 0.3, seed=3)
+    a, b = _both(formation, law, q0, 2.0, integrator=fl.Euler(dt=1e-2), save_every=10)
+    assert a.stats["backend"] == "numba" and b.stats.get("backend", "numpy") != "numba"
+    assert a.q.shape == b.q.shape and a.q.shape[-1] == 3
+    assert a.status == b.status
+    scale = np.max(np.abs(b.q))
+    assert np.max(np.abs(a.q - b.q)) <= 1e-12 * scale
+    assert np.max(np.abs(a.u - b.u)) <= 1e-10 * np.max(np.abs(b.u))
+    # it moved in space: the start's third coordinates changed, and the distances converged
+    assert np.max(np.abs(a.q[-1, :, 2] - q0[:, 2])) > 1e-2
+    assert np.max(np.abs(a.q[-1] - a.q[0])) > 1e-2
+
+
+def test_a_swarm_in_space_on_the_lists_layout_is_the_drivers() -> None:
+    tpl = fl.lattice("fcc", PAIRS_UP_TO + 100)
+    formation = fl.Formation.from_template(
+        tpl, edges=fl.build_edges("delaunay", tpl), diameters=0.2, one_based=False
+    )
+    q0 = _start(tpl, 0.05, seed=1)
+    a, b = _both(formation, fl.DistanceLaw(), q0, 0.3, integrator=fl.Euler(dt=1e-2), save_every=5)
+    assert a.stats["backend"] == "numba"
+    assert a.status == b.status
+    assert np.max(np.abs(a.q - b.q)) <= 1e-12 * np.max(np.abs(b.q))
+    assert np.max(np.abs(a.q[-1] - a.q[0])) > 1e-3
+    # the run without a system (the benchmarks' call): single integrators in space
+    law = fl.DistanceLaw()
+    layout = compiled_terms(System(formation=formation, law=law), fl.Euler(dt=1e-2))
+    out = run_compiled(layout, q0, dt=1e-2, n_steps=30, save_every=5)
+    np.testing.assert_array_equal(out.x, a.q)
+
+
+def test_a_swarm_in_space_sees_contact_in_all_three_axes() -> None:
+    # two robots one above the other, pulled together along z: the step into contact is
+    # rejected as the driver rejects it (a loop that measured x and y only would not)
+    tpl = fl.lattice("fcc", PAIRS_UP_TO + 8)
+    formation = fl.Formation.from_template(
+        tpl, edges=fl.build_edges("delaunay", tpl), diameters=0.2, one_based=False
+    )
+    q0 = tpl.copy()
+    top = int(np.argmax(q0[:, 2]))
+    below = int(
+        np.argmin(np.linalg.norm(q0[:, :2] - q0[top, :2], axis=1) + 100 * (q0[:, 2] >= q0[top, 2]))
+    )
+    q0[top] = q0[below] + [0.0, 0.0, 0.21]
+    law = fl.DistanceLaw()
+    a, b = _both(formation, law, q0, 0.5, integrator=fl.Euler(dt=2e-2), save_every=1)
+    assert a.status == b.status and str(a.status) == "step-too-large"  # (along z)
+    assert a.q.shape == b.q.shape
+    assert np.max(np.abs(a.q - b.q)) <= 1e-12 * np.max(np.abs(b.q))
+
+
+def test_a_batch_in_space_runs_compiled_with_the_drivers_outcomes() -> None:
+    formation = fl.Formation.from_template(
+        TETRAHEDRON, edges="complete", diameters=0.2, orientation="template"
+    )
+    rng = np.random.default_rng(5)
+    q0 = rng.uniform(-1.5, 1.5, size=(12, 4, 3))
+    law = fl.DistanceLaw()
+    kw = {"dt": 1e-2, "duration": 10.0}
+    a = run_batch(formation, law, q0, backend="numba", **kw)
+    b = run_batch(formation, law, q0, backend="numpy", **kw)
+    assert list(a.outcome) == list(b.outcome)
+    np.testing.assert_array_equal(a.steps, b.steps)
+    assert np.max(np.abs(a.q_final - b.q_final)) <= 1e-9
+    assert batch_backend("numba", dim=3, laws=[law]) == ("numba", "")
+
+
+def test_what_the_loop_does_not_step_in_space_runs_on_numpy_or_is_refused() -> None:
+    formation = fl.Formation.from_template(TETRAHEDRON, edges="complete", diameters=0.2)
+    chiral = fl.get_law("chirality-restricted")
+    backend, note = batch_backend("numba", dim=3, laws=[chiral])
+    assert backend == "numpy" and "chirality-restricted" in note
+    backend, note = batch_backend("numba", model=DoubleIntegrator(), dim=3)
+    assert backend == "numpy" and "double" in note
+    q0 = _start(TETRAHEDRON, 0.3, 1)
+    x0 = np.concatenate([q0, np.zeros_like(q0)], axis=-1)[None]
+    with pytest.raises(ParameterError, match="single integrators"):
+        run_batch(formation, fl.DistanceLaw(), x0, dt=1e-2, duration=0.1,
+                  model=DoubleIntegrator())  # fmt: skip
+    res = fl.simulate(formation, fl.DistanceLaw(), q0, duration=0.1, integrator=fl.Euler(dt=1e-2),
+                      model=DoubleIntegrator())  # fmt: skip
+    assert res.stats.get("backend") != "numba"
+
+
+def test_the_tetrahedron_study_has_the_same_outcomes_on_both_backends() -> None:
+    # examples/space/study-tetrahedron.toml with few trials: the distance law's trials run
+    # on the compiled loop (the note names the laws that stay on numpy), the same outcomes
+    import warnings
+
+    from formationlab.io.scenario import load_scenario
+    from formationlab.studies.config import parse_study
+    from formationlab.studies.runner import StudySetup, run_study
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sc = load_scenario(EXAMPLES / "space" / "study-tetrahedron.toml")
+        table = {**sc.study, "laws": ["distance", "squared-distance"]}
+        got = {}
+        for backend in ("numba", "numpy"):
+            config = parse_study({**table, "backend": backend}, trials=16, duration=8.0)
+            setup = StudySetup.from_scenario(sc, config)
+            assert setup.backend == (backend, "")
+            res = run_study(setup, seed=7)
+            got[backend] = res.trials.sort_values(["law", "trial"])
+    a, b = got["numba"], got["numpy"]
+    assert list(a["outcome"]) == list(b["outcome"])
+    assert list(a["steps"]) == list(b["steps"])
+    assert {"desired", "mirror"} & set(a["outcome"])  # (trials that converged, both ways)
+    cols = [c for c in a.columns if c[:1] in "xyz" and c[1:].isdigit()]
+    assert len(cols) == 12
+    assert np.max(np.abs(a[cols].to_numpy() - b[cols].to_numpy())) <= 1e-9
