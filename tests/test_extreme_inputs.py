@@ -138,7 +138,7 @@ HUGE_WORK = {
     "study-dt": ("[study]\ntrials = 4\ndt = 1e-300\n", "study.dt", "1e+300 steps"),
     "study-duration": ("[study]\ntrials = 4\nduration = 1e300\n", "study.duration", "steps"),
     "equilibria-dt": ("[equilibria]\ndt = 1e-300\n", "equilibria.dt", "6e+301 steps"),
-    "equilibria-duration": ("[equilibria]\nduration = 1e300\n", "equilibria.duration", "10000000"),
+    "equilibria-duration": ("[equilibria]\nduration = 1e300\n", "equilibria.duration", "1e+07"),
     "equilibria-starts": ("[equilibria]\nstarts = 1000000000000000\n", "equilibria.starts", ""),
 }
 
