@@ -56,6 +56,7 @@ def test_page_draws_every_robot_and_streams(live):
 def test_drag_robot_1_moves_it_on_the_server_and_the_run_continues(live):
     page, session = live
     pause(page, session)
+    start = session.q[0].copy()
     x0, y0 = page.evaluate(f"document.querySelector('{ROOT_SEL}').flv.robotPx(1)")
     # a drop inside the view (which follows the formation): near its top left corner
     left, top, right, bottom = flv(page, "view")["world"]
@@ -68,7 +69,17 @@ def test_drag_robot_1_moves_it_on_the_server_and_the_run_continues(live):
     for k in range(1, 11):
         page.mouse.move(x0 + (tx - x0) * k / 10, y0 + (ty - y0) * k / 10)
         page.wait_for_timeout(20)
-    wait_for(lambda: np.linalg.norm(session.q[0] - drop) < 0.05, what="robot 1 at the drop")
+    # robot 1 follows the pointer: the server's state, drawn by the page, puts it under the
+    # pointer (the page's own mapping at that moment: the view may have followed the
+    # formation's extent during the drag, on a loaded machine more than otherwise)
+
+    def under_pointer() -> bool:
+        px = page.evaluate(f"document.querySelector('{ROOT_SEL}').flv.robotPx(1)")
+        return bool(np.hypot(px[0] - tx, px[1] - ty) < 4.0)
+
+    wait_for(under_pointer, what="robot 1 under the pointer")
+    moved = np.linalg.norm(session.q[0] - start)
+    assert moved > 0.5 * np.linalg.norm(np.asarray(drop) - start), (moved, drop, start)
     page.mouse.up()
     wait_for(lambda: session.pinned is None, what="the release")
     dropped, t_drop = session.q[0].copy(), session.t
