@@ -1,7 +1,8 @@
 """Fill the numba cache before the test workers start (see ``conftest.pytest_configure``).
 
 Each of the two parts compiles some of the package's kernels through the public API, on a
-tiny problem, about a minute and a half each; ``python tests/_warmup.py PART`` runs one part.
+tiny problem, about a minute and a half each on a quiet machine; ``python
+tests/_warmup.py PART`` runs one part.
 Run in parallel by the controlling process, they compile each kernel once instead of once
 per test worker.
 """
@@ -23,13 +24,6 @@ def _triangle():
     return fl, f, q0
 
 
-def _many(x0):
-    """``x0`` repeated to more trials than one chunk holds: a batch on numba's threads."""
-    from formationlab.studies.batch import MIN_CHUNK
-
-    return np.concatenate([x0] * (MIN_CHUNK // len(x0) + 1))
-
-
 def part0() -> None:
     """The batch kernel of obstacles and safety filters (the longest compilation), and the
     loop in space on both layouts (``tests/test_compiled_space.py``)."""
@@ -43,7 +37,7 @@ def part0() -> None:
     disc = (Circle(center=[5.0, 5.0], radius=0.5),)
     for kind in ("barrier-decentralized", "barrier"):
         cfg = SafetyFilter(filter=kind, distance=0.25)
-        run_batch(f, fl.get_law("distance"), _many(q0), dt=1e-2, duration=0.05, safety=cfg,
+        run_batch(f, fl.get_law("distance"), q0, dt=1e-2, duration=0.05, safety=cfg,
                   obstacles=disc)  # fmt: skip
     for count in (4, PAIRS_UP_TO + 8):  # the pairs layout, then the lists layout
         tpl = lattice("fcc", count)
@@ -54,24 +48,21 @@ def part0() -> None:
 
 def part1() -> None:
     """The study kernel for every robot model, the sensed kernel, compiled single runs of
-    both kinds of law (one by one and as a batch), the filters of single runs, the rigidity
-    check."""
+    both kinds of law (one by one and as a batch), the rigidity check."""
     fl, f, q0 = _triangle()
     from formationlab.formation.rigidity import is_generically_rigid
     from formationlab.models import DoubleIntegrator, Unicycle
-    from formationlab.safety import SafetyFilter
     from formationlab.sensing import Sensing
     from formationlab.simulation.batch import simulate_batch
     from formationlab.studies.batch import run_batch
 
     law = fl.get_law("angle-restricted")
-    run_batch(f, law, _many(q0), dt=1e-2, duration=0.05)
+    run_batch(f, law, q0, dt=1e-2, duration=0.05)
     for model in (Unicycle(), Unicycle(mapping="heading"), DoubleIntegrator()):
         x0 = np.stack([model.initial_state(q) for q in q0])
-        run_batch(f, law, _many(x0), dt=1e-2, duration=0.05, model=model)
-    many = _many(q0)
-    seeds = [(1, t) for t in range(len(many))]
-    run_batch(f, law, many, dt=1e-2, duration=0.05, sensing=Sensing(noise=0.01), seeds=seeds)
+        run_batch(f, law, x0, dt=1e-2, duration=0.05, model=model)
+    seeds = [(1, t) for t in range(len(q0))]
+    run_batch(f, law, q0, dt=1e-2, duration=0.05, sensing=Sensing(noise=0.01), seeds=seeds)
     for name in ("distance", "angle-restricted"):
         fl.simulate(f, fl.get_law(name), q0[0], duration=0.05)
     # a formation larger than PAIRS_UP_TO: the lists layout of single runs
@@ -83,9 +74,7 @@ def part1() -> None:
     big = fl.Formation.from_template(tpl, edges=delaunay_edges(tpl), one_based=False)
     fl.simulate(big, law, tpl, duration=0.05)
     simulate_batch(f, law, q0, duration=0.05)  # compiled single runs as one batch
-    for kind in ("barrier-decentralized", "barrier"):
-        cfg = SafetyFilter(filter=kind, distance=0.25)
-        fl.simulate(f, fl.get_law("distance"), q0[0], duration=0.05, safety=cfg)
+    # (single runs under a filter use the loop of part 0's batches under a filter)
     is_generically_rigid(f.edges, f.n)
 
 

@@ -34,16 +34,18 @@ innermost, contiguous axis, so that each loop over trials is a plain SIMD loop. 
 
 Everything a chunk carries from one call to the next is in :class:`ChunkState` (so the loop
 can stop at a pause, or at the end of a block of steps, and go on), and what it returns is
-in :class:`TrialOutputs`. Chunks run in parallel (``prange``) in :func:`run_chunks`.
+in :class:`TrialOutputs`. Chunks run side by side on threads in :func:`run_chunks`.
 """
 
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
 
+import numba
 import numpy as np
-from numba import njit, prange, types
+from numba import njit, types
 from numba.extending import overload
 from numpy.typing import NDArray
 
@@ -425,9 +427,31 @@ def _pause(st, c, nact, step, kc, status):
     st.meta[c, 4] = status
 
 
-@njit(cache=True, error_model="numpy", nogil=True, parallel=True)
-def run_chunks(law, model, mt, obs, flt, sn, ss, st, out, run, sv):
-    """Every running chunk until it ends, pauses or reaches ``run.k_end``, in parallel."""
-    for c in prange(st.x.shape[0]):
-        if st.meta[c, 4] == RUNNING and st.meta[c, 1] < run.k_end:
+def run_chunks(law, model, mt, obs, flt, sn, ss, st, out, run, sv) -> None:
+    """Every running chunk until it ends, pauses or reaches ``run.k_end``, on numba's
+    number of threads (:func:`numba.get_num_threads`).
+
+    Each chunk is one call of :func:`step_chunk`, which releases the GIL, from a pool of
+    Python threads: the chunks share nothing they write (each its own slots of ``st``, its
+    own trials' rows of ``out`` and of the sensing state), so they run side by side. It is
+    the same compiled version of the loop as a batch of one chunk's (a ``prange`` loop
+    around it would be compiled apart, with the loop inside it compiled twice more: about
+    half a minute per variant of the loop), and the threads take the next chunk as they
+    finish one, so that chunks whose trials stop early do not leave a thread idle.
+    """
+    todo = [
+        c for c in range(st.x.shape[0])
+        if st.meta[c, 4] == RUNNING and st.meta[c, 1] < run.k_end
+    ]  # fmt: skip
+    threads = min(numba.get_num_threads(), len(todo))
+    if threads <= 1:
+        for c in todo:
             step_chunk(c, law, model, mt, obs, flt, sn, ss, st, out, run, None, sv)
+        return
+    with ThreadPoolExecutor(threads) as pool:
+        done = [
+            pool.submit(step_chunk, c, law, model, mt, obs, flt, sn, ss, st, out, run, None, sv)
+            for c in todo
+        ]
+        for d in done:  # (an error in a chunk is raised here)
+            d.result()

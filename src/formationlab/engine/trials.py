@@ -35,7 +35,7 @@ from ..safety.stage import CENTRALIZED, NONE, filter_terms
 from ..sensing import BLOCK, Channel, Faults, Seed, Sensing
 from ..sensing.stage import sensing_arrays, trial_bytes
 from .euler import axes_for
-from .loop import DONE, RUNNING, ChunkState, RunNumbers, TrialOutputs, run_chunks, step_chunk
+from .loop import DONE, RUNNING, ChunkState, RunNumbers, TrialOutputs, run_chunks
 from .saving import no_saving
 
 __all__ = [
@@ -217,11 +217,8 @@ def _run_group(
                 sn.drop_block[live] = channel.block("drop", trials[live])
         run = numbers._replace(k_end=min(k_end, numbers.k_end))
         while True:
-            if G > 1:  # (the pairs layout) the chunks on numba's threads
-                run_chunks(terms, robots, still, *stage, sn, ss, st, out, run, kept)
-            elif st.meta[0, 4] == RUNNING and st.meta[0, 1] < run.k_end:  # one chunk: the
-                # loop itself (the threads' version is compiled only where it is used)
-                step_chunk(0, terms, robots, still, *stage, sn, ss, st, out, run, None, kept)
+            # the running chunks, side by side on threads (one chunk: on this thread)
+            run_chunks(terms, robots, still, *stage, sn, ss, st, out, run, kept)
             wait_g, wait_b = np.nonzero(st.need)  # chunks paused, and their slots needing a QP
             if wait_g.size == 0:
                 break

@@ -47,7 +47,7 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from ..controllers import LAWS, Law
-from ..engine.loop import run_chunks, step_chunk
+from ..engine.loop import step_chunk
 from ..errors import ParameterError
 from ..formation.spec import Formation
 from ..models import RobotModel, SingleIntegrator
@@ -55,7 +55,7 @@ from ..safety import describe_obstacle
 from ..sensing import Faults, Sensing, delay_steps
 from ..validation import positive, steps_within, whole
 from ..validation import seed as check_seed
-from .batch import MIN_CHUNK, batch_backend, run_batch
+from .batch import batch_backend, run_batch
 from .chunks import ChunkTask, plan_chunks, run_chunk
 from .config import GaussianInitial, StudyConfig, parse_study
 from .executors import run_in_process, run_on_dask
@@ -461,29 +461,22 @@ def run_study(
 
 def _warm_kernels(tasks: list[ChunkTask], notify: Callable[[str], None] | None) -> float:
     """Compile (or load from numba's cache) each version of the loop the tasks use (with or
-    without sensing, safety, per robot model, in the plane or in space, on numba's threads or
-    not), on a batch of two
-    steps, so that the
-    study's throughput does not count it; returns the time taken."""
+    without sensing, safety, per robot model, in the plane or in space), on a batch of two
+    steps, so that the study's throughput does not count it; returns the time taken."""
     first: dict[tuple[Any, ...], ChunkTask] = {}  # one batch per version of the loop
     for t in tasks:
         if t.backend == "numba":
             safe = bool(t.obstacles) or (t.safety is not None and t.safety.enabled)
-            # a chunk of more than MIN_CHUNK trials runs on the threads' version of the loop
-            # (engine.trials), a smaller one on the loop itself
-            threads = t.size > MIN_CHUNK
             dim = t.group.formation.dim  # (the loop compiles once for each dimension)
-            first.setdefault((t.group.sensed, safe, type(t.model), dim, threads), t)
+            first.setdefault((t.group.sensed, safe, type(t.model), dim), t)
     if not first:
         return 0.0
-    # (the loop itself, or its threads' version for chunks of more than MIN_CHUNK trials)
-    used = {run_chunks if threads else step_chunk for (*_, threads) in first}
-    if notify is not None and not all(_kernel_cached(k) for k in used):
+    if notify is not None and not _kernel_cached(step_chunk):
         notify("compiling kernels (once; later studies load them from the cache) ...")
     start = time.perf_counter()
     for t in first.values():
         f, g = t.group.formation, t.group
-        trials = np.arange(min(t.size, MIN_CHUNK + 1))
+        trials = np.arange(min(t.size, 2))
         q0 = trial_initial_states(
             f, t.initial, t.seed, trials, center=t.center, obstacles=t.obstacles
         )
