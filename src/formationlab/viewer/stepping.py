@@ -32,9 +32,11 @@ from ..status import Status
 
 __all__ = ["COMPILED_FROM", "CompiledSteps", "Segment"]
 
-#: Robots from which the live session steps on the compiled loop (below, a numpy step
-#: costs less than a frame's budget, and the driver's path is bit for bit ``simulate``'s).
-COMPILED_FROM = 200
+#: Robots from which the live session steps on the compiled loop: below, a numpy step
+#: costs a small part of a frame's budget (measured, ``benchmarks/bench_viewer_speed.py
+#: --counts``: 0.21 ms per step at 25 robots, 0.42 ms at 50, 0.96 ms at 200, against
+#: 0.011-0.017 ms compiled), and the driver's path is bit for bit ``simulate``'s.
+COMPILED_FROM = 50
 #: Most saved numbers (robots x states) of one segment: past it, the segment keeps every
 #: few steps only (the session's history is thinned past its own budget anyway).
 SEGMENT_SAVED_MAX = 400_000
