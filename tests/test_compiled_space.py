@@ -21,7 +21,7 @@ from formationlab.dynamics import System
 from formationlab.engine.layout import PAIRS_UP_TO
 from formationlab.errors import ParameterError
 from formationlab.integrators.compiled import compiled_terms, run_compiled
-from formationlab.models import DoubleIntegrator
+from formationlab.models import DoubleIntegrator, Quadrotor, SingleIntegrator, Unicycle
 from formationlab.studies.batch import batch_backend, run_batch
 
 TETRAHEDRON = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, 0.8660254038, 0.0],
@@ -117,20 +117,77 @@ def test_a_batch_in_space_runs_compiled_with_the_drivers_outcomes() -> None:
     assert batch_backend("numba", dim=3, laws=[law]) == ("numba", "")
 
 
+#: the models of points in space, each with its limits active (a drone's velocity lag)
+SPACE_MODELS = {
+    "single-limited": SingleIntegrator(max_speed=0.4),
+    "double": DoubleIntegrator(damping=2.0),
+    "double-limited": DoubleIntegrator(damping=1.0, max_speed=0.3),
+    "quadrotor": Quadrotor(time_constant=0.3, max_accel=1.5, max_speed=0.5),
+}
+
+
+def _moving(model, q0: np.ndarray, seed: int) -> np.ndarray:
+    """The model's state at ``q0``, moving (velocities drawn) where it has velocities."""
+    x0 = model.initial_state(q0)
+    if x0.shape[-1] == 6:
+        x0[:, 3:] = 0.4 * np.random.default_rng(seed).standard_normal(q0.shape)
+    return x0
+
+
+@pytest.mark.parametrize("model", sorted(SPACE_MODELS))
+def test_every_model_of_points_in_space_is_the_drivers(model) -> None:
+    # the pairs layout (a tetrahedron) and the lists layout (an fcc patch past PAIRS_UP_TO)
+    m = SPACE_MODELS[model]
+    tpl = fl.lattice("fcc", PAIRS_UP_TO + 40)
+    swarm = fl.Formation.from_template(
+        tpl, edges=fl.build_edges("delaunay", tpl), diameters=0.2, one_based=False
+    )
+    tet = fl.Formation.from_template(TETRAHEDRON, edges="complete", diameters=0.2)
+    for formation, q0, duration in ((tet, _start(TETRAHEDRON, 0.3, 2), 3.0),
+                                    (swarm, _start(tpl, 0.05, 4), 0.4)):  # fmt: skip
+        x0 = _moving(m, q0, seed=7)
+        kw = {"integrator": fl.Euler(dt=1e-2), "save_every": 5, "model": m}
+        a, b = _both(formation, fl.DistanceLaw(), x0, duration, **kw)
+        assert a.stats["backend"] == "numba" and b.stats.get("backend", "numpy") != "numba"
+        assert a.status == b.status and a.x.shape == b.x.shape and a.x.shape[-1] == x0.shape[-1]
+        assert np.max(np.abs(a.x - b.x)) <= 1e-12 * np.max(np.abs(b.x))
+        assert np.max(np.abs(a.x[-1, :, :3] - a.x[0, :, :3])) > 1e-3  # (it moved)
+    # the limits held between saved states (5 steps of 1e-2 s) of the swarm's run
+    if model == "quadrotor":  # the velocities change within the acceleration limit
+        dw = np.linalg.norm(np.diff(a.x[..., 3:], axis=0), axis=-1)
+        assert dw.max() <= 5e-2 * m.max_accel * (1 + 1e-9)
+    elif m.max_speed is not None:  # the positions move within the speed limit
+        moves = np.linalg.norm(np.diff(a.q, axis=0), axis=-1)
+        assert moves.max() <= 5e-2 * m.max_speed * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("model", ["double", "quadrotor"])
+def test_a_batch_of_drones_in_space_runs_compiled_with_the_drivers_outcomes(model) -> None:
+    m = SPACE_MODELS[model]
+    formation = fl.Formation.from_template(TETRAHEDRON, edges="complete", diameters=0.2)
+    rng = np.random.default_rng(8)
+    q0 = rng.uniform(-1.5, 1.5, size=(8, 4, 3))
+    x0 = np.stack([_moving(m, q, seed=i) for i, q in enumerate(q0)])
+    kw = {"dt": 1e-2, "duration": 8.0, "model": m}
+    assert batch_backend("numba", model=m, dim=3) == ("numba", "")
+    a = run_batch(formation, fl.DistanceLaw(), x0, backend="numba", **kw)
+    b = run_batch(formation, fl.DistanceLaw(), x0, backend="numpy", **kw)
+    assert list(a.outcome) == list(b.outcome)
+    np.testing.assert_array_equal(a.steps, b.steps)
+    assert np.max(np.abs(a.q_final - b.q_final)) <= 1e-9
+
+
 def test_what_the_loop_does_not_step_in_space_runs_on_numpy_or_is_refused() -> None:
     formation = fl.Formation.from_template(TETRAHEDRON, edges="complete", diameters=0.2)
     chiral = fl.get_law("chirality-restricted")
     backend, note = batch_backend("numba", dim=3, laws=[chiral])
     assert backend == "numpy" and "chirality-restricted" in note
-    backend, note = batch_backend("numba", model=DoubleIntegrator(), dim=3)
-    assert backend == "numpy" and "double" in note
+    backend, note = batch_backend("numba", model=Unicycle(), dim=3)
+    assert backend == "numpy" and "unicycle" in note
     q0 = _start(TETRAHEDRON, 0.3, 1)
-    x0 = np.concatenate([q0, np.zeros_like(q0)], axis=-1)[None]
-    with pytest.raises(ParameterError, match="single integrators"):
-        run_batch(formation, fl.DistanceLaw(), x0, dt=1e-2, duration=0.1,
-                  model=DoubleIntegrator())  # fmt: skip
-    res = fl.simulate(formation, fl.DistanceLaw(), q0, duration=0.1, integrator=fl.Euler(dt=1e-2),
-                      model=DoubleIntegrator())  # fmt: skip
+    with pytest.raises(ParameterError, match="chirality-restricted"):
+        run_batch(formation, chiral, q0[None], dt=1e-2, duration=0.1)
+    res = fl.simulate(formation, chiral, q0, duration=0.1, integrator=fl.Euler(dt=1e-2))
     assert res.stats.get("backend") != "numba"
 
 

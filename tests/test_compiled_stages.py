@@ -23,7 +23,7 @@ from formationlab.errors import FormationlabWarning
 from formationlab.formation.spec import DENSE_LIMIT
 from formationlab.integrators import compiled
 from formationlab.marching import Marching, MotionParameters
-from formationlab.models import DoubleIntegrator, SingleIntegrator, Unicycle
+from formationlab.models import DoubleIntegrator, Quadrotor, SingleIntegrator, Unicycle
 from formationlab.safety import SafetyFilter
 from formationlab.safety.obstacles import Circle
 from formationlab.sensing import BLOCK, Faults, Sensing, Stop
@@ -32,6 +32,8 @@ MODELS = {
     "single": SingleIntegrator(),
     "single-limited": SingleIntegrator(max_speed=0.6),
     "double": DoubleIntegrator(damping=2.0),
+    # both of its limits active at the start (the command and the lag's acceleration)
+    "quadrotor": Quadrotor(time_constant=0.15, max_accel=3.0, max_speed=0.8),
     "unicycle-heading": Unicycle(mapping="heading"),
     "unicycle-near-identity": Unicycle(mapping="near-identity", offset=0.1),
 }

@@ -105,23 +105,24 @@ def test_a_drone_formation_in_space_reaches_its_chirality_with_lag_and_limits(tm
     assert s["state_names"] == ["x", "y", "z", "vx", "vy", "vz"]
 
 
-def test_a_batch_of_quadrotors_runs_on_the_numpy_path_and_says_so() -> None:
+def test_a_batch_of_quadrotors_runs_compiled_as_its_single_runs() -> None:
     from formationlab.studies.batch import batch_backend
 
     model = Quadrotor()
-    assert batch_backend("numba", model=model) == (
-        "numpy", "the compiled loop has no stage for the robot model 'quadrotor'"
-    )  # fmt: skip
+    assert batch_backend("numba", model=model) == ("numba", "")
     f = fl.Formation.from_template(TRIANGLE, diameters=0.2)
     rng = np.random.default_rng(2)
     q0 = np.stack([3 * TRIANGLE + rng.normal(scale=0.5, size=(3, 2)) for _ in range(3)])
     x0 = model.initial_state(q0)
-    res = run_batch(f, fl.AngleRestrictedLaw(), x0, dt=1e-2, duration=15.0, model=model,
-                    backend="numpy")  # fmt: skip
+    kw = {"dt": 1e-2, "duration": 15.0, "model": model}
+    res = run_batch(f, fl.AngleRestrictedLaw(), x0, backend="numba", **kw)
+    slow = run_batch(f, fl.AngleRestrictedLaw(), x0, backend="numpy", **kw)
     assert "desired" in list(res.outcome)
-    for b in range(3):  # each trial is its single run
+    assert list(res.outcome) == list(slow.outcome)
+    np.testing.assert_array_equal(res.steps, slow.steps)
+    for b in range(3):  # each trial is its single run (the numpy driver's)
         one = fl.simulate(f, fl.AngleRestrictedLaw(), x0[b], duration=15.0, model=model,
-                          integrator=fl.get_integrator("euler", dt=1e-2))  # fmt: skip
+                          integrator=fl.Euler(dt=1e-2), backend="numpy")  # fmt: skip
         np.testing.assert_allclose(one.x[int(res.steps[b])], res.x_final[b], atol=1e-9)
 
 

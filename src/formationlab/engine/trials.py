@@ -27,7 +27,7 @@ from ..errors import ParameterError
 from ..formation.spec import Formation
 from ..marching.terms import march_terms
 from ..models import RobotModel
-from ..models.terms import HEADING, NEAR_IDENTITY, SINGLE, model_terms
+from ..models.terms import HEADING, NEAR_IDENTITY, model_terms
 from ..outcomes.analysis import Tolerances
 from ..safety import barrier_filter
 from ..safety.obstacle_terms import obstacle_terms
@@ -103,10 +103,11 @@ def run_trials(
     terms = law.compiled_terms(formation).writable()  # one signature for every law
     robots = model_terms(model)
     sensed = (sensing is not None and not sensing.ideal) or (faults is not None and faults.any)
-    if formation.dim == 3 and (robots.kind != SINGLE or sensed):
+    if formation.dim == 3 and (robots.kind in (HEADING, NEAR_IDENTITY) or sensed):
         raise ParameterError(
-            "the compiled loop steps formations in space on single integrators without "
-            f'sensing or faults; run this one ({model.name!r}) with backend="numpy"'
+            "the compiled loop steps formations in space on single and double integrators "
+            f"and quadrotors without sensing or faults; run this one ({model.name!r}) with "
+            'backend="numpy"'
         )
     stage = safety_stage(law, obstacles, safety)
     B, n, k = q0.shape

@@ -44,7 +44,7 @@ from ..engine.trials import chunk_state, safety_stage, sensing_channel, trial_ou
 from ..errors import ParameterError
 from ..marching.terms import march_terms, with_references
 from ..models import SingleIntegrator
-from ..models.terms import HEADING, NEAR_IDENTITY, SINGLE, model_terms
+from ..models.terms import HEADING, NEAR_IDENTITY, model_terms
 from ..safety import barrier_filter
 from ..safety.stage import CENTRALIZED
 from ..sensing import BLOCK
@@ -340,11 +340,11 @@ def compiled_terms(system: System, integrator: object) -> RunLayout | KernelTerm
 
     Explicit Euler (exactly, not a subclass) on any robot model the compiled loop steps
     (:func:`formationlab.models.terms.model_terms`: single integrators, unicycles of both
-    mappings, double integrators, with their limits), marching or not, among obstacles and
-    under a safety filter or not, sensing and with faults or not, with a law whose
-    ``kernel_terms`` describe its control. In space (``Formation.dim == 3``): single
-    integrators (with a speed limit or not), without sensing or faults, marching, obstacles
-    or a filter, under a law of ``Law.compiled_dims``.
+    mappings, double integrators, quadrotors, with their limits), marching or not, among
+    obstacles and under a safety filter or not, sensing and with faults or not, with a law whose
+    ``kernel_terms`` describe its control. In space (``Formation.dim == 3``): single and
+    double integrators and quadrotors (with their limits or not), without sensing or
+    faults, marching, obstacles or a filter, under a law of ``Law.compiled_dims``.
     """
     if type(integrator) is not Euler:
         return None
@@ -353,8 +353,9 @@ def compiled_terms(system: System, integrator: object) -> RunLayout | KernelTerm
     except ParameterError:  # (a model of the user's own)
         return None
     f = system.formation
-    if f.dim == 3 and (robots.kind != SINGLE or _measuring(system) or _acted_on(system)):
-        return None  # (in space the loop steps single integrators on the true positions)
+    if f.dim == 3 and (robots.kind in (HEADING, NEAR_IDENTITY) or _measuring(system)
+                       or _acted_on(system)):  # fmt: skip
+        return None  # (in space the loop steps the models of points on the true positions)
     if _measuring(system) or f.n <= PAIRS_UP_TO:
         try:
             return system.law.compiled_terms(f).writable()

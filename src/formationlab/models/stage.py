@@ -1,7 +1,8 @@
 """The robot models as a stage of the compiled loop (:mod:`formationlab.engine.loop`).
 
 The model enters as a :class:`~formationlab.models.terms.ModelTerms` (single integrators,
-unicycles through either transform, double integrators, each with its limits):
+unicycles through either transform, double integrators, quadrotors, each with its limits;
+in space all but the unicycles):
 :func:`points` gives the points the law acts on (``RobotModel.points``), :func:`rates` the
 state's rate from the law's control (``RobotModel.derivative``), :func:`speed` the stop
 rule's speed (``RobotModel.speed``). States are ``(n, k, C)``, the trials innermost.
@@ -29,7 +30,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .terms import DOUBLE, HEADING, NEAR_IDENTITY, SINGLE
+from .terms import DOUBLE, HEADING, NEAR_IDENTITY, QUADROTOR, SINGLE
 from .trig import SMALL_TURN, atan2_poly, turn_small
 
 __all__ = ["headings", "points", "rates", "speed", "turn"]
@@ -107,7 +108,7 @@ def rates(x, hc, hs, u, f, vel, nact, model, axes):
 
     ``hc``, ``hs``: the unicycles' ``cos theta`` and ``sin theta`` ``(n, C)`` (:func:`turn`);
     ``vel`` ``(C,)``: room for their speeds. ``axes``: the positions' (the loop's
-    ``run.axes``); in space the single integrator, the model the loop steps there.
+    ``run.axes``); in space the single and double integrators and the quadrotor.
     """
     n = x.shape[0]
     vmax = model.max_speed
@@ -138,6 +139,10 @@ def rates(x, hc, hs, u, f, vel, nact, model, axes):
                 s = vmax / size if size > vmax else 1.0  # limit_speed
                 f[i, 0, b] = ux * s
                 f[i, 1, b] = uy * s
+    elif model.kind == DOUBLE and axes.ndim == 3:  # (a constant: compiled in space only)
+        _double_in_space(x, u, f, nact, model)
+    elif model.kind == QUADROTOR:
+        _quadrotor(x, u, f, nact, model, axes)
     elif model.kind == DOUBLE:
         kd = model.damping
         for i in range(n):
@@ -203,9 +208,69 @@ def rates(x, hc, hs, u, f, vel, nact, model, axes):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
+def _double_in_space(x, u, f, nact, model):
+    """The double integrator's rates in space (``DoubleIntegrator.derivative``): state
+    ``(p, w)`` of six numbers, ``w_dot = -k_d w + u`` with the extra damping at the speed
+    limit."""
+    kd = model.damping
+    vmax = model.max_speed
+    for i in range(x.shape[0]):
+        for b in range(nact):
+            wx = x[i, 3, b]
+            wy = x[i, 4, b]
+            wz = x[i, 5, b]
+            ax = -kd * wx + u[i, 0, b]  # q_ddot = -k_d q_dot + u
+            ay = -kd * wy + u[i, 1, b]
+            az = -kd * wz + u[i, 2, b]
+            w2 = wx * wx + wy * wy + wz * wz
+            push = wx * ax + wy * ay + wz * az
+            if w2 >= vmax * vmax and push > 0:  # extra damping at the limit
+                brake = push / w2 if w2 > 0 else 0.0
+                ax -= brake * wx
+                ay -= brake * wy
+                az -= brake * wz
+            size = math.sqrt(w2)
+            s = vmax / size if size > vmax else 1.0
+            f[i, 0, b] = wx * s
+            f[i, 1, b] = wy * s
+            f[i, 2, b] = wz * s
+            f[i, 3, b] = ax
+            f[i, 4, b] = ay
+            f[i, 5, b] = az
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
+def _quadrotor(x, u, f, nact, model, axes):
+    """The quadrotor's rates (``Quadrotor.derivative``): ``q_dot = w``, ``w_dot =
+    sat_a((sat_v(u) - w) / tau)``, in the plane or in space (``axes``)."""
+    dim = axes.ndim
+    tau = model.time_constant
+    vmax = model.max_speed
+    amax = model.max_accel
+    for i in range(x.shape[0]):
+        for b in range(nact):
+            uu = 0.0
+            for d in range(dim):
+                uu += u[i, d, b] * u[i, d, b]
+            size = math.sqrt(uu)
+            s = vmax / size if size > vmax else 1.0  # sat_v: limit_speed
+            aa = 0.0
+            for d in range(dim):
+                w = x[i, dim + d, b]
+                f[i, d, b] = w
+                a = (u[i, d, b] * s - w) / tau  # the lag
+                f[i, dim + d, b] = a
+                aa += a * a
+            size = math.sqrt(aa)
+            s = amax / size if size > amax else 1.0  # sat_a: limit_speed
+            for d in range(dim):
+                f[i, dim + d, b] *= s
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
 def speed(f, b, model, axes):
     """Largest robot speed of trial ``b`` (``RobotModel.speed``) from its rates ``f``
-    (``axes``: the positions'; in space the single integrator's)."""
+    (``axes``: the positions')."""
     top = 0.0
     for i in range(f.shape[0]):
         if axes.ndim == 3:  # (a constant: compiled in space only)
@@ -215,9 +280,17 @@ def speed(f, b, model, axes):
             s = math.sqrt(f[i, 0, b] * f[i, 0, b] + f[i, 1, b] * f[i, 1, b])
         if model.kind == NEAR_IDENTITY or model.kind == HEADING:
             s += model.offset * abs(f[i, 2, b])
-        elif model.kind == DOUBLE:
-            tx = f[i, 0, b] + f[i, 2, b] / model.damping
-            ty = f[i, 1, b] + f[i, 3, b] / model.damping
-            s = max(s, math.sqrt(tx * tx + ty * ty))
+        elif model.kind == DOUBLE or model.kind == QUADROTOR:
+            # the velocity it tends to: w + w_dot / k_d (DoubleIntegrator.speed) or
+            # w + tau w_dot (Quadrotor.speed)
+            dim = axes.ndim
+            tt = 0.0
+            for d in range(dim):
+                a = f[i, dim + d, b]
+                t = f[i, d, b] + (
+                    a / model.damping if model.kind == DOUBLE else model.time_constant * a
+                )
+                tt += t * t
+            s = max(s, math.sqrt(tt))
         top = max(top, s)
     return top

@@ -13,16 +13,17 @@ from typing import NamedTuple
 from ..errors import ParameterError
 from .base import RobotModel
 from .double_integrator import DoubleIntegrator
+from .quadrotor import Quadrotor
 from .single_integrator import SingleIntegrator
 from .unicycle import Unicycle
 
-__all__ = ["DOUBLE", "HEADING", "KERNEL_MODELS", "NEAR_IDENTITY", "SINGLE", "ModelTerms",
-           "model_terms"]  # fmt: skip
+__all__ = ["DOUBLE", "HEADING", "KERNEL_MODELS", "NEAR_IDENTITY", "QUADROTOR", "SINGLE",
+           "ModelTerms", "model_terms"]  # fmt: skip
 
 #: Model kinds of the kernel.
-SINGLE, NEAR_IDENTITY, HEADING, DOUBLE = 0, 1, 2, 3
+SINGLE, NEAR_IDENTITY, HEADING, DOUBLE, QUADROTOR = 0, 1, 2, 3, 4
 #: Models the numba backend implements.
-KERNEL_MODELS = ("single-integrator", "unicycle", "double-integrator")
+KERNEL_MODELS = ("single-integrator", "unicycle", "double-integrator", "quadrotor")
 
 
 class ModelTerms(NamedTuple):
@@ -37,6 +38,8 @@ class ModelTerms(NamedTuple):
     max_speed: float  #: inf: no limit
     max_turn_rate: float
     damping: float
+    time_constant: float  #: the quadrotor's velocity lag tau (else 0)
+    max_accel: float  #: the quadrotor's acceleration limit (inf: none)
 
 
 def _limit(value: float | None) -> float:
@@ -45,7 +48,11 @@ def _limit(value: float | None) -> float:
 
 def model_terms(model: RobotModel) -> ModelTerms:
     """The :class:`ModelTerms` of ``model``; a :class:`ParameterError` for other models."""
-    common = {"max_speed": _limit(getattr(model, "max_speed", None))}
+    common = {
+        "max_speed": _limit(getattr(model, "max_speed", None)),
+        "time_constant": 0.0,
+        "max_accel": math.inf,
+    }
     if type(model) is SingleIntegrator:
         return ModelTerms(
             kind=SINGLE, state_size=2, offset=0.0, linear_gain=1.0, turn_gain=0.0,
@@ -62,6 +69,12 @@ def model_terms(model: RobotModel) -> ModelTerms:
         return ModelTerms(
             kind=DOUBLE, state_size=4, offset=0.0, linear_gain=1.0, turn_gain=0.0,
             backwards=False, max_turn_rate=math.inf, damping=float(model.damping), **common,
+        )  # fmt: skip
+    if type(model) is Quadrotor:
+        common.update(time_constant=float(model.time_constant), max_accel=_limit(model.max_accel))
+        return ModelTerms(
+            kind=QUADROTOR, state_size=4, offset=0.0, linear_gain=1.0, turn_gain=0.0,
+            backwards=False, max_turn_rate=math.inf, damping=0.0, **common,
         )  # fmt: skip
     raise ParameterError(
         f"the compiled kernel steps the robot models {', '.join(KERNEL_MODELS)}, not "

@@ -52,7 +52,7 @@ from ..formation.geometry import row_norms
 from ..formation.spec import Formation
 from ..integrators import Euler, StopRule, drive
 from ..integrators.base import steps_for
-from ..models import RobotModel, SingleIntegrator
+from ..models import DoubleIntegrator, Quadrotor, RobotModel, SingleIntegrator
 from ..models.terms import model_terms
 from ..outcomes.analysis import Tolerances
 from ..outcomes.batch import BatchResult, classify_batch, max_distance_errors
@@ -129,8 +129,11 @@ def _space_note(sensed: bool, model: RobotModel | None, laws: Sequence[Law]) -> 
     ``Law.compiled_dims`` there."""
     if sensed:
         return "the compiled loop steps formations in space without sensing or faults"
-    if model is not None and not isinstance(model, SingleIntegrator):
-        return f"the compiled loop steps single integrators in space, not {model.name!r}"
+    if model is not None and not isinstance(model, SingleIntegrator | DoubleIntegrator | Quadrotor):
+        return (
+            "the compiled loop steps single and double integrators and quadrotors in space, "
+            f"not {model.name!r}"
+        )
     plane = sorted({law.name for law in laws if 3 not in law.compiled_dims})
     if plane:
         return (
