@@ -8,12 +8,15 @@ law (eq. 8, with Khatib's repulsion between close non-neighbours), single integr
 explicit Euler (dt = 1e-3) on the compiled single run (``integrators/compiled.py``, the
 lists layout: the loop ``engine/loop.py`` compiled once for each dimension). The two are
 measured in the same run, one after the other, each on one thread and on numba's threads;
-it prints ms per step and ns per robot-step of each, the ratio space / plane of the
-faster of each, and PASS/FAIL against the target of the issue (at most 2x).
+it prints ms per step, ns per robot-step and ns per edge-step of each (the whole step's time
+over the edges), the ratio space / plane of the faster of each, and PASS/FAIL against the
+target of the issue (at most 2x).
 
 In space a robot has about twice the edges of the plane (an fcc point has 12 neighbours
-and about 14 Delaunay edges against 6), and each edge three coordinates instead of two:
-the ratio measures how much of that the loop absorbs.
+and about 14 Delaunay edges against 6: 6.9 edges per robot against 3.0), and each edge
+three coordinates instead of two: the ratio measures how much of that the loop absorbs.
+The per-edge figure says where the rest lies: at the same cost per edge-step, the edges
+alone make space 2.3 times the plane per robot-step.
 
 ``python benchmarks/bench_swarm_space.py [--n 100000] [--steps 200]``; the load average is
 printed at the start and the end (the machine may be shared: wall times grow with the
@@ -59,8 +62,8 @@ def per_step(layout, q0, steps: int, parallel: bool) -> tuple[float, float, str]
     return out.wall / steps, (time.process_time() - c0) / steps, str(out.status)
 
 
-def measure(kind: str, n: int, steps: int) -> float:
-    """Print one swarm's costs; returns its best ns per robot-step."""
+def measure(kind: str, n: int, steps: int) -> tuple[float, float]:
+    """Print one swarm's costs; returns its best ns per robot-step and per edge-step."""
     t0 = time.perf_counter()
     f, q0 = swarm(kind, n)
     built = time.perf_counter() - t0
@@ -76,12 +79,13 @@ def measure(kind: str, n: int, steps: int) -> float:
         threads = numba.get_num_threads() if parallel else 1
         rows.append(f"{threads} thr {1e3 * wall:7.3f} ms (cpu {1e3 * cpu:7.3f}), {status}")
     ns = 1e9 * best / n
+    per_edge = 1e9 * best / len(f.edges)
     print(
         f"{kind:>10} {f.dim}-D  N = {n:>7}  edges {len(f.edges):>7} ({len(f.edges) / n:4.1f} "
         f"per robot)  built in {built:5.1f} s  |  " + "  |  ".join(rows) + f"  |  {ns:6.1f} ns "
-        "per robot-step (best)"
+        f"per robot-step, {per_edge:5.2f} ns per edge-step (best)"
     )
-    return ns
+    return ns, per_edge
 
 
 def main() -> None:
@@ -90,14 +94,18 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=200)
     args = parser.parse_args()
     print(f"start: {load()}; numba threads {numba.get_num_threads()}; {args.steps} steps")
-    plane = measure("triangular", args.n, args.steps)
-    space = measure("fcc", args.n, args.steps)
+    plane, plane_edge = measure("triangular", args.n, args.steps)
+    space, space_edge = measure("fcc", args.n, args.steps)
     ratio = space / plane
     print(f"end: {load()}")
     verdict = "PASS" if ratio <= TARGET else "FAIL"
     print(
         f"  {verdict} {args.n} robots in space: {space:.1f} ns per robot-step against "
         f"{plane:.1f} in the plane, {ratio:.2f}x (target <= {TARGET:g}x)"
+    )
+    print(
+        f"  per edge-step: {space_edge:.2f} ns in space against {plane_edge:.2f} in the plane, "
+        f"{space_edge / plane_edge:.2f}x (the rest of the ratio is the edges per robot)"
     )
 
 

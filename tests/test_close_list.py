@@ -18,6 +18,12 @@ from formationlab.neighbours.close_list import close_list
 from formationlab.neighbours.kdtree import non_edges
 
 
+def length(r):
+    """``|r|`` of a difference in the plane (numpy's hypot) or in space (the root of its
+    squares summed in order, as the compiled search sums them)."""
+    return np.hypot(*r) if r.size == 2 else np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+
+
 def brute(q, radius, reach, exclude):
     skip = {tuple(e) for e in exclude.tolist()}
     n = len(q)
@@ -25,7 +31,7 @@ def brute(q, radius, reach, exclude):
         (i, j)
         for i in range(n)
         for j in range(i + 1, n)
-        if (i, j) not in skip and np.hypot(*(q[j] - q[i])) - radius[i] - radius[j] < reach
+        if (i, j) not in skip and length(q[j] - q[i]) - radius[i] - radius[j] < reach
     ]
     return np.array(found, dtype=np.int64).reshape(-1, 2)
 
@@ -43,11 +49,31 @@ def layout(kind: str, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray,
     if kind == "one-cell":
         q = rng.uniform(0, 0.1, (70, 2))
         return q, rng.uniform(0.0, 0.02, len(q)), 0.05
-    q = np.concatenate([rng.uniform(0, 3, (90, 2)), [[1e6, 1e6], [-1e6, 5.0], [1e6, 1e6 + 0.5]]])
+    if kind == "outliers":
+        far = [[1e6, 1e6], [-1e6, 5.0], [1e6, 1e6 + 0.5]]
+        q = np.concatenate([rng.uniform(0, 3, (90, 2)), far])
+        return q, np.full(len(q), 0.1), 0.4
+    # in space: random in a box, a cubic grid whose spacing is the cells' side, a tall
+    # column (many robots over one square of the plane), a flat layer (one cell deep)
+    if kind == "space-random":
+        q = rng.uniform(0, 5, (500, 3))
+        return q, rng.uniform(0.05, 0.2, len(q)), 0.4
+    if kind == "space-cell-borders":
+        g = np.arange(8) * (0.2 + 0.5)
+        q = np.stack(np.meshgrid(g, g, g), axis=-1).reshape(-1, 3)
+        return q, np.full(len(q), 0.1), 0.5
+    if kind == "space-column":
+        q = np.column_stack([rng.uniform(0, 0.6, (300, 2)), rng.uniform(0, 60, 300)])
+        return q, np.full(len(q), 0.1), 0.4
+    q = np.column_stack([rng.uniform(0, 6, (300, 2)), np.full(300, 2.0)])
     return q, np.full(len(q), 0.1), 0.4
 
 
-@pytest.mark.parametrize("kind", ["random", "cell-borders", "one-cell", "outliers"])
+PLANE_KINDS = ["random", "cell-borders", "one-cell", "outliers"]
+SPACE_KINDS = ["space-random", "space-cell-borders", "space-column", "space-layer"]
+
+
+@pytest.mark.parametrize("kind", PLANE_KINDS + SPACE_KINDS)
 def test_the_close_list_is_exactly_the_pairs_within_reach(kind):
     rng = np.random.default_rng(11)
     q, radius, reach = layout(kind, rng)
@@ -55,10 +81,10 @@ def test_the_close_list_is_exactly_the_pairs_within_reach(kind):
     exclude = every[::4]  # some close pairs are edges: left out
     pairs, ptr, rows = close_list(q, radius, reach, exclude)
     expected = brute(q, radius, reach, exclude)
-    if kind == "cell-borders":  # exactly at the reach: rounding may put a pair either side
+    if kind.endswith("cell-borders"):  # exactly at the reach: rounding may put a pair either side
         diff = {tuple(p) for p in pairs.tolist()} ^ {tuple(p) for p in expected.tolist()}
         for i, j in diff:
-            gap = np.hypot(*(q[j] - q[i])) - radius[i] - radius[j]
+            gap = length(q[j] - q[i]) - radius[i] - radius[j]
             assert gap == pytest.approx(reach, rel=1e-12)
         assert len(expected) > 100  # the layout does put pairs at the reach
     else:
@@ -269,6 +295,9 @@ EXTREME = {
     "thin and huge": [[0.0, 0.0], [1e300, 0.0], [0.0, 0.5], [0.3, 0.5]],
     "NaN": [[np.nan, 0.0], [0.0, 0.0], [0.0, 0.3], [5.0, 5.0]],
     "infinite": [[np.inf, 0.0], [0.0, -np.inf], [0.0, 0.3], [0.0, 0.0]],
+    "far apart in space": [[0.0, 0.0, -3e154], [0.0, 0.0, 3e154], [1.0, 0.0, 0.0], [1.0, 0.0, 0.3]],
+    "depth beyond floats": [[0.0, 0.0, -1e308], [0.0, 0.0, 1e308], [0.0, 0.0, 0.0], [0, 0, 0.05]],
+    "NaN in space": [[0.0, 0.0, np.nan], [0.0, 0.0, 0.0], [0.0, 0.3, 0.0], [5.0, 5.0, 5.0]],
 }
 
 
@@ -283,9 +312,9 @@ def test_the_cell_grid_stays_in_bounds_for_huge_or_non_finite_positions(kind):
     n = len(q)
     cell_of, items = np.zeros(n, np.int32), np.zeros(n, np.int32)
     start = np.full(4 * n + 17, -7, np.int32)
-    nx, ny = bin_points(q, 0.5, cell_of, items, start)[:2]
-    assert nx >= 1 and ny >= 1 and nx * ny <= start.size - 1
-    assert np.all((cell_of >= 0) & (cell_of < nx * ny))
+    nx, ny, nz = bin_points(q, 0.5, cell_of, items, start)[:3]
+    assert nx >= 1 and ny >= 1 and nz >= 1 and nx * ny * nz <= start.size - 1
+    assert np.all((cell_of >= 0) & (cell_of < nx * ny * nz))
     assert sorted(items.tolist()) == list(range(n))  # each robot in exactly one cell
     # the pairs between finite robots are still exactly those within reach
     finite = np.isfinite(q).all(axis=1)
@@ -295,3 +324,24 @@ def test_the_cell_grid_stays_in_bounds_for_huge_or_non_finite_positions(kind):
         expected = brute(np.where(finite[:, None], q, 0.0), radius, 0.5, np.zeros((0, 2), int))
     expected = [tuple(p) for p in expected.tolist() if finite[p[0]] and finite[p[1]]]
     assert [tuple(p) for p in pairs.tolist() if finite[p[0]] and finite[p[1]]] == expected
+
+
+def test_in_space_the_cells_are_cubes_each_holding_its_points():
+    # the close list of a swarm in space bins its robots into cubes (a column over the
+    # plane held a whole column of robots: O(n^(4/3)) candidates for a patch of n)
+    from formationlab.neighbours.cell_grid import bin_points
+
+    q = lattice("fcc", 2000, 1.0)
+    n = len(q)
+    cell_of, items = np.zeros(n, np.int32), np.zeros(n, np.int32)
+    start = np.zeros(4 * n + 17, np.int32)
+    nx, ny, nz, side, x0, y0, z0 = bin_points(q, 0.7, cell_of, items, start)
+    assert nz > 3 and nx * ny * nz <= start.size - 1 and side >= 0.7
+    corner = np.array([x0, y0, z0])
+    cx, cy, cz = np.floor((q - corner) / side).astype(int).T
+    np.testing.assert_array_equal(cell_of, (cx * ny + cy) * nz + cz)
+    counts = np.diff(start[: nx * ny * nz + 1])
+    assert counts.max() <= 4 * side**3 + 8  # about fcc's density (sqrt 2 per unit volume)
+    for c in np.flatnonzero(counts)[:50]:
+        inside = items[start[c] : start[c + 1]]
+        assert np.all(cell_of[inside] == c) and np.all(np.diff(inside) > 0)

@@ -81,6 +81,36 @@ def test_a_swarm_in_space_on_the_lists_layout_is_the_drivers() -> None:
     np.testing.assert_array_equal(out.x, a.q)
 
 
+def test_a_swarm_in_space_numbered_along_the_curve_is_the_same_run(monkeypatch) -> None:
+    # from REORDER_FROM robots the run numbers a swarm in space along the Morton curve of
+    # its template (engine/layout.space_order): each robot keeps its rows in their order,
+    # so the run is the one numbered as given, bit for bit, and the driver's
+    from formationlab.integrators import compiled
+
+    tpl = fl.lattice("fcc", PAIRS_UP_TO + 100)
+    rng = np.random.default_rng(4)
+    shuffle = rng.permutation(len(tpl))  # (numbered at random: far from the curve)
+    tpl = tpl[shuffle]
+    edges = fl.build_edges("delaunay", tpl)
+    formation = fl.Formation.from_template(tpl, edges=edges, diameters=0.2, one_based=False)
+    q0 = _start(tpl, 0.05, seed=2)
+    system = System(formation=formation, law=fl.DistanceLaw())
+    plain = compiled_terms(system, fl.Euler(dt=1e-2))
+    monkeypatch.setattr(compiled, "REORDER_FROM", 8)
+    curved = compiled_terms(system, fl.Euler(dt=1e-2))
+    assert plain.perm.size == 0 and sorted(curved.perm.tolist()) == list(range(len(tpl)))
+    gap = [np.abs(lay.edge_i - lay.edge_j) for lay in (plain, curved)]
+    assert np.median(gap[1]) < np.median(gap[0]) / 4  # neighbours have near numbers
+    a = run_compiled(plain, q0, dt=1e-2, n_steps=40, save_every=5)
+    b = run_compiled(curved, q0, dt=1e-2, n_steps=40, save_every=5)
+    assert a.status == b.status and np.max(np.abs(b.x[-1] - q0)) > 1e-3
+    np.testing.assert_array_equal(a.x, b.x)
+    np.testing.assert_array_equal(a.v, b.v)
+    ref = fl.simulate(formation, fl.DistanceLaw(), q0, duration=0.4, backend="numpy",
+                      integrator=fl.Euler(dt=1e-2), save_every=5)  # fmt: skip
+    assert np.max(np.abs(b.x - ref.q)) <= 1e-12 * np.max(np.abs(ref.q))
+
+
 def test_a_swarm_in_space_sees_contact_in_all_three_axes() -> None:
     # two robots one above the other, pulled together along z: the step into contact is
     # rejected as the driver rejects it (a loop that measured x and y only would not)

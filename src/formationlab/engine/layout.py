@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from ..controllers.terms import KernelTerms
 from ..errors import ParameterError
 
-__all__ = ["PAIRS_UP_TO", "REORDER_FROM", "RunLayout", "robot_order", "run_layout"]
+__all__ = ["PAIRS_UP_TO", "REORDER_FROM", "RunLayout", "robot_order", "run_layout", "space_order"]
 
 _I32 = np.int32
 _LIMIT = 2**31 - 1
@@ -130,15 +130,69 @@ def _i32(a: NDArray[np.integer]) -> NDArray[np.int32]:
     return np.ascontiguousarray(a, dtype=_I32)
 
 
-def robot_order(edge_i: NDArray[np.integer], edge_j: NDArray[np.integer], n: int) -> NDArray:
-    """An order of the robots in which neighbours have near numbers: reverse Cuthill-McKee
-    on the graph (``scipy.sparse.csgraph``), new to old, int32 ``(n,)``."""
+def robot_order(
+    edge_i: NDArray[np.integer],
+    edge_j: NDArray[np.integer],
+    n: int,
+    positions: NDArray[np.floating] | None = None,
+) -> NDArray[np.int32]:
+    """An order of the robots in which neighbours have near numbers, new to old, int32
+    ``(n,)``.
+
+    In the plane (and without ``positions``): reverse Cuthill-McKee on the graph
+    (``scipy.sparse.csgraph``). In space, given the robots' places ``positions`` ``(n, 3)``
+    (the template): along the Morton (Z-order) curve of cubes about one edge long
+    (:func:`space_order`). Reverse Cuthill-McKee numbers a 3-D patch in wavefronts, so that a
+    robot's neighbours in the previous front are some ``n^(2/3)`` numbers back (about 3,800
+    in a 100,000-robot fcc patch, beyond the second-level cache for the forces they read);
+    along the curve half of them are within a few numbers and nine in ten within a few
+    hundred.
+    """
+    if positions is not None and positions.shape[-1] == 3:
+        return space_order(positions, edge_i, edge_j)
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import reverse_cuthill_mckee
 
     ones = np.ones(edge_i.size, dtype=np.int8)
     graph = csr_matrix((ones, (edge_i, edge_j)), shape=(n, n))
     return _i32(reverse_cuthill_mckee(graph + graph.T, symmetric_mode=True))
+
+
+#: bits of each axis in a Morton key (three of them fill 63 bits)
+_MORTON_BITS = 21
+
+
+def _spread(v: NDArray[np.uint64]) -> NDArray[np.uint64]:
+    """The 21 low bits of ``v`` moved to every third bit (bit ``b`` to bit ``3 b``)."""
+    v = v & np.uint64(0x1FFFFF)
+    for shift, mask in (
+        (32, 0x1F00000000FFFF),
+        (16, 0x1F0000FF0000FF),
+        (8, 0x100F00F00F00F00F),
+        (4, 0x10C30C30C30C30C3),
+        (2, 0x1249249249249249),
+    ):
+        v = (v | (v << np.uint64(shift))) & np.uint64(mask)
+    return v
+
+
+def space_order(
+    positions: NDArray[np.floating], edge_i: NDArray[np.integer], edge_j: NDArray[np.integer]
+) -> NDArray[np.int32]:
+    """The robots at ``positions`` ``(n, 3)`` along the Morton curve of cubes whose side is
+    the median length of the edges ``(edge_i, edge_j)`` (at least ``2^-21`` of the extent),
+    new to old, int32 ``(n,)``; robots in one cube keep their order."""
+    p = np.asarray(positions, dtype=float)
+    low = p.min(axis=0) if p.size else np.zeros(3)
+    extent = float(np.max(p.max(axis=0) - low)) if p.size else 0.0
+    side = float(np.median(np.linalg.norm(p[edge_j] - p[edge_i], axis=1))) if edge_i.size else 0
+    side = max(side, extent / (2**_MORTON_BITS - 1))
+    if not (np.isfinite(side) and side > 0.0):
+        return np.arange(p.shape[0], dtype=_I32)
+    cells = np.floor((p - low) / side).astype(np.uint64)
+    x, y, z = (_spread(cells[:, a]) for a in range(3))
+    key = (x << np.uint64(2)) | (y << np.uint64(1)) | z
+    return _i32(np.argsort(key, kind="stable"))
 
 
 def run_layout(

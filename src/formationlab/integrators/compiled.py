@@ -362,7 +362,11 @@ def compiled_terms(system: System, integrator: object) -> RunLayout | KernelTerm
         except ParameterError:
             return None
     # the robots' order first: its scratch is gone before the law's arrays are made
-    order = robot_order(f.edges[:, 0], f.edges[:, 1], f.n) if f.n >= REORDER_FROM else False
+    order = (  # (in space along a curve through the template, where there is one)
+        robot_order(f.edges[:, 0], f.edges[:, 1], f.n, f.template if f.dim == 3 else None)
+        if f.n >= REORDER_FROM
+        else False
+    )
     try:
         terms = system.law.compiled_terms(f, pairs=False)._asdict()
     except ParameterError:

@@ -1,12 +1,13 @@
-"""Points binned into a grid of square cells, compiled (numba): the one cell grid.
+"""Points binned into a grid of cells, compiled (numba): the one cell grid.
 
-Points are binned into square cells of side at least a radius ``R`` (counting sort), so the
-points within ``R`` of point ``i`` lie in its cell and the eight around it: ``O(n)`` work
-for a swarm of bounded density instead of the ``O(n^2)`` of all pairs. A spread-out swarm
-gets larger cells, so that the grid has at most as many cells as its scratch holds
-(``start.size - 1``). Two users: the close-pair (Verlet) list of the compiled loop
-(:mod:`.close_list`, Khatib's repulsion and contact, into scratch it keeps from step to
-step) and each robot's neighbours within the safety filter's sensing radius
+Points are binned into cells of side at least a radius ``R`` (counting sort: squares in the
+plane, cubes in space), so the points within ``R`` of point ``i`` lie in its cell and the
+ones around it (8 in the plane, 26 in space): ``O(n)`` work for a swarm of bounded density
+instead of the ``O(n^2)`` of all pairs. A spread-out swarm gets larger cells, so that the
+grid has at most as many cells as its scratch holds (``start.size - 1``). Two users: the
+close-pair (Verlet) list of the compiled loop (:mod:`.close_list`, Khatib's repulsion and
+contact, in the plane and in space, into scratch it keeps from step to step) and each
+robot's neighbours within the safety filter's sensing radius in the plane
 (:func:`build_grid`, :func:`neighbours_of`, in ascending order, the order of
 :func:`formationlab.safety.neighbour_lists`).
 """
@@ -19,7 +20,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["bin_points", "build_grid", "cell", "neighbours_of"]
+__all__ = ["bin_points", "build_grid", "cell", "cell_index", "neighbours_of"]
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -38,39 +39,78 @@ def cell(v, v0, side, count):
     return int(t)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _cells(wide, high, deep, side):
+    """How many cells of ``side`` cover an extent ``wide x high x deep`` (``deep`` 0: the
+    plane), counted in floats: the cell counts of a huge extent are beyond the integers."""
+    return (
+        (math.floor(wide / side) + 1.0)
+        * (math.floor(high / side) + 1.0)
+        * (math.floor(deep / side) + 1.0)
+    )
+
+
+@njit(cache=True, nogil=True, inline="always")
+def cell_index(q, i, x0, y0, z0, side, nx, ny, nz):
+    """The cell ``c = (cx ny + cy) nz + cz`` of point ``i`` of ``q`` (``cz = 0`` when
+    ``nz`` is 1: the plane, or a flat layout in space)."""
+    c = cell(q[i, 0], x0, side, nx) * ny + cell(q[i, 1], y0, side, ny)
+    if nz > 1:
+        c = c * nz + cell(q[i, 2], z0, side, nz)
+    return c
+
+
 @njit(cache=True, nogil=True)
 def bin_points(q, side, cell_of, items, start):
-    """Counting sort of the points ``q`` ``(n, 2)`` into square cells of side ``>= side``.
+    """Counting sort of the points ``q`` ``(n, d)`` into cells of side ``>= side``: squares
+    in the plane (``d = 2``), cubes in space (``d = 3``).
 
     At most ``start.size - 1`` cells: a spread-out layout gets larger cells (to about that
-    many from its area, then doubled until they fit; wider cells still hold every pair
-    within ``side``); points whose extent is not finite (NaN, infinite, or too far apart
+    many from its area or volume, then doubled until they fit; wider cells still hold every
+    pair within ``side``); points whose extent is not finite (NaN, infinite, or too far apart
     for their difference to be a float) all go into one cell. ``cell_of`` and ``items``
-    ``(n,)`` and ``start`` are scratch. Returns ``nx, ny, side, x0, y0``; the points of
-    cell ``c = cx ny + cy`` are ``items[start[c]:start[c + 1]]``, in ascending order.
+    ``(n,)`` and ``start`` are scratch. Returns ``nx, ny, nz, side, x0, y0, z0`` (``nz = 1``
+    and ``z0 = 0`` in the plane); the points of cell ``c = (cx ny + cy) nz + cz``
+    (:func:`cell_index`) are ``items[start[c]:start[c + 1]]``, in ascending order.
     """
     n = q.shape[0]
+    space = q.shape[1] == 3
     limit = start.size - 1
     x0, y0, x1, y1 = np.inf, np.inf, -np.inf, -np.inf
+    z0, z1 = 0.0, 0.0
     for i in range(n):
         x0, x1 = min(x0, q[i, 0]), max(x1, q[i, 0])
         y0, y1 = min(y0, q[i, 1]), max(y1, q[i, 1])
-    wide, high = x1 - x0, y1 - y0
-    nx, ny = 1, 1
-    if math.isfinite(wide) and math.isfinite(high) and math.isfinite(side) and side > 0.0:
-        # counted in floats: the cell counts of a huge extent are beyond the integers
-        if (math.floor(wide / side) + 1.0) * (math.floor(high / side) + 1.0) > limit:
-            side = max(side, math.sqrt((wide + side) * (high + side) / limit) * 1.01)
-        while (math.floor(wide / side) + 1.0) * (math.floor(high / side) + 1.0) > limit:
-            side *= 2.0  # a thin layout, or one whose area above overflowed
+    if space and n > 0:
+        z0, z1 = np.inf, -np.inf
+        for i in range(n):
+            z0, z1 = min(z0, q[i, 2]), max(z1, q[i, 2])
+    wide, high, deep = x1 - x0, y1 - y0, z1 - z0
+    nx, ny, nz = 1, 1, 1
+    if (
+        math.isfinite(wide)
+        and math.isfinite(high)
+        and math.isfinite(deep)
+        and math.isfinite(side)
+        and side > 0.0
+    ):
+        if _cells(wide, high, deep, side) > limit:
+            if space:  # (from the volume)
+                volume = (wide + side) * (high + side) * (deep + side)
+                side = max(side, (volume / limit) ** (1.0 / 3.0) * 1.01)
+            else:
+                side = max(side, math.sqrt((wide + side) * (high + side) / limit) * 1.01)
+        while _cells(wide, high, deep, side) > limit:
+            side *= 2.0  # a thin layout, or one whose area or volume above overflowed
         nx = int(wide / side) + 1  # (>= 1: truncation is the floor)
         ny = int(high / side) + 1
+        nz = int(deep / side) + 1
     else:
-        x0, y0, side = 0.0, 0.0, np.inf
-    cells = nx * ny
+        x0, y0, z0, side = 0.0, 0.0, 0.0, np.inf
+    cells = nx * ny * nz
     start[: cells + 1] = 0
     for i in range(n):
-        c = cell(q[i, 0], x0, side, nx) * ny + cell(q[i, 1], y0, side, ny)
+        c = cell_index(q, i, x0, y0, z0, side, nx, ny, nz)
         cell_of[i] = c
         start[c + 1] += 1
     for c in range(cells):
@@ -82,12 +122,12 @@ def bin_points(q, side, cell_of, items, start):
     for c in range(cells):  # start[c + 1] now points at cell c's first point; shift back
         start[c] = start[c + 1]
     start[cells] = n
-    return nx, ny, side, x0, y0
+    return nx, ny, nz, side, x0, y0, z0
 
 
 @njit(cache=True, nogil=True)
 def build_grid(q: NDArray, radius: float):
-    """The points ``q`` ``(n, 2)`` in cells of side ``>= radius``, at most ``4 n + 16`` of them.
+    """The points ``q`` ``(n, 2)`` in squares of side ``>= radius``, at most ``4 n + 16`` of them.
 
     Returns ``(origin_x, origin_y, side, nx, ny, start, order)``: point ``order[k]`` for
     ``start[c] <= k < start[c + 1]`` lies in cell ``c = cx ny + cy`` (:func:`bin_points`).
@@ -96,7 +136,7 @@ def build_grid(q: NDArray, radius: float):
     cell_of = np.empty(n, dtype=np.int64)
     order = np.empty(n, dtype=np.int64)
     start = np.zeros(4 * n + 16 + 1, dtype=np.int64)
-    nx, ny, side, x0, y0 = bin_points(q, radius, cell_of, order, start)
+    nx, ny, _, side, x0, y0, _ = bin_points(q, radius, cell_of, order, start)
     return x0, y0, side, nx, ny, start[: nx * ny + 1], order
 
 

@@ -3,13 +3,13 @@
 Khatib's repulsion acts only between robots closer than ``a_ij + s0`` and contact
 only at ``r_ij <= a_ij``, so a run of many robots needs, at each step, only the
 pairs whose clearance ``r_ij - a_ij`` is below some ``c``. :func:`build_close_list`
-finds exactly the pairs with clearance below ``reach`` (robots binned into square
-cells at least ``max a_ij + reach`` wide by :mod:`.cell_grid`, each robot looking at the
-3 x 3 cells around its own), leaving out excluded partners (a formation's neighbours, whose
-edge potential has its own barrier). A list built with ``reach = c + skin`` still
-holds every pair of clearance below ``c`` while no robot has moved more than
-``skin / 2`` since the build (a pair's clearance changes by at most the sum of
-its robots' moves), so it is rebuilt only then (:func:`list_holds`).
+finds exactly the pairs with clearance below ``reach`` (robots binned into cells at least
+``max a_ij + reach`` wide by :mod:`.cell_grid`, squares in the plane and cubes in space,
+each robot looking at the 3 x 3 or 3 x 3 x 3 cells around its own), leaving out excluded
+partners (a formation's neighbours, whose edge potential has its own barrier). A list
+built with ``reach = c + skin`` still holds every pair of clearance below ``c`` while no
+robot has moved more than ``skin / 2`` since the build (a pair's clearance changes by at
+most the sum of its robots' moves), so it is rebuilt only then (:func:`list_holds`).
 
 The pairs come out sorted, ``i < j``, and each robot's row of the list (the
 pairs it belongs to, as signed pair numbers: ``p`` where it is ``i``, ``~p``
@@ -39,10 +39,8 @@ def build_close_list(q, radius, reach, ex_ptr, ex_nbr, pairs, cell_of, items, st
 
     Parameters
     ----------
-    q : (n, d) positions (finite), d = 2 or 3: in space the cells are columns over the
-        plane of the first two axes (a pair within reach is within it there too), and the
-        distances are measured in space; radius : (n,) half diameters; reach : clearance
-        bound.
+    q : (n, d) positions (finite), d = 2 or 3 (squares or cubes of the cell grid);
+        radius : (n,) half diameters; reach : clearance bound.
     ex_ptr, ex_nbr : CSR rows of the excluded partners of each robot (int32).
     pairs : (cap, 2) int32 buffer, filled with the first ``min(count, cap)`` pairs.
     cell_of, items, stamp, cand : (n,) int32 scratch; start : (cells + 1,) int32 scratch.
@@ -58,7 +56,8 @@ def build_close_list(q, radius, reach, ex_ptr, ex_nbr, pairs, cell_of, items, st
     for i in range(n):
         top = max(top, radius[i])
     side = (2.0 * top + reach) * (1.0 + _SLACK) + 1e-300
-    nx, ny, side, x0, y0 = bin_points(q, side, cell_of, items, start)
+    nx, ny, nz, side, x0, y0, z0 = bin_points(q, side, cell_of, items, start)
+    space = q.shape[1] == 3
     stamp[:] = -1
     count = 0
     for i in range(n):
@@ -66,23 +65,25 @@ def build_close_list(q, radius, reach, ex_ptr, ex_nbr, pairs, cell_of, items, st
             stamp[ex_nbr[p]] = i
         cx = cell(q[i, 0], x0, side, nx)
         cy = cell(q[i, 1], y0, side, ny)
+        cz = cell(q[i, 2], z0, side, nz) if nz > 1 else 0
         m = 0
         for gx in range(max(cx - 1, 0), min(cx + 2, nx)):
             for gy in range(max(cy - 1, 0), min(cy + 2, ny)):
-                c = gx * ny + gy
-                for pos in range(start[c], start[c + 1]):
-                    j = items[pos]
-                    if j <= i or stamp[j] == i:
-                        continue
-                    dx = q[j, 0] - q[i, 0]
-                    dy = q[j, 1] - q[i, 1]
-                    r2 = dx * dx + dy * dy
-                    for d in range(2, q.shape[1]):  # (in space: the cells are columns)
-                        dz = q[j, d] - q[i, d]
-                        r2 += dz * dz
-                    if math.sqrt(r2) - (radius[i] + radius[j]) < reach:
-                        cand[m] = j
-                        m += 1
+                for gz in range(max(cz - 1, 0), min(cz + 2, nz)):  # (nz = 1: the plane)
+                    c = (gx * ny + gy) * nz + gz
+                    for pos in range(start[c], start[c + 1]):
+                        j = items[pos]
+                        if j <= i or stamp[j] == i:
+                            continue
+                        dx = q[j, 0] - q[i, 0]
+                        dy = q[j, 1] - q[i, 1]
+                        r2 = dx * dx + dy * dy
+                        if space:
+                            dz = q[j, 2] - q[i, 2]
+                            r2 += dz * dz
+                        if math.sqrt(r2) - (radius[i] + radius[j]) < reach:
+                            cand[m] = j
+                            m += 1
         for a in range(1, m):  # insertion sort: rows are short
             v = cand[a]
             b = a - 1
@@ -163,7 +164,7 @@ class CloseList:
         ex_ptr: NDArray[np.int32],
         ex_nbr: NDArray[np.int32],
     ) -> None:
-        """Fill the list from positions ``q`` ``(n, 2)`` (:func:`build_close_list`)."""
+        """Fill the list from positions ``q`` ``(n, d)`` (:func:`build_close_list`)."""
         n = q.shape[0]
         while True:
             self.count = build_close_list(
@@ -183,9 +184,10 @@ def close_list(
     reach: float,
     exclude: NDArray[np.int64] | None = None,
 ) -> tuple[NDArray[np.int64], NDArray[np.int32], NDArray[np.int32]]:
-    """The pairs ``i < j`` of ``q`` ``(n, 2)`` with clearance ``r_ij - rho_i/2 - rho_j/2 <
-    reach``, not in ``exclude`` ``(m, 2)``: ``(p, 2)`` sorted, and each robot's row
-    (``ptr`` ``(n + 1,)``, ``rows``: signed pair numbers sorted by partner)."""
+    """The pairs ``i < j`` of ``q`` ``(n, d)`` (``d`` 2 or 3) with clearance
+    ``r_ij - rho_i/2 - rho_j/2 < reach``, not in ``exclude`` ``(m, 2)``: ``(p, 2)`` sorted,
+    and each robot's row (``ptr`` ``(n + 1,)``, ``rows``: signed pair numbers sorted by
+    partner)."""
     q = np.ascontiguousarray(q, dtype=float)
     n = q.shape[0]
     rad = np.broadcast_to(np.asarray(radius, dtype=float), (n,)).copy()
