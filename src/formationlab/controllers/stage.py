@@ -19,7 +19,7 @@ import math
 
 from numba import njit
 
-from .kinds.edges import edge_force, edge_force_at, edge_gain
+from .kinds.edges import BEARING, LOG_BARRIER, SQUARED, edge_force, edge_force_at, edge_gain
 from .kinds.khatib import repulsion_gain
 from .kinds.restriction import restriction_force, switched_on, switching, triangle_product
 from .kinds.signed_area import area_force, area_gain, signed_area
@@ -57,18 +57,14 @@ def law_field(q, u, sigma, nact, terms, rr, known, axes):
         a = t.pair_contact[p]
         if not known:
             _lengths(q, rr, p, i, j, nact, axes)
-        if t.pair_is_edge[p]:
-            d = t.pair_distance[p]
-            bx = t.pair_bearing[p * t.bearing_stride, 0]
-            by = t.pair_bearing[p * t.bearing_stride, 1]
-            for b in range(nact):
-                dx = q[j, 0, b] - q[i, 0, b]
-                dy = q[j, 1, b] - q[i, 1, b]
-                fx, fy = edge_force_at(t.kind, dx, dy, rr[p, b], d, a, t.edge_gain, bx, by)
-                u[i, 0, b] += fx  # eq. (8)
-                u[i, 1, b] += fy
-                u[j, 0, b] -= fx
-                u[j, 1, b] -= fy
+        if t.pair_is_edge[p]:  # (one loop per kind, whose branch numba folds away: the
+            # loop over trials then holds one kind's arithmetic and no test)
+            if t.kind == LOG_BARRIER:
+                _edge(q, u, rr, p, i, j, a, nact, t, LOG_BARRIER)
+            elif t.kind == SQUARED:
+                _edge(q, u, rr, p, i, j, a, nact, t, SQUARED)
+            else:
+                _edge(q, u, rr, p, i, j, a, nact, t, BEARING)
         else:
             for b in range(nact):
                 dx = q[j, 0, b] - q[i, 0, b]
@@ -122,6 +118,23 @@ def law_field(q, u, sigma, nact, terms, rr, known, axes):
             fx, fy = area_force(g, xa, ya, xb, yb)
             u[ic, 0, b] += fx
             u[ic, 1, b] += fy
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
+def _edge(q, u, rr, p, i, j, a, nact, t, kind):
+    """Edge ``p = (i, j)``'s terms in the first ``nact`` trials, ``kind`` a constant where
+    numba compiles it (:func:`.kinds.edges.edge_force_at`)."""
+    d = t.pair_distance[p]
+    bx = t.pair_bearing[p * t.bearing_stride, 0]
+    by = t.pair_bearing[p * t.bearing_stride, 1]
+    for b in range(nact):
+        dx = q[j, 0, b] - q[i, 0, b]
+        dy = q[j, 1, b] - q[i, 1, b]
+        fx, fy = edge_force_at(kind, dx, dy, rr[p, b], d, a, t.edge_gain, bx, by)
+        u[i, 0, b] += fx  # eq. (8)
+        u[i, 1, b] += fy
+        u[j, 0, b] -= fx
+        u[j, 1, b] -= fy
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")

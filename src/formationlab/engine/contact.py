@@ -88,15 +88,15 @@ def contact(x, xp, disp, gap, swept, near, nact, terms, rr, axes):
     ``gap``: least ``r_ij - a_ij`` at ``x``; ``swept``: least clearance along the
     straight step from ``xp`` to ``x`` of the pairs within ``SWEPT_MARGIN disp``
     (``disp`` is each trial's largest displacement, 0 before the first step). Two
-    passes: every trial's least clearance, flagging in ``near`` the trials with such a
-    pair (plain arithmetic, vectorised); then the swept test of those pairs of the
-    flagged trials (rare: a pair about to touch). A call in the first loop would keep
-    it, and the law's loops if they held it, from being vectorised.
+    passes: every trial's least clearance, and ``near`` flags the trials with such a
+    pair, those whose least clearance is within the margin (plain arithmetic,
+    vectorised); then the swept test of those pairs of the flagged trials (rare: a pair
+    about to touch). A call in the first loop would keep it, and the law's loops if they
+    held it, from being vectorised.
     """
     for b in range(nact):
         gap[b] = np.inf
         swept[b] = np.inf
-        near[b] = 0.0
     for p in range(terms.pair_i.shape[0]):
         i = terms.pair_i[p]
         j = terms.pair_j[p]
@@ -110,9 +110,9 @@ def contact(x, xp, disp, gap, swept, near, nact, terms, rr, axes):
             else:
                 r = math.sqrt(dx * dx + dy * dy)
             rr[p, b] = r
-            clr = r - a
-            gap[b] = min(gap[b], clr)
-            near[b] = 1.0 if clr <= SWEPT_MARGIN * disp[b] else near[b]
+            gap[b] = min(gap[b], r - a)
+    for b in range(nact):  # (a pair within the margin: the least clearance is within it)
+        near[b] = 1.0 if gap[b] <= SWEPT_MARGIN * disp[b] else 0.0
     for b in range(nact):
         if near[b] == 0.0:
             continue

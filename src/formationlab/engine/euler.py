@@ -49,18 +49,20 @@ def euler(x, f, xn, dt, lo, hi, nact, disp, fin, axes):
         _euler_in_space(x, f, xn, dt, lo, hi, nact, disp, fin)
         return
     for i in range(lo, hi):
-        # (two loops over trials: one that writes only xn and one that writes only disp and
-        # fin, so that each is vectorised; in one loop the checks that the five arrays do
-        # not overlap are too many for the compiler, and it stays scalar)
+        # (three loops over trials, each writing one array, so that each is vectorised; in
+        # one loop the checks that the five arrays do not overlap are too many for the
+        # compiler, and it stays scalar, and a loop writing both disp and fin keeps the
+        # largest move scalar)
         for b in range(nact):
             xn[i, 0, b] = x[i, 0, b] + dt * f[i, 0, b]  # explicit Euler
             xn[i, 1, b] = x[i, 1, b] + dt * f[i, 1, b]
         for b in range(nact):
+            ex = xn[i, 0, b] - x[i, 0, b]
+            ey = xn[i, 1, b] - x[i, 1, b]
+            disp[b] = max(disp[b], ex * ex + ey * ey)
+        for b in range(nact):
             nx = xn[i, 0, b]
             ny = xn[i, 1, b]
-            ex = nx - x[i, 0, b]
-            ey = ny - x[i, 1, b]
-            disp[b] = max(disp[b], ex * ex + ey * ey)
             fin[b] += (nx * nx + ny * ny) * 0.0  # NaN unless finite, squares too
         for d in range(2, kk):
             for b in range(nact):
