@@ -40,6 +40,7 @@ from rich.markup import escape
 from typer.core import TyperArgument, TyperCommand, TyperGroup, TyperOption
 
 from ..errors import FormationlabWarning, UserInputError
+from . import _signals
 from ._signals import interrupted_status
 
 __all__ = [
@@ -54,7 +55,21 @@ __all__ = [
     "warn",
 ]
 
-err_console = Console(stderr=True)
+
+class _Console(Console):
+    """rich's console, which lets go of what it was writing when the write is interrupted
+    (Ctrl-C, SIGTERM): rich keeps it in its buffer, and the next message (``interrupted
+    ...``) printed it a second time."""
+
+    def _check_buffer(self) -> None:
+        try:
+            super()._check_buffer()
+        except BaseException:
+            del self._buffer[:]
+            raise
+
+
+err_console = _Console(stderr=True)
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -159,21 +174,28 @@ def command(*args: Any, on: typer.Typer | None = None, **kwargs: Any) -> Callabl
     def deco(fn: F) -> F:
         @functools.wraps(fn)
         def wrapper(*a: Any, **k: Any) -> Any:
+            _signals.command_done(False)
             try:
-                with _warnings_as_lines():
-                    return fn(*a, **k)
-            except UserInputError as exc:
-                fail(str(exc))
-            except FileNotFoundError as exc:
-                fail(f"file not found: {exc.filename or exc}")
-            except OSError as exc:
-                fail(describe_os_error(exc))
-            except subprocess.CalledProcessError as exc:  # ffmpeg died (e.g. killed by Ctrl-C)
-                fail(f"{os.path.basename(str(exc.cmd[0]))} failed (exit status {exc.returncode})")
-            except KeyboardInterrupt:
-                fail("interrupted", code=INTERRUPTED)
-            finally:
-                _release_claims()
+                try:
+                    with _warnings_as_lines():
+                        out = fn(*a, **k)
+                    _signals.command_done()
+                    return out
+                except UserInputError as exc:
+                    fail(str(exc))
+                except FileNotFoundError as exc:
+                    fail(f"file not found: {exc.filename or exc}")
+                except OSError as exc:
+                    fail(describe_os_error(exc))
+                except subprocess.CalledProcessError as exc:  # ffmpeg died (e.g. by Ctrl-C)
+                    fail(f"{os.path.basename(str(exc.cmd[0]))} failed (exit status "
+                         f"{exc.returncode})")  # fmt: skip
+                except KeyboardInterrupt:
+                    fail("interrupted", code=INTERRUPTED)
+                finally:
+                    _release_claims()
+            except KeyboardInterrupt:  # as the claims were let go, or a message printed
+                fail(_signals.AFTER_THE_WORK if _signals.is_done() else "interrupted", INTERRUPTED)
 
         (app if on is None else on).command(*args, **kwargs)(wrapper)
         return fn
@@ -261,6 +283,70 @@ class _Command(TyperCommand):
 
     def get_short_help_str(self, limit: int = 45) -> str:
         return (self.short_help or (self.help or "").strip().split("\n\n")[0]).replace("\n", " ")
+
+    def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
+        try:
+            return super().parse_args(ctx, list(args))  # type: ignore[no-any-return]
+        except typer.BadParameter as exc:
+            message = _number_message(exc.param, args)
+            if message is None:
+                raise
+            fail(message)
+
+
+def _bounds(param: Any) -> tuple[Any, Any]:
+    """An option's least and greatest value (typer's ``min``/``max``, or click's range type)."""
+    for owner in (param, getattr(param, "type", None)):
+        low, high = getattr(owner, "min", None), getattr(owner, "max", None)
+        if low is not None or high is not None:
+            return low, high
+    return None, None
+
+
+def _number_kind(param: Any) -> str | None:
+    """``"whole number"`` or ``"number"`` for an option of int or float, else None."""
+    annotation = getattr(getattr(param, "type_descriptor", None), "annotation", None)
+    name = str(getattr(getattr(param, "type", None), "name", ""))
+    if annotation is int or name.startswith("integer"):
+        return "whole number"
+    if annotation is float or name.startswith("float"):
+        return "number"
+    return None
+
+
+def _given(param: Any, args: list[str]) -> str | None:
+    """The value given on the command line for the option ``param`` (its last one)."""
+    value = None
+    for k, arg in enumerate(args):
+        for opt in param.opts:
+            if arg == opt and k + 1 < len(args):
+                value = args[k + 1]
+            elif opt.startswith("--") and arg.startswith(f"{opt}="):
+                value = arg[len(opt) + 1 :]
+            elif not opt.startswith("--") and arg.startswith(opt) and len(arg) > len(opt):
+                value = arg[len(opt) :]
+    return value
+
+
+def _number_message(param: Any, args: list[str]) -> str | None:
+    """The package's words for a bad value of a numeric option: the option, the value given
+    and what to give (typer's are pydantic's or click's, and name no fix); None for others."""
+    kind = _number_kind(param) if isinstance(param, TyperOption) else None
+    if kind is None:
+        return None
+    opt = max(param.opts, key=len)
+    low, high = _bounds(param)
+    if low is not None and high is not None:
+        rule, example = f"a {kind} from {low:,} to {high:,}", low
+    elif low is not None:
+        rule, example = f"a {kind} of at least {low:,}", low
+    elif high is not None:
+        rule, example = f"a {kind} of at most {high:,}", high
+    else:
+        rule, example = f"a {kind}", 1
+    given = _given(param, args)
+    got = f", not {given!r}" if given is not None else ""
+    return f"{opt} takes {rule}{got}; give e.g. {opt} {example}"
 
 
 class _Group(TyperGroup):
