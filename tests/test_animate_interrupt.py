@@ -141,6 +141,40 @@ def test_a_signal_as_the_command_ends_is_not_lost(finished_run: Path, tmp_path: 
     _check(folder, before, ["animation.html"])
 
 
+#: ``formationlab`` with a SIGTERM as ``run`` lets go of an earlier run's files, its last step
+_LATE_RUN = """\
+import signal
+from formationlab.io import files
+remove_stale = files.remove_stale
+def late(*args):
+    removed = remove_stale(*args)
+    signal.raise_signal(signal.SIGTERM)
+    return removed
+files.remove_stale = late
+from formationlab.cli import main
+main()
+"""
+
+
+def test_a_signal_as_run_ends_keeps_its_results_listed_and_says_so(tmp_path: Path) -> None:
+    scenario = tmp_path / "s.toml"
+    scenario.write_text(triangle("ending", "0.5"))
+    out = tmp_path / "out"
+    proc = subprocess.run(
+        [sys.executable, "-c", _LATE_RUN, "run", str(scenario), "--out", str(out),
+         "--animate", "--frames", "10", "-q"],
+        capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert proc.returncode == 143, proc.stderr  # was "interrupted" alone: what was kept?
+    assert "Traceback" not in proc.stderr
+    assert proc.stderr.strip().splitlines()[-1] == (
+        f"interrupted as the run ended; its results are whole in {out}"
+    )
+    summary = json.loads((out / "summary.json").read_text())
+    assert {"animation.gif", "animation.html"} <= set(summary["manifest"])
+    assert {p.name for p in out.iterdir()} == set(summary["manifest"])
+
+
 @needs_ffmpeg
 def test_a_signal_as_the_encoder_starts_leaves_no_encoder_and_no_file(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
