@@ -289,3 +289,16 @@ def test_an_obstacle_beyond_the_coordinate_limit_is_refused(obstacle, words, tmp
     message = refused(scenario)
     assert f"{scenario}: obstacles, item 1 (line " in message and words in message, message
     assert "Warning" not in message
+
+
+def test_a_tiny_polygon_keeps_every_vertex() -> None:
+    """A closing repeat of the first vertex was tolerated to within 1e-8 m: every vertex of a
+    polygon smaller than that was 'a repeat', and a triangle of 1e-9 m lost its last vertex
+    (refused as 'not simple', quoting two vertices)."""
+    pytest.importorskip("shapely")
+    from formationlab.safety.obstacles import Polygon
+
+    tiny = [[0.0, 0.0], [1e-9, 0.0], [1e-9, 1e-9]]
+    assert Polygon(vertices=tiny).vertices.tolist() == tiny
+    closed = Polygon(vertices=[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [1e-12, 0.0]])
+    assert len(closed.vertices) == 3  # a repeat to within its size is still let go
