@@ -413,3 +413,31 @@ def test_animation_formats_as_a_comma_separated_list(run_folder: Path, tmp_path:
         "error: unknown animation format 'jpg': choose from gif, mp4, html "
         "(a comma-separated list, e.g. --format gif,html)"
     )
+
+
+@pytest.mark.parametrize(
+    ("args", "said"),
+    [
+        (["--trials", "-3"], "--trials takes a whole number of at least 1, not '-3'; "
+         "give e.g. --trials 1"),
+        (["-n", "0"], "--trials takes a whole number of at least 1, not '0'"),
+        (["--seed", "-1"], "--seed takes a whole number from 0 to 9,223,372,036,854,775,807, "
+         "not '-1'; give e.g. --seed 0"),
+        (["--seed=2e3"], "--seed takes a whole number from 0 to"),
+        (["--chunk-size", "abc"], "--chunk-size takes a whole number of at least 1, not 'abc'"),
+    ],
+)  # fmt: skip
+def test_an_option_out_of_range_is_one_line_naming_it_its_value_and_the_fix(
+    scenario: Path, tmp_path: Path, args: list[str], said: str
+) -> None:
+    """typer's words were pydantic's ("Input should be greater than or equal to 1"), under
+    a usage block, without the value given or a fix."""
+    res = invoke("study", scenario, "--out", tmp_path / "out", *args)
+    assert res.exit_code == 2
+    assert "Traceback" not in res.output and "Input should" not in res.output
+    assert one_error_line(res).startswith(f"error: {said}"), res.output
+    assert not (tmp_path / "out").exists()
+    res = invoke("run", scenario, "--out", tmp_path / "out", "--save-every", "0")
+    assert one_error_line(res) == (
+        "error: --save-every takes a whole number of at least 1, not '0'; give e.g. --save-every 1"
+    )

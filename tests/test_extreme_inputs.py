@@ -214,6 +214,8 @@ def test_an_alpha_table_of_odd_rows_is_refused_by_name(table, words):
     [
         # points 1e150 m ahead of robots 6 m apart: the offset, not the headings
         ('model = "unicycle"\noffset = 1e150\n', "robots.offset"),
+        # points beyond the coordinates' limit: the offset too (was "robots.initial hand points")
+        ('model = "unicycle"\noffset = 1e200\n', "robots.offset"),
         # robots 1 and 2 face each other 0.6 m apart, points 0.35 m ahead: the headings
         ('model = "unicycle"\noffset = 0.35\nheadings = [0.0, 3.14159, 0.0]\n', "robots.headings"),
     ],
@@ -225,6 +227,18 @@ def test_hand_points_that_overlap_name_their_cause(robots, key, tmp_path: Path) 
     scenario.write_text(text)
     message = refused(scenario)
     assert message.startswith(f"error: {scenario}: {key} (line "), message
+
+
+@pytest.mark.parametrize("stop", ["{ robot = 1, at = -1.0 }", '{ robot = 1, at = "x" }'])
+def test_a_bad_stop_time_is_refused_at_its_line(stop: str, tmp_path: Path) -> None:
+    """A stop time below 0 was refused at the [faults] header's line, as 'faults.stop at'."""
+    text = triangle("stops", "1.0") + f"\n[faults]\nstop = [{stop}]\n"
+    scenario = tmp_path / "stops.toml"
+    scenario.write_text(text)
+    line = text.splitlines().index(f"stop = [{stop}]") + 1
+    message = refused(scenario)
+    assert message.startswith(f"error: {scenario}: faults.stop"), message
+    assert f"(line {line}): " in message, message
 
 
 def test_a_lattice_spacing_too_small_for_double_precision_is_refused(tmp_path: Path) -> None:
@@ -275,3 +289,16 @@ def test_an_obstacle_beyond_the_coordinate_limit_is_refused(obstacle, words, tmp
     message = refused(scenario)
     assert f"{scenario}: obstacles, item 1 (line " in message and words in message, message
     assert "Warning" not in message
+
+
+def test_a_tiny_polygon_keeps_every_vertex() -> None:
+    """A closing repeat of the first vertex was tolerated to within 1e-8 m: every vertex of a
+    polygon smaller than that was 'a repeat', and a triangle of 1e-9 m lost its last vertex
+    (refused as 'not simple', quoting two vertices)."""
+    pytest.importorskip("shapely")
+    from formationlab.safety.obstacles import Polygon
+
+    tiny = [[0.0, 0.0], [1e-9, 0.0], [1e-9, 1e-9]]
+    assert Polygon(vertices=tiny).vertices.tolist() == tiny
+    closed = Polygon(vertices=[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [1e-12, 0.0]])
+    assert len(closed.vertices) == 3  # a repeat to within its size is still let go

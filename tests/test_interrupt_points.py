@@ -1,12 +1,14 @@
 """SIGINT and SIGTERM at points drawn at random (seeded) in a study and an equilibria search.
 
-Each test starts ``formationlab`` as a subprocess, waits for a line the program prints at
-the point drawn (never for a time), sends the signal drawn and then checks: exit status
-``128 +`` the signal (130, 143), a message that says what was kept, no traceback, no
-temporary file and no half-written file (every file there reads whole). Then ``--resume``
-(interrupted again at a point drawn, then to the end) gives what an uninterrupted command
-gives. Other points are tested in tests/test_cli_interrupt.py (start-up, mid-run,
-animation) and tests/test_no_silent_loss.py (writing a run's results).
+Each test starts ``formationlab`` as a subprocess and sends the signal drawn where the
+program prints the line of the point drawn (it waits there for the signal, ``_paused``:
+never a time, and no race with the program's next step on a loaded machine), then
+checks: exit status ``128 +`` the signal (130, 143), a message that says what was kept,
+no traceback, no temporary file and no half-written file (every file there reads whole).
+Then ``--resume`` (interrupted again at a point drawn, then to the end) gives what an
+uninterrupted command gives. Other points are tested in tests/test_cli_interrupt.py
+(start-up, mid-run), tests/test_animate_interrupt.py (animation, the end of writing) and
+tests/test_no_silent_loss.py (writing a run's results).
 """
 
 from __future__ import annotations
@@ -14,51 +16,26 @@ from __future__ import annotations
 import json
 import random
 import signal
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from _paused import interrupted
 from _scenarios import triangle
-
-CLI = [sys.executable, "-c", "from formationlab.cli import main; main()"]
-ENV_WARMUP = {"FORMATIONLAB_NO_WARMUP": "1"}
 
 #: the draws: which printed line each interruption waits for, and which signal it sends
 DRAW = random.Random(40)
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
-def _default_signals() -> None:
-    """In the child: SIGINT and SIGTERM as a shell leaves them (default, not blocked)."""
-    for sig in SIGNALS:
-        signal.signal(sig, signal.SIG_DFL)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, set(SIGNALS))
-
-
 def _interrupted(args: list[str], marker: str, sig: int) -> str:
-    """Run the command, send ``sig`` once a line of stderr holds ``marker``; its stderr."""
-    import os
-
-    proc = subprocess.Popen(
-        [*CLI, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        preexec_fn=_default_signals, env={**os.environ, **ENV_WARMUP},
-    )  # fmt: skip
-    assert proc.stderr is not None
-    seen = []
-    for line in proc.stderr:
-        seen.append(line)
-        if marker in line:
-            proc.send_signal(sig)
-            break
-    _, rest = proc.communicate(timeout=300)
-    err = "".join(seen) + rest
-    assert marker in err, err
-    assert proc.returncode == 128 + sig, err
-    assert "Traceback" not in err and "error:" not in err, err
-    return err
+    """Run the command, send ``sig`` where it prints a line holding ``marker`` (it waits
+    there for the signal: ``_paused``); its output."""
+    status, out = interrupted(args, marker, sig)
+    assert status == 128 + sig, out
+    assert "Traceback" not in out and "error:" not in out, out
+    return out
 
 
 def _no_temporary_files(folder: Path) -> None:
@@ -80,9 +57,8 @@ def _finish(args: list[str]) -> str:
 
 @pytest.fixture(scope="module")
 def scenario(tmp_path_factory) -> Path:
-    """The paper's triangle: 96 trials in 12 chunks on the numpy driver (slow enough that
-    a signal sent at a chunk boundary lands before the last chunk), 80 random starts (3
-    blocks)."""
+    """The paper's triangle: 96 trials in 12 chunks on the numpy driver, 80 random starts
+    (3 blocks)."""
     path = tmp_path_factory.mktemp("scenario") / "tri.toml"
     path.write_text(
         triangle(

@@ -28,10 +28,15 @@ def _load_commands() -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of the ``formationlab`` console script."""
+    """Entry point of the ``formationlab`` console script (``argv``: the arguments, when
+    called from Python; then the signal handlers in place before are restored at the end)."""
     _signals.install()
-    try:  # (inside a command, its own handling says what was kept)
-        _load_commands()
-        app(args=argv if argv is not None else sys.argv[1:], prog_name="formationlab")
-    except KeyboardInterrupt:  # while loading the commands or reading the arguments
-        _signals.exit_interrupted()
+    try:
+        try:  # (inside a command, its own handling says what was kept)
+            _load_commands()
+            app(args=argv if argv is not None else sys.argv[1:], prog_name="formationlab")
+        except KeyboardInterrupt:  # loading the commands, reading the arguments, or after
+            _signals.exit_interrupted()
+        raise SystemExit(0)
+    except SystemExit as exc:  # (a signal that came as the command ended is said too)
+        raise SystemExit(_signals.ended(exc.code, process=argv is None)) from None

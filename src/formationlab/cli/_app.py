@@ -40,6 +40,8 @@ from rich.markup import escape
 from typer.core import TyperArgument, TyperCommand, TyperGroup, TyperOption
 
 from ..errors import FormationlabWarning, UserInputError
+from . import _signals
+from ._options import number_message
 from ._signals import interrupted_status
 
 __all__ = [
@@ -54,7 +56,21 @@ __all__ = [
     "warn",
 ]
 
-err_console = Console(stderr=True)
+
+class _Console(Console):
+    """rich's console, which lets go of what it was writing when the write is interrupted
+    (Ctrl-C, SIGTERM): rich keeps it in its buffer, and the next message (``interrupted
+    ...``) printed it a second time."""
+
+    def _check_buffer(self) -> None:
+        try:
+            super()._check_buffer()
+        except BaseException:
+            del self._buffer[:]
+            raise
+
+
+err_console = _Console(stderr=True)
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -159,21 +175,28 @@ def command(*args: Any, on: typer.Typer | None = None, **kwargs: Any) -> Callabl
     def deco(fn: F) -> F:
         @functools.wraps(fn)
         def wrapper(*a: Any, **k: Any) -> Any:
+            _signals.command_done(False)
             try:
-                with _warnings_as_lines():
-                    return fn(*a, **k)
-            except UserInputError as exc:
-                fail(str(exc))
-            except FileNotFoundError as exc:
-                fail(f"file not found: {exc.filename or exc}")
-            except OSError as exc:
-                fail(describe_os_error(exc))
-            except subprocess.CalledProcessError as exc:  # ffmpeg died (e.g. killed by Ctrl-C)
-                fail(f"{os.path.basename(str(exc.cmd[0]))} failed (exit status {exc.returncode})")
-            except KeyboardInterrupt:
-                fail("interrupted", code=INTERRUPTED)
-            finally:
-                _release_claims()
+                try:
+                    with _warnings_as_lines():
+                        out = fn(*a, **k)
+                    _signals.command_done()
+                    return out
+                except UserInputError as exc:
+                    fail(str(exc))
+                except FileNotFoundError as exc:
+                    fail(f"file not found: {exc.filename or exc}")
+                except OSError as exc:
+                    fail(describe_os_error(exc))
+                except subprocess.CalledProcessError as exc:  # ffmpeg died (e.g. by Ctrl-C)
+                    fail(f"{os.path.basename(str(exc.cmd[0]))} failed (exit status "
+                         f"{exc.returncode})")  # fmt: skip
+                except KeyboardInterrupt:
+                    fail("interrupted", code=INTERRUPTED)
+                finally:
+                    _release_claims()
+            except KeyboardInterrupt:  # as the claims were let go, or a message printed
+                fail(_signals.AFTER_THE_WORK if _signals.is_done() else "interrupted", INTERRUPTED)
 
         (app if on is None else on).command(*args, **kwargs)(wrapper)
         return fn
@@ -261,6 +284,15 @@ class _Command(TyperCommand):
 
     def get_short_help_str(self, limit: int = 45) -> str:
         return (self.short_help or (self.help or "").strip().split("\n\n")[0]).replace("\n", " ")
+
+    def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
+        try:
+            return super().parse_args(ctx, list(args))  # type: ignore[no-any-return]
+        except typer.BadParameter as exc:
+            message = number_message(exc.param, args)
+            if message is None:
+                raise
+            fail(message)
 
 
 class _Group(TyperGroup):

@@ -80,22 +80,25 @@ def write_animation(
             }
     else:
         ds = result_or_ds
-        t_all = ds["time"].values
-        rows = used_indices(t_all, frames, ds.sizes["robot"], ds["q"])  # lazily: the rows it reads
-        part = ds.isel(time=rows)
-        t, q = t_all[rows], part["q"].values
-        edges, diam = ds["edge_robots"].values - 1, ds["diameter"].values
-        headings = part["theta"].values if "theta" in ds else None
-        points = part["point"].values if "point" in ds else None
-        faults = json.loads(str(ds.attrs["faults"])) if "faults" in ds.attrs else None
-        if "filter_active" in ds:
-            safety = {
-                "obstacles": json.loads(str(ds.attrs.get("obstacles", "[]"))),
-                "active": part["filter_active"].values.astype(bool),
-                "active_pairs": _pairs_at(
-                    ds["active_pair"].values.reshape(-1, 3) - [0, 1, 1], rows
-                ),
-            }
+        try:
+            t_all = ds["time"].values
+            rows = used_indices(t_all, frames, ds.sizes["robot"], ds["q"])  # lazily: its rows
+            part = ds.isel(time=rows)
+            t, q = t_all[rows], part["q"].values
+            edges, diam = ds["edge_robots"].values - 1, ds["diameter"].values
+            headings = part["theta"].values if "theta" in ds else None
+            points = part["point"].values if "point" in ds else None
+            faults = json.loads(str(ds.attrs["faults"])) if "faults" in ds.attrs else None
+            if "filter_active" in ds:
+                safety = {
+                    "obstacles": json.loads(str(ds.attrs.get("obstacles", "[]"))),
+                    "active": part["filter_active"].values.astype(bool),
+                    "active_pairs": _pairs_at(
+                        ds["active_pair"].values.reshape(-1, 3) - [0, 1, 1], rows
+                    ),
+                }
+        except (OSError, RuntimeError, KeyError, ValueError) as exc:  # h5py's, on a damaged file
+            raise damaged(ds.encoding.get("source", "trajectory.nc"), exc) from None
     stops = [(s["robot"] - 1, s["at"]) for s in (faults or {}).get("stop", [])]
     # a run in the plane of discs and edges only: its HTML page draws the states itself
     page = "html" in formats and q.shape[-1] == 2 and q.shape[1] <= LABEL_LIMIT
@@ -168,6 +171,16 @@ def run_trajectory(folder: Path) -> Path:
     return nc
 
 
+def damaged(nc: Any, exc: BaseException) -> UserInputError:
+    """The error of a run's file that cannot be read whole (damaged: overwritten, cut short)."""
+    reason = str(exc).strip() or type(exc).__name__
+    reason = reason[:1].lower() + reason[1:]
+    return UserInputError(
+        f"cannot read {nc}: {reason}; the file is damaged: run `formationlab run` again to "
+        "write it anew"
+    )
+
+
 def open_run(nc: Path) -> Any:
     """The run's ``trajectory.nc`` opened lazily (close it), checked to be formationlab's."""
     from ..io.netcdf import open_trajectory
@@ -238,19 +251,35 @@ def animate_cmd(
         raise OutputExistsError(
             f"{folder} already holds {', '.join(existing)}; pass --force to replace it"
         )
+    from ..engine.signals import held_signals
+
+    done: list[Path] = []
+    stopped = False
     with open_run(nc) as ds:
         title = str(ds.attrs.get("scenario_name", folder.name))
-        done: list[Path] = []
         try:
             write_animation(folder, ds, title, frames, formats, done, progress=not quiet)
         except (KeyboardInterrupt, subprocess.CalledProcessError):  # Ctrl-C, also killing ffmpeg
+            stopped = True
+    try:  # what was written is listed and said whole; a signal meanwhile comes after it
+        with held_signals():
             add_to_manifest(folder, [p.name for p in done])
-            kept = f"; kept {', '.join(p.name for p in done)}" if done else ""
-            fail(f"interrupted{kept}", INTERRUPTED)
-        finally:
             for p in done:
                 typer.echo(f"wrote {p}")
-    add_to_manifest(folder, [p.name for p in done])
+    except KeyboardInterrupt:
+        stopped = True
+    if stopped:
+        fail(_kept(folder, done, formats), INTERRUPTED)
+
+
+def _kept(folder: Path, done: list[Path], formats: tuple[str, ...]) -> str:
+    """What an interrupted ``animate`` says: which animations it wrote whole, which not."""
+    if not done:
+        return f"interrupted before an animation was written whole; {folder} is as it was"
+    names = [p.name for p in done]
+    left = [f for f in formats if (folder / ANIMATION_STEM).with_suffix(f".{f}").name not in names]
+    rest = f" (not {', '.join(f'{ANIMATION_STEM}.{f}' for f in left)})" if left else ""
+    return f"interrupted; {', '.join(names)} written whole in {folder}{rest}"
 
 
 def add_to_manifest(folder: Path, names: list[str]) -> None:

@@ -206,8 +206,14 @@ def _run(
                 INTERRUPTED,
             )
         written = [*written, *(p.name for p in done)]
-        _write_summary(folder, sc, scenario, summary, save_every, written)
-    removed = remove_stale(folder, earlier, written)
+    try:  # the last of the files: the manifest of them all, and the earlier run's let go
+        with held_signals():
+            if formats and not interrupted:
+                _write_summary(folder, sc, scenario, summary, save_every, written)
+            removed = remove_stale(folder, earlier, written)
+    except KeyboardInterrupt:
+        _say(f"{sc.name}: {_verdict(summary)}; wrote {folder}/", quiet)
+        fail(f"interrupted as the run ended; its results are whole in {folder}", INTERRUPTED)
     if removed:
         _note(f"removed {', '.join(removed)} of the earlier run in {folder}", quiet)
     _say(f"{sc.name}: {_verdict(summary)}; wrote {folder}/", quiet)

@@ -14,11 +14,12 @@ import os
 import re
 import shutil
 import tempfile
-from collections.abc import Callable, Iterable
-from contextlib import AbstractContextManager, nullcontext
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 from pathlib import Path
 from typing import Any
 
+from ..engine.signals import held_signals
 from .files import atomic_path, atomic_write_text
 
 __all__ = ["FORMATS", "Progress", "ffmpeg_executable", "missing_writer", "save_animation"]
@@ -137,7 +138,7 @@ def _save(anim: Any, fmt: str, target: Path, fps: int, update: Progress | None) 
             atomic_path(target) as tmp,
         ):
             # yuv420p + even frame size: playable in browsers and common players
-            writer = FFMpegWriter(
+            writer = _encoder(FFMpegWriter)(
                 fps=fps, codec="libx264", extra_args=["-pix_fmt", "yuv420p", "-vf", _EVEN]
             )
             anim.save(tmp, writer=writer, progress_callback=callback)
@@ -154,6 +155,40 @@ def _save(anim: Any, fmt: str, target: Path, fps: int, update: Progress | None) 
 
 
 _EVEN = "pad=ceil(iw/2)*2:ceil(ih/2)*2"
+
+
+def _encoder(base: type) -> type:
+    """matplotlib's ffmpeg writer ``base`` whose encoder never outlives a save that stopped
+    (Ctrl-C or SIGTERM to formationlab alone, at any frame, the first and the last too).
+
+    matplotlib ends the encoder only once it has started the frames: a signal while the
+    encoder's process started (inside ``subprocess.Popen``) left it running unknown, and it
+    wrote the temporary file after :func:`~formationlab.io.files.atomic_path` had removed it
+    (a ``.animation.mp4.*`` left behind); one while the last frames were encoded left it
+    encoding. Here the process starts whole (signals held meanwhile), and is killed and
+    waited for before the save goes on stopping.
+    """
+
+    class Encoder(base):  # type: ignore[misc,valid-type]
+        def setup(self, *args: Any, **kwargs: Any) -> None:
+            with held_signals():  # (started whole: its process is known when a signal stops it)
+                super().setup(*args, **kwargs)
+
+        @contextmanager
+        def saving(self, *args: Any, **kwargs: Any) -> Iterator[Any]:
+            try:
+                with super().saving(*args, **kwargs) as writer:
+                    yield writer
+            except BaseException:
+                with held_signals():  # (a second Ctrl-C waits until it has ended)
+                    proc = getattr(self, "_proc", None)
+                    if proc is not None:
+                        if proc.poll() is None:
+                            proc.kill()
+                        proc.communicate()  # (waited for, its pipes closed)
+                raise
+
+    return Encoder
 
 
 #: matplotlib's player links Font Awesome from a CDN for its button icons; the

@@ -100,8 +100,10 @@ class Polygon:
         if not np.all(np.isfinite(v)):
             raise ObstacleError(f"polygon vertices must be finite, got {v.tolist()}")
         within_limit(v, "polygon")
-        if np.allclose(v[0], v[-1]):
-            v = v[:-1]  # a closing repeat of the first vertex is tolerated
+        # a closing repeat of the first vertex is tolerated: equal to within the polygon's
+        # size (not to within 1e-8: all the vertices of a tiny polygon were, and it lost one)
+        if np.all(np.abs(v[0] - v[-1]) <= 1e-9 * float(np.max(np.ptp(v, axis=0)))):
+            v = v[:-1]
         shapely: Any = require_extra("safety", ("shapely",), "polygon obstacles")
         ring = shapely.LinearRing(v) if len(v) >= 3 else None
         if ring is None or not ring.is_simple:

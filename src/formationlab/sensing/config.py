@@ -194,7 +194,10 @@ class Stop:
                 f"faults.stop robot must be a robot number >= 1 (robots are numbered from "
                 f"1), got {self.robot!r}", key="faults.stop",
             )  # fmt: skip
-        number(self.at, "faults.stop at", low=0.0, strict=False, allow_inf=True)
+        try:
+            number(self.at, "faults.stop at", low=0.0, strict=False, allow_inf=True)
+        except ParameterError as exc:  # (the key of the line: the list's, not "stop at")
+            raise ParameterError(str(exc), key="faults.stop") from None
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -782,7 +782,7 @@ def initial_state(
     if not np.array_equal(points, model.positions(x0)):
         try:
             formation.check_positions(points, what="initial hand points")
-        except FormationError as exc:
+        except (FormationError, ParameterError) as exc:  # (overlap, or beyond the coordinates)
             # an offset wider than the formation is the cause, else the robots' headings
             q = model.positions(x0)
             across = float(np.max(np.ptp(q, axis=0))) if len(q) else 0.0
