@@ -139,30 +139,10 @@ def rates(x, hc, hs, u, f, vel, nact, model, axes):
                 s = vmax / size if size > vmax else 1.0  # limit_speed
                 f[i, 0, b] = ux * s
                 f[i, 1, b] = uy * s
-    elif model.kind == DOUBLE and axes.ndim == 3:  # (a constant: compiled in space only)
-        _double_in_space(x, u, f, nact, model)
     elif model.kind == QUADROTOR:
         _quadrotor(x, u, f, nact, model, axes)
     elif model.kind == DOUBLE:
-        kd = model.damping
-        for i in range(n):
-            for b in range(nact):
-                wx = x[i, 2, b]
-                wy = x[i, 3, b]
-                ax = -kd * wx + u[i, 0, b]
-                ay = -kd * wy + u[i, 1, b]
-                w2 = wx * wx + wy * wy
-                push = wx * ax + wy * ay
-                if w2 >= vmax * vmax and push > 0:  # extra damping at the limit
-                    brake = push / w2 if w2 > 0 else 0.0
-                    ax -= brake * wx
-                    ay -= brake * wy
-                size = math.sqrt(w2)
-                s = vmax / size if size > vmax else 1.0
-                f[i, 0, b] = wx * s
-                f[i, 1, b] = wy * s
-                f[i, 2, b] = ax
-                f[i, 3, b] = ay
+        _double(x, u, f, nact, model, axes)
     else:  # unicycles: per robot the speed (in `vel`) and the turn rate (f's third row),
         # then the velocity (measured: the heading transform's rates in one loop that
         # stores the three rows of f cost twice as much, 15 against 7 ns per robot)
@@ -208,35 +188,31 @@ def rates(x, hc, hs, u, f, vel, nact, model, axes):
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
-def _double_in_space(x, u, f, nact, model):
-    """The double integrator's rates in space (``DoubleIntegrator.derivative``): state
-    ``(p, w)`` of six numbers, ``w_dot = -k_d w + u`` with the extra damping at the speed
-    limit."""
+def _double(x, u, f, nact, model, axes):
+    """The double integrator's rates (``DoubleIntegrator.derivative``): state ``(p, w)``,
+    ``w_dot = -k_d w + u`` with the extra damping at the speed limit, in the plane or in
+    space (``axes``)."""
+    dim = axes.ndim
     kd = model.damping
     vmax = model.max_speed
     for i in range(x.shape[0]):
         for b in range(nact):
-            wx = x[i, 3, b]
-            wy = x[i, 4, b]
-            wz = x[i, 5, b]
-            ax = -kd * wx + u[i, 0, b]  # q_ddot = -k_d q_dot + u
-            ay = -kd * wy + u[i, 1, b]
-            az = -kd * wz + u[i, 2, b]
-            w2 = wx * wx + wy * wy + wz * wz
-            push = wx * ax + wy * ay + wz * az
+            w2 = 0.0
+            push = 0.0
+            for d in range(dim):
+                w = x[i, dim + d, b]
+                a = -kd * w + u[i, d, b]  # q_ddot = -k_d q_dot + u
+                f[i, dim + d, b] = a
+                w2 += w * w
+                push += w * a
             if w2 >= vmax * vmax and push > 0:  # extra damping at the limit
                 brake = push / w2 if w2 > 0 else 0.0
-                ax -= brake * wx
-                ay -= brake * wy
-                az -= brake * wz
+                for d in range(dim):
+                    f[i, dim + d, b] -= brake * x[i, dim + d, b]
             size = math.sqrt(w2)
             s = vmax / size if size > vmax else 1.0
-            f[i, 0, b] = wx * s
-            f[i, 1, b] = wy * s
-            f[i, 2, b] = wz * s
-            f[i, 3, b] = ax
-            f[i, 4, b] = ay
-            f[i, 5, b] = az
+            for d in range(dim):
+                f[i, d, b] = x[i, dim + d, b] * s
 
 
 @njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
