@@ -44,7 +44,7 @@ def test_the_scene_renders_every_robot_in_space(space):
     wait_for(lambda: float(attr(page, "t")) > t, what="the run to stream")
     pause(page, session)
     # the pixels: a robot's colour (#1f6fb5, shaded) where robot 1's centre is drawn, and
-    # the background's white in the corner
+    # the background's white around the formation
     # (the camera eases towards the formation for a few frames after it moves: the shot is
     # taken when robot 1's pixel is the same before and after it, on a loaded machine too)
     box = page.locator("canvas[data-role=scene3d]").bounding_box()
@@ -59,7 +59,10 @@ def test_the_scene_renders_every_robot_in_space(space):
     x, y = before
     r, g, b = img[round(y - box["y"]), round(x - box["x"])]
     assert b > r + 40 and b > 90, (r, g, b)
-    assert tuple(img[3, 3]) == (255, 255, 255)
+    # the background's white: most of the picture (a corner may hold a trail or an edge,
+    # as the camera frames the formation)
+    white = (img == 255).all(axis=-1).mean()
+    assert white > 0.5, white
 
 
 def test_drag_a_robot_in_the_plane_facing_the_camera_then_orbit(space):
