@@ -27,7 +27,7 @@ from ..errors import ParameterError
 from ..formation.spec import Formation
 from ..marching.terms import march_terms
 from ..models import RobotModel
-from ..models.terms import HEADING, NEAR_IDENTITY, model_terms
+from ..models.terms import HEADING, NEAR_IDENTITY, POINT_KINDS, model_terms
 from ..outcomes.analysis import Tolerances
 from ..safety import barrier_filter
 from ..safety.obstacle_terms import obstacle_terms
@@ -103,7 +103,7 @@ def run_trials(
     terms = law.compiled_terms(formation).writable()  # one signature for every law
     robots = model_terms(model)
     sensed = (sensing is not None and not sensing.ideal) or (faults is not None and faults.any)
-    if formation.dim == 3 and (robots.kind in (HEADING, NEAR_IDENTITY) or sensed):
+    if formation.dim == 3 and (robots.kind not in POINT_KINDS or sensed):
         raise ParameterError(
             "the compiled loop steps formations in space on single and double integrators "
             f"and quadrotors without sensing or faults; run this one ({model.name!r}) with "

@@ -42,7 +42,7 @@ from numba import njit
 from ..controllers.kinds.restriction import triangle_product
 from ..controllers.stage import local_field
 from ..sensing.channel import BLOCK
-from ..sensing.stage import delivery, measured_pair, within_range
+from ..sensing.stage import delivery, measured_pair, own_frame, within_range
 
 __all__ = ["errors", "law_commands", "observe"]
 
@@ -83,11 +83,7 @@ def observe(p, x, hc, hs, which, k, sn, ss, others, neighbours, at, own, obs):
         kb = k[b]
         row = kb % BLOCK
         for i in range(n):
-            c = 1.0  # (cos, sin)(-a_i): robot i's turn into its own frame
-            s = 0.0
-            if sn.local:
-                c = hc[i, b] if sn.headed else sn.cos_in[b, i]
-                s = -hs[i, b] if sn.headed else sn.sin_in[b, i]
+            c, s = own_frame(sn, hc, hs, i, b, b)  # robot i's turn into its own frame
             for m in range(n - 1):
                 j = others[i, m]
                 wx = wy = 0.0

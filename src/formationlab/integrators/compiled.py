@@ -44,7 +44,7 @@ from ..engine.trials import chunk_state, safety_stage, sensing_channel, trial_ou
 from ..errors import ParameterError
 from ..marching.terms import march_terms, with_references
 from ..models import SingleIntegrator
-from ..models.terms import HEADING, NEAR_IDENTITY, model_terms
+from ..models.terms import HEADING, NEAR_IDENTITY, POINT_KINDS, model_terms
 from ..safety import barrier_filter
 from ..safety.stage import CENTRALIZED
 from ..sensing import BLOCK
@@ -353,8 +353,7 @@ def compiled_terms(system: System, integrator: object) -> RunLayout | KernelTerm
     except ParameterError:  # (a model of the user's own)
         return None
     f = system.formation
-    if f.dim == 3 and (robots.kind in (HEADING, NEAR_IDENTITY) or _measuring(system)
-                       or _acted_on(system)):  # fmt: skip
+    if f.dim == 3 and (robots.kind not in POINT_KINDS or _measuring(system) or _acted_on(system)):
         return None  # (in space the loop steps the models of points on the true positions)
     if _measuring(system) or f.n <= PAIRS_UP_TO:
         try:

@@ -17,11 +17,14 @@ from .quadrotor import Quadrotor
 from .single_integrator import SingleIntegrator
 from .unicycle import Unicycle
 
-__all__ = ["DOUBLE", "HEADING", "KERNEL_MODELS", "NEAR_IDENTITY", "QUADROTOR", "SINGLE",
-           "ModelTerms", "model_terms"]  # fmt: skip
+__all__ = ["DOUBLE", "HEADING", "KERNEL_MODELS", "NEAR_IDENTITY", "POINT_KINDS", "QUADROTOR",
+           "SINGLE", "ModelTerms", "model_terms"]  # fmt: skip
 
 #: Model kinds of the kernel.
 SINGLE, NEAR_IDENTITY, HEADING, DOUBLE, QUADROTOR = 0, 1, 2, 3, 4
+#: Kinds whose state is a point's (positions, then velocities): the models the compiled
+#: loop steps in space too (unicycles are planar).
+POINT_KINDS = (SINGLE, DOUBLE, QUADROTOR)
 #: Models the numba backend implements.
 KERNEL_MODELS = ("single-integrator", "unicycle", "double-integrator", "quadrotor")
 

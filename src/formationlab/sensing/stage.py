@@ -48,6 +48,7 @@ __all__ = [
     "halt",
     "informed",
     "measured_pair",
+    "own_frame",
     "sensed_field",
     "sensing_terms",
     "within_range",
@@ -82,6 +83,19 @@ class SensingState(NamedTuple):
     held: NDArray[np.float64]  #: (B, n, n, 2) the measurement each robot uses
     has: NDArray[np.bool_]  #: (B, n, n) whether it has one
     seen_c: NDArray[np.bool_]  #: (B,) whether every robot saw its neighbours at the last check
+
+
+@njit(cache=True, fastmath=False, error_model="numpy", nogil=True, inline="always")
+def own_frame(sn, hc, hs, i, b, g):
+    """``(c, s) = (cos, sin)(-a_i)``: robot ``i``'s turn into its own frame in slot ``b``
+    (trial or environment ``g`` of the sensing terms ``sn``): its heading's, for unicycles
+    that measure in their heading's frame (``sn.headed``), else its drawn frame's; the
+    identity when robots measure in the common frame."""
+    if not sn.local:
+        return 1.0, 0.0
+    if sn.headed:
+        return hc[i, b], -hs[i, b]
+    return sn.cos_in[g, i], sn.sin_in[g, i]
 
 
 @formula
@@ -138,11 +152,7 @@ def sensed_field(p, x, hc, hs, u, ul, nact, ids, k, terms, sn, ss):
     for b in range(nact):
         g = ids[b]
         for i in range(n):  # 1. measure, into the ring's slot of step k
-            c = 1.0
-            s = 0.0
-            if sn.local:
-                c = hc[i, b] if sn.headed else sn.cos_in[g, i]
-                s = -hs[i, b] if sn.headed else sn.sin_in[g, i]
+            c, s = own_frame(sn, hc, hs, i, b, g)
             for j in range(n):
                 wx = wy = 0.0
                 if sn.noise > 0 and i != j:

@@ -52,8 +52,8 @@ from ..formation.geometry import row_norms
 from ..formation.spec import Formation
 from ..integrators import Euler, StopRule, drive
 from ..integrators.base import steps_for
-from ..models import DoubleIntegrator, Quadrotor, RobotModel, SingleIntegrator
-from ..models.terms import model_terms
+from ..models import RobotModel, SingleIntegrator
+from ..models.terms import POINT_KINDS, model_terms
 from ..outcomes.analysis import Tolerances
 from ..outcomes.batch import BatchResult, classify_batch, max_distance_errors
 from ..safety import check_obstacle_starts
@@ -123,13 +123,21 @@ def batch_backend(
     return backend, note  # type: ignore[return-value]
 
 
+def _kind(model: RobotModel) -> int | None:
+    """The compiled loop's kind of ``model`` (None: a model without a stage of it)."""
+    try:
+        return model_terms(model).kind
+    except ParameterError:
+        return None
+
+
 def _space_note(sensed: bool, model: RobotModel | None, laws: Sequence[Law]) -> str:
     """Why a batch in space runs on the numpy path ("" when the compiled loop steps it):
     the loop steps single integrators on their true positions under the laws of
     ``Law.compiled_dims`` there."""
     if sensed:
         return "the compiled loop steps formations in space without sensing or faults"
-    if model is not None and not isinstance(model, SingleIntegrator | DoubleIntegrator | Quadrotor):
+    if model is not None and _kind(model) not in POINT_KINDS:
         return (
             "the compiled loop steps single and double integrators and quadrotors in space, "
             f"not {model.name!r}"
